@@ -1,0 +1,37 @@
+# sphere_twin: two commands for a newcomer, `make demo` and `make test`.
+# Every target runs with DDS discovery limited to this machine.
+export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
+
+PYTHON  ?= python3
+VENV    := .venv
+BIN     := $(VENV)/bin
+STAMP   := $(VENV)/.installed
+PYTEST_ARGS ?=
+
+.PHONY: setup demo test lint bench clean
+
+setup: $(STAMP)
+
+# Reinstall only when a pin or the package metadata changed.
+$(STAMP): requirements.txt requirements-dev.txt constraints.txt setup.py setup.cfg package.xml
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check \
+		-r requirements-dev.txt -c constraints.txt
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation --use-pep517 -e .
+	@touch $(STAMP)
+	@echo "setup: .venv ready"
+
+demo: $(STAMP)
+	$(BIN)/sphere-twin demo
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+
+test: lint
+	$(BIN)/python -m pytest $(PYTEST_ARGS)
+
+bench: $(STAMP)
+	$(BIN)/sphere-twin bench work-precision --quick
+
+clean:
+	rm -rf $(VENV) build install log .pytest_cache .ruff_cache

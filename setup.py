@@ -1,0 +1,32 @@
+"""Installs sphere_twin as an ament_python ROS 2 package (colcon) or a plain Python package (pip)."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE_NAME = 'sphere_twin'
+
+setup(
+    name=PACKAGE_NAME,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*']),
+    package_data={'sphere_sim': ['scenes/*.yaml', 'params/*.yaml']},
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE_NAME]),
+        ('share/' + PACKAGE_NAME, ['package.xml']),
+        ('share/' + PACKAGE_NAME + '/scenes', glob('sphere_sim/scenes/*.yaml')),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='sphere_twin maintainers',
+    maintainer_email='maintainers@sphere-twin.invalid',
+    description='Digital twin of an electrostatically kicked sphere micromirror (ROS 2 Jazzy).',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'sphere-twin = sphere_twin.cli:main',
+            'simulator = sphere_sim.simulator_node:main',
+            'monitor = sphere_twin.monitor_node:main',
+        ],
+    },
+)

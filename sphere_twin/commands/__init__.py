@@ -1,0 +1,1 @@
+"""Subcommands of the sphere-twin CLI, one module each with register(subparsers)."""
