@@ -1,0 +1,303 @@
+"""The compiled right-hand side of the continuous model (paper §3).
+
+One kernel evaluates whatever parts the assembly switched on through ``flags``; a part that
+is off is never entered. State layout for ``n`` beams, with ``o = 4 n``:
+
+======================  =====================================================
+``x[2k], x[2k+1]``      z_S,k (m) and phi_k (rad) of beam k
+``x[2n+2k], ...+1``     their rates (m/s, rad/s)
+``x[o:o+3]``            sphere centre of gravity xi_S (m), inertial frame
+``x[o+3:o+7]``          unit quaternion [w, x, y, z], body to inertial
+``x[o+7:o+10]``         velocity of the centre of gravity (m/s)
+``x[o+10:o+13]``        angular velocity in the body frame (rad/s)
+======================  =====================================================
+
+Corrections to the printed equations (each tested, see docs/parameters.md): the mass matrix
+is derived from eq. (2) by eq. (1), so L_cog enters with factor 1, not 0.5 and 0.25; damping
+acts on rates (eq. 13 prints positions); Q_ES = +V^2/2 dC/dq (the co-energy gradient pulls the
+plate down); the sphere's Euler equation has the gyroscopic term omega x J omega (eq. 19);
+the velocity of a body point is v_S + omega x r (eq. 34/36 print the opposite sign); the
+contact normal points from the full-sphere centre (eq. 42 prints the centre of gravity).
+"""
+
+import math
+
+import numba
+import numpy as np
+
+from sphere_sim.capacitance import closed_form, rbf_evaluate
+from sphere_sim.contact_law import contact_force
+from sphere_sim.friction import friction_magnitude, onset_gate
+from sphere_sim.rotations import quat_to_matrix
+from sphere_sim.vec3 import add, cross, dot, mat_t_vec, matvec, scale, sub
+
+# Indices into the packed parameter vector ``p`` (see model.pack_parameters).
+P_GRAVITY = 0
+P_BEAM_MASS = 1
+P_BEAM_INERTIA_SUSP = 2
+P_BEAM_COG = 3
+P_BEAM_LENGTH = 4
+P_SUSPENSION_RADIUS = 5
+P_SUSPENSION_Z = 6
+P_KZ = 7
+P_KPHI = 8
+P_DZ = 9
+P_DPHI = 10
+P_GROUND_Z = 11
+P_GROUND_LENGTH = 12
+P_ISO = 13
+P_ES_LENGTH = 14
+P_ES_WIDTH = 15
+P_FRINGE_ANGLE = 16
+P_SPHERE_RADIUS = 17
+P_SPHERE_MASS = 18
+P_COG_OFFSET = 19
+P_JXX = 20
+P_JYY = 21
+P_JZZ = 22
+P_D_ROT = 23
+P_D_TRANS = 24
+P_KC = 25
+P_C_TRANSITION = 26
+P_RD = 27
+P_MU_VISC = 28
+P_MU_C = 29
+P_V_C = 30
+P_MU_S = 31
+P_V_S = 32
+P_EPS = 33
+P_VISC_ONSET = 34
+P_RBF_SIGMA_Z = 35
+P_RBF_SIGMA_PHI = 36
+N_PARAMS = 37
+
+# Indices into the integer ``flags`` vector: which parts the scene assembled.
+F_N_BEAMS = 0
+F_SPHERE = 1
+F_GRAVITY = 2
+F_ELECTROSTATICS = 3
+F_RBF = 4
+F_FRINGE = 5
+F_GROUND_CONTACT = 6
+F_SPHERE_CONTACT = 7
+F_CONTACT_LOSSES = 8
+F_DAMPING = 9
+F_VISCOUS = 10
+F_COULOMB = 11
+F_STRIBECK = 12
+F_PRINTED_FRICTION = 13
+N_FLAGS = 14
+
+# Diagnostics the kernel writes alongside the derivative (powers in W, gaps in m).
+D_POWER_ELECTROSTATIC = 0
+D_POWER_DAMPING = 1
+D_POWER_CONTACT_LOSS = 2
+D_POWER_FRICTION = 3
+D_MIN_GROUND_GAP = 4
+D_MIN_SPHERE_GAP = 5
+N_DIAG = 6
+
+QUATERNION_GAIN_PER_S = 1.0e3  # pulls |q| back to 1 without touching the rotation itself
+FAR_GAP_M = 1.0  # reported gap when a contact does not exist
+
+
+@numba.njit(cache=True)
+def capacitance_of(z_m, phi_rad, p, flags, rbf_cz, rbf_cphi, rbf_w):
+    """C (F) and its partial derivatives by z_S (F/m) and phi (F/rad) for one beam."""
+    if flags[F_RBF]:
+        return rbf_evaluate(z_m, phi_rad, rbf_cz, rbf_cphi, p[P_RBF_SIGMA_Z],
+                            p[P_RBF_SIGMA_PHI], rbf_w)
+    return closed_form(z_m - p[P_GROUND_Z], phi_rad, p[P_ES_LENGTH], p[P_ES_WIDTH],
+                       p[P_FRINGE_ANGLE], flags[F_FRINGE] != 0)
+
+
+@numba.njit(cache=True)
+def rhs_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, dxdt, diag):
+    """Write dx/dt of the assembled model into ``dxdt`` and diagnostics into ``diag``.
+
+    Parameters
+    ----------
+    t : float
+        Time in s (the model is autonomous given ``u``).
+    x : ndarray, shape (4 n + 13 sphere,)
+    u : ndarray, shape (n,)
+        Beam voltages in V, held constant by the caller between programme edges.
+    p : ndarray, shape (N_PARAMS,)
+    flags : ndarray of int64, shape (N_FLAGS,)
+    beam_angles : ndarray, shape (n,)
+        delta_k of each beam present (rad).
+    rbf_cz, rbf_cphi, rbf_w : ndarray
+        RBF capacitance centres (m, rad) and weights (F); unused with the closed form.
+    dxdt : ndarray, shape like ``x``
+    diag : ndarray, shape (N_DIAG,)
+    """
+    n = flags[F_N_BEAMS]
+    has_sphere = flags[F_SPHERE] != 0
+    g = p[P_GRAVITY] if flags[F_GRAVITY] else 0.0
+    damping = flags[F_DAMPING] != 0
+    r_d = p[P_RD] if flags[F_CONTACT_LOSSES] else 0.0
+    any_friction = flags[F_VISCOUS] or flags[F_COULOMB] or flags[F_STRIBECK]
+    for i in range(N_DIAG):
+        diag[i] = 0.0
+    diag[D_MIN_GROUND_GAP] = FAR_GAP_M
+    diag[D_MIN_SPHERE_GAP] = FAR_GAP_M
+
+    m_b = p[P_BEAM_MASS]
+    l_cog = p[P_BEAM_COG]
+    l_b = p[P_BEAM_LENGTH]
+
+    # Sphere kinematics, shared by all tips. Defaults keep every variable typed when absent.
+    o = 4 * n
+    force_s = (0.0, 0.0, 0.0)
+    torque_b = (0.0, 0.0, 0.0)
+    pos = (0.0, 0.0, 0.0)
+    vel = (0.0, 0.0, 0.0)
+    omega_b = (0.0, 0.0, 0.0)
+    omega_i = (0.0, 0.0, 0.0)
+    r_sc = (0.0, 0.0, 0.0)
+    centre = (0.0, 0.0, 0.0)
+    centre_vel = (0.0, 0.0, 0.0)
+    R = np.eye(3)
+    if has_sphere:
+        pos = (x[o], x[o + 1], x[o + 2])
+        vel = (x[o + 7], x[o + 8], x[o + 9])
+        omega_b = (x[o + 10], x[o + 11], x[o + 12])
+        R = quat_to_matrix(x[o + 3:o + 7])
+        omega_i = matvec(R, omega_b)
+        r_sc = (R[0, 2] * p[P_COG_OFFSET], R[1, 2] * p[P_COG_OFFSET], R[2, 2] * p[P_COG_OFFSET])
+        centre = add(pos, r_sc)
+        centre_vel = add(vel, cross(omega_i, r_sc))
+
+    for k in range(n):
+        z = x[2 * k]
+        phi = x[2 * k + 1]
+        zd = x[2 * n + 2 * k]
+        phid = x[2 * n + 2 * k + 1]
+        cphi = math.cos(phi)
+        sphi = math.sin(phi)
+        f1 = m_b * l_cog * sphi * phid * phid - m_b * g
+        f2 = -m_b * g * l_cog * cphi
+        f1 -= p[P_KZ] * (z - p[P_SUSPENSION_Z])
+        f2 -= p[P_KPHI] * phi
+        if damping:
+            f1 -= p[P_DZ] * zd
+            f2 -= p[P_DPHI] * phid
+            diag[D_POWER_DAMPING] -= p[P_DZ] * zd * zd + p[P_DPHI] * phid * phid
+        if flags[F_ELECTROSTATICS] and u[k] != 0.0:
+            _, dcdz, dcdphi = capacitance_of(z, phi, p, flags, rbf_cz, rbf_cphi, rbf_w)
+            half_v2 = 0.5 * u[k] * u[k]
+            f1 += half_v2 * dcdz
+            f2 += half_v2 * dcdphi
+            diag[D_POWER_ELECTROSTATIC] += half_v2 * (dcdz * zd + dcdphi * phid)
+        if flags[F_GROUND_CONTACT]:
+            gap_rear = z - p[P_GROUND_Z] - p[P_ISO]
+            lever = p[P_GROUND_LENGTH] / (cphi * cphi)
+            gap_front = gap_rear + p[P_GROUND_LENGTH] * sphi / cphi
+            rate_front = zd + lever * phid
+            f_rear = contact_force(gap_rear, zd, p[P_KC], p[P_C_TRANSITION], r_d)
+            f_front = contact_force(gap_front, rate_front, p[P_KC], p[P_C_TRANSITION], r_d)
+            f1 += f_rear + f_front
+            f2 += f_front * lever
+            if r_d != 0.0:
+                elastic_rear = contact_force(gap_rear, 0.0, p[P_KC], p[P_C_TRANSITION], 0.0)
+                elastic_front = contact_force(gap_front, 0.0, p[P_KC], p[P_C_TRANSITION], 0.0)
+                diag[D_POWER_CONTACT_LOSS] += ((f_rear - elastic_rear) * zd
+                                               + (f_front - elastic_front) * rate_front)
+            diag[D_MIN_GROUND_GAP] = min(diag[D_MIN_GROUND_GAP], gap_rear, gap_front)
+        if has_sphere and flags[F_SPHERE_CONTACT]:
+            cd = math.cos(beam_angles[k])
+            sd = math.sin(beam_angles[k])
+            radial = -p[P_SUSPENSION_RADIUS] + l_b * cphi
+            tip = (radial * cd, radial * sd, z + l_b * sphi)
+            dtip_dphi = (-l_b * sphi * cd, -l_b * sphi * sd, l_b * cphi)
+            tip_vel = (dtip_dphi[0] * phid, dtip_dphi[1] * phid, dtip_dphi[2] * phid + zd)
+            rel = sub(tip, centre)
+            dist = math.sqrt(dot(rel, rel))
+            gap = dist - p[P_SPHERE_RADIUS]
+            diag[D_MIN_SPHERE_GAP] = min(diag[D_MIN_SPHERE_GAP], gap)
+            if gap < 0.0:
+                e = scale(1.0 / dist, rel)
+                rate = dot(e, sub(tip_vel, centre_vel))
+                f_n = contact_force(gap, rate, p[P_KC], p[P_C_TRANSITION], r_d)
+                f1 += f_n * e[2]
+                f2 += f_n * dot(e, dtip_dphi)
+                push = scale(-f_n, e)
+                force_s = add(force_s, push)
+                torque_b = add(torque_b, mat_t_vec(R, cross(r_sc, push)))
+                if r_d != 0.0:
+                    elastic = contact_force(gap, 0.0, p[P_KC], p[P_C_TRANSITION], 0.0)
+                    diag[D_POWER_CONTACT_LOSS] += (f_n - elastic) * rate
+                if any_friction:
+                    r_sp = sub(tip, pos)
+                    slip = sub(add(vel, cross(omega_i, r_sp)), tip_vel)
+                    slip_t = sub(slip, scale(dot(e, slip), e))
+                    speed = math.sqrt(p[P_EPS] + dot(slip_t, slip_t))
+                    gate = onset_gate(gap, p[P_VISC_ONSET])
+                    f_t = friction_magnitude(
+                        speed, f_n, gate, p[P_MU_VISC], p[P_MU_C], p[P_V_C], p[P_MU_S],
+                        p[P_V_S], flags[F_VISCOUS] != 0, flags[F_COULOMB] != 0,
+                        flags[F_STRIBECK] != 0, flags[F_PRINTED_FRICTION] != 0)
+                    direction = scale(1.0 / speed, slip_t)
+                    f1 += f_t * direction[2]
+                    f2 += f_t * dot(direction, dtip_dphi)
+                    drag = scale(-f_t, direction)
+                    force_s = add(force_s, drag)
+                    torque_b = add(torque_b, mat_t_vec(R, cross(r_sp, drag)))
+                    diag[D_POWER_FRICTION] -= f_t * dot(direction, slip_t)
+
+        # M [zdd, phidd] = [f1, f2] with the 2x2 mass matrix of eq. (1)-(2).
+        m12 = m_b * l_cog * cphi
+        m22 = p[P_BEAM_INERTIA_SUSP]
+        det = m_b * m22 - m12 * m12
+        dxdt[2 * k] = zd
+        dxdt[2 * k + 1] = phid
+        dxdt[2 * n + 2 * k] = (m22 * f1 - m12 * f2) / det
+        dxdt[2 * n + 2 * k + 1] = (m_b * f2 - m12 * f1) / det
+
+    if has_sphere:
+        m_s = p[P_SPHERE_MASS]
+        force_s = (force_s[0], force_s[1], force_s[2] - m_s * g)
+        if damping:
+            force_s = sub(force_s, scale(p[P_D_TRANS], vel))
+            torque_b = sub(torque_b, scale(p[P_D_ROT], omega_b))
+            diag[D_POWER_DAMPING] -= (p[P_D_TRANS] * dot(vel, vel)
+                                      + p[P_D_ROT] * dot(omega_b, omega_b))
+        inertia = (p[P_JXX], p[P_JYY], p[P_JZZ])
+        spin = (inertia[0] * omega_b[0], inertia[1] * omega_b[1], inertia[2] * omega_b[2])
+        torque_b = sub(torque_b, cross(omega_b, spin))
+        w, qx, qy, qz = x[o + 3], x[o + 4], x[o + 5], x[o + 6]
+        wx, wy, wz = omega_b[0], omega_b[1], omega_b[2]
+        stab = QUATERNION_GAIN_PER_S * (1.0 - (w * w + qx * qx + qy * qy + qz * qz))
+        for i in range(3):
+            dxdt[o + i] = vel[i]
+            dxdt[o + 7 + i] = force_s[i] / m_s
+            dxdt[o + 10 + i] = torque_b[i] / inertia[i]
+        dxdt[o + 3] = 0.5 * (-qx * wx - qy * wy - qz * wz) + stab * w
+        dxdt[o + 4] = 0.5 * (w * wx + qy * wz - qz * wy) + stab * qx
+        dxdt[o + 5] = 0.5 * (w * wy - qx * wz + qz * wx) + stab * qy
+        dxdt[o + 6] = 0.5 * (w * wz + qx * wy - qy * wx) + stab * qz
+
+
+JACOBIAN_STEP = 1e-7  # forward-difference step relative to each state's characteristic scale
+
+
+@numba.njit(cache=True)
+def jacobian_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, scale, jac):
+    """d(dx/dt)/dx by compiled forward differences into ``jac``, shape (n, n).
+
+    Steps are ``JACOBIAN_STEP * max(|x_j|, scale_j)`` so that positions in um and rates in m/s
+    are perturbed alike.
+    """
+    n = x.size
+    f0 = np.empty(n)
+    f1 = np.empty(n)
+    diag = np.empty(N_DIAG)
+    rhs_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, f0, diag)
+    xp = x.copy()
+    for j in range(n):
+        h = JACOBIAN_STEP * max(abs(x[j]), scale[j])
+        xp[j] = x[j] + h
+        rhs_kernel(t, xp, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, f1, diag)
+        for i in range(n):
+            jac[i, j] = (f1[i] - f0[i]) / h
+        xp[j] = x[j]

@@ -1,0 +1,261 @@
+"""Physical parameter sets: frozen dataclasses in SI units, loaded from one place.
+
+A parameter set is a YAML file under ``sphere_sim/params``. A file may name a ``base`` set
+and override some of its values; the ``calibrated`` set does this and declares which
+parameters it treats as uncertain, with a plausible range and a reason for each.
+"""
+
+import dataclasses
+import hashlib
+import json
+from functools import lru_cache
+from pathlib import Path
+
+import yaml
+
+PARAMS_DIR = Path(__file__).parent / 'params'
+DEFAULT_PARAMETER_SET = 'calibrated'
+
+
+class ParameterError(ValueError):
+    """A parameter file is missing, malformed or names an unknown key."""
+
+
+@dataclasses.dataclass(frozen=True)
+class BeamParams:
+    suspension_z_m: float
+    tip_distance_m: float
+    length_m: float
+    width_m: float
+    mass_kg: float
+    inertia_kg_m2: float
+    inertia_about: str
+    cog_distance_m: float
+    electrode_length_m: float
+    electrode_width_m: float
+    insulation_virtual_m: float
+    stiffness_z_n_per_m: float
+    stiffness_phi_nm_per_rad: float
+    damping_z_ns_per_m: float
+    damping_phi_nms_per_rad: float
+    ground_z_m: float
+    ground_length_m: float
+
+    @property
+    def suspension_radius_m(self):
+        """Horizontal distance of the suspension from the centre, L_B + d_B/2 (eq. 3)."""
+        return self.length_m + 0.5 * self.tip_distance_m
+
+    @property
+    def inertia_suspension_kg_m2(self):
+        """Rotational inertia about the suspension point, the (2,2) entry of the mass matrix."""
+        if self.inertia_about == 'suspension':
+            return self.inertia_kg_m2
+        return self.inertia_kg_m2 + self.mass_kg * self.cog_distance_m**2
+
+
+@dataclasses.dataclass(frozen=True)
+class ElectrostaticParams:
+    fringe: bool
+    fringe_angle_rad: float
+
+
+@dataclasses.dataclass(frozen=True)
+class SphereParams:
+    radius_m: float
+    cut_angle_rad: float
+    mass_kg: float
+    cog_offset_m: float
+    damping_rot_nms: float
+    damping_trans_ns_per_m: float
+
+
+@dataclasses.dataclass(frozen=True)
+class ContactParams:
+    stiffness_n_per_m: float
+    transition_force_n: float
+    loss_s_per_m: float
+
+
+@dataclasses.dataclass(frozen=True)
+class FrictionParams:
+    reading: str
+    viscous_ns_per_m: float
+    coulomb: float
+    coulomb_velocity_m_per_s: float
+    stribeck: float
+    stribeck_velocity_m_per_s: float
+    epsilon_m2_per_s2: float
+    viscous_onset_m: float
+
+
+@dataclasses.dataclass(frozen=True)
+class UncertainParameter:
+    """A parameter the calibration may move, within ``[low, high]``, and why."""
+
+    path: str
+    low: float
+    high: float
+    reason: str
+
+
+@dataclasses.dataclass(frozen=True)
+class ParameterSet:
+    name: str
+    description: str
+    gravity_m_per_s2: float
+    beam: BeamParams
+    electrostatics: ElectrostaticParams
+    sphere: SphereParams
+    contact: ContactParams
+    friction: FrictionParams
+    uncertain: tuple = ()
+
+    def to_dict(self):
+        return dataclasses.asdict(self)
+
+    def digest(self):
+        """Short content hash of the physical values (name and description excluded)."""
+        physical = {k: v for k, v in self.to_dict().items() if k not in ('name', 'description')}
+        text = json.dumps(physical, sort_keys=True, default=str)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    def replace(self, **paths):
+        """A copy with dotted-path values replaced: ``replace(**{'beam.mass_kg': 1e-7})``."""
+        data = self.to_dict()
+        for path, value in paths.items():
+            _set_path(data, path, value)
+        return _from_dict(data)
+
+    def get(self, path):
+        node = self
+        for part in path.split('.'):
+            node = getattr(node, part)
+        return node
+
+
+_SECTIONS = {
+    'beam': BeamParams,
+    'electrostatics': ElectrostaticParams,
+    'sphere': SphereParams,
+    'contact': ContactParams,
+    'friction': FrictionParams,
+}
+_CHOICES = {
+    ('beam', 'inertia_about'): ('suspension', 'cog'),
+    ('friction', 'reading'): ('dissipative', 'printed'),
+}
+
+
+def _set_path(data, path, value):
+    keys = path.split('.')
+    node = data
+    for key in keys[:-1]:
+        if not isinstance(node, dict) or key not in node:
+            raise ParameterError(f'unknown parameter {path!r}')
+        node = node[key]
+    if keys[-1] not in node:
+        raise ParameterError(f'unknown parameter {path!r}')
+    node[keys[-1]] = value
+
+
+def _from_dict(data):
+    top_fields = {f.name for f in dataclasses.fields(ParameterSet)}
+    unknown = set(data) - top_fields - {'base', 'overrides'}
+    if unknown:
+        raise ParameterError(
+            f'unknown key(s) {sorted(unknown)} in parameter set; allowed: {sorted(top_fields)}')
+    kwargs = {}
+    for section, cls in _SECTIONS.items():
+        values = data.get(section)
+        if not isinstance(values, dict):
+            raise ParameterError(f'parameter set lacks section {section!r}')
+        allowed = {f.name: f.type for f in dataclasses.fields(cls)}
+        extra = set(values) - set(allowed)
+        missing = set(allowed) - set(values)
+        if extra:
+            raise ParameterError(
+                f'unknown key(s) {sorted(extra)} in {section!r}; allowed: {sorted(allowed)}')
+        if missing:
+            raise ParameterError(f'missing key(s) {sorted(missing)} in {section!r}')
+        converted = {}
+        for key, value in values.items():
+            choices = _CHOICES.get((section, key))
+            if choices is not None:
+                if value not in choices:
+                    raise ParameterError(f'{section}.{key} must be one of {choices}, got {value!r}')
+                converted[key] = value
+            elif allowed[key] in (bool, 'bool'):
+                converted[key] = bool(value)
+            else:
+                try:
+                    converted[key] = float(value)
+                except (TypeError, ValueError) as exc:
+                    raise ParameterError(
+                        f'{section}.{key} must be a number, got {value!r}') from exc
+        kwargs[section] = cls(**converted)
+    uncertain = tuple(
+        item if isinstance(item, UncertainParameter) else UncertainParameter(**item)
+        for item in data.get('uncertain', ()) or ())
+    return ParameterSet(
+        name=str(data.get('name', 'unnamed')),
+        description=str(data.get('description', '')),
+        gravity_m_per_s2=float(data['gravity_m_per_s2']),
+        uncertain=uncertain,
+        **kwargs,
+    )
+
+
+def _read_yaml(path):
+    try:
+        with open(path) as stream:
+            data = yaml.safe_load(stream)
+    except FileNotFoundError as exc:
+        raise ParameterError(f'parameter file not found: {path}') from exc
+    if not isinstance(data, dict):
+        raise ParameterError(f'parameter file {path} must hold a mapping')
+    return data
+
+
+def _resolve(data, seen=()):
+    base = data.get('base')
+    if base is None:
+        return data
+    if base in seen:
+        raise ParameterError(f'parameter sets form a cycle through {base!r}')
+    merged = _resolve(_read_yaml(_path_of(base)), (*seen, base))
+    merged = json.loads(json.dumps(merged))
+    for path, value in (data.get('overrides') or {}).items():
+        _set_path(merged, path, value)
+    for key in ('name', 'description', 'uncertain'):
+        if key in data:
+            merged[key] = data[key]
+    merged.pop('base', None)
+    return merged
+
+
+def _path_of(name_or_path):
+    path = Path(name_or_path)
+    if path.suffix in ('.yaml', '.yml'):
+        return path
+    return PARAMS_DIR / f'{name_or_path}.yaml'
+
+
+def available_parameter_sets():
+    return sorted(p.stem for p in PARAMS_DIR.glob('*.yaml'))
+
+
+@lru_cache(maxsize=32)
+def load_parameter_set(name_or_path=DEFAULT_PARAMETER_SET):
+    """Load a parameter set by name (``table_a1``, ``calibrated``) or YAML path.
+
+    Raises
+    ------
+    ParameterError
+        When the file is missing or a key is unknown, missing or of the wrong type.
+    """
+    path = _path_of(name_or_path)
+    if not path.exists():
+        raise ParameterError(
+            f'unknown parameter set {name_or_path!r}; available: {available_parameter_sets()}')
+    return _from_dict(_resolve(_read_yaml(path)))

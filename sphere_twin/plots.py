@@ -1,0 +1,54 @@
+"""Figures written by the CLI (matplotlib, Agg backend: no display needed)."""
+
+import matplotlib
+
+matplotlib.use('Agg')
+import matplotlib.pyplot as plt
+import numpy as np
+
+
+def plot_pulse_sweep(trajectories, voltages_v, threshold_v, path, title=''):
+    """Fig. 4 layout: beam z and phi over time (a) and sphere height change (b)."""
+    fig, axes = plt.subplots(3, 1, figsize=(7.5, 8.5), sharex=True)
+    cmap = plt.get_cmap('viridis')
+    for i, (traj, v) in enumerate(zip(trajectories, voltages_v, strict=True)):
+        color = cmap(i / max(1, len(voltages_v) - 1))
+        model = traj.model
+        t_ms = traj.t * 1e3
+        axes[0].plot(t_ms, traj.x[0] * 1e6, color=color, label=f'{v:.0f} V')
+        axes[1].plot(t_ms, traj.x[1] * 1e3, color=color)
+        if model.has_sphere:
+            z = traj.x[model.sphere_offset + 2]
+            axes[2].plot(t_ms, (z - z[0]) * 1e6, color=color)
+    axes[0].set_ylabel('beam 1 $z_S$ (µm)')
+    axes[1].set_ylabel(r'beam 1 $\varphi$ (mrad)')
+    axes[2].set_ylabel('sphere height change (µm)')
+    axes[2].set_xlabel('time (ms)')
+    axes[0].legend(ncol=3, fontsize=8)
+    axes[0].set_title(title or f'5 ms pulses on all beams; dynamic pull-in at {threshold_v:.1f} V')
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_lines(x, ys, labels, xlabel, ylabel, path, title='', logx=False, logy=False):
+    """A plain multi-line plot."""
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for y, label in zip(ys, labels, strict=True):
+        ax.plot(x, y, marker='o', label=label)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if logx:
+        ax.set_xscale('log')
+    if logy:
+        ax.set_yscale('log')
+    ax.grid(alpha=0.3)
+    ax.legend()
+    ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return np.asarray(x)

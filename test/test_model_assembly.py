@@ -1,0 +1,81 @@
+"""The model is assembled from what the scene declares, and nothing else runs."""
+
+import numpy as np
+import pytest
+from physics_helpers import scene_with
+
+from sphere_sim import dynamics
+from sphere_sim.model import assemble
+
+
+def _raise(*args, **kwargs):
+    raise AssertionError('a part the scene left out was evaluated')
+
+
+def _random_state(model, rng):
+    x = np.zeros(model.n_states)
+    n = model.n_beams
+    x[0:2 * n:2] = rng.uniform(-3e-6, 3e-6, n)
+    x[1:2 * n:2] = rng.uniform(-5e-3, 5e-3, n)
+    x[2 * n:4 * n] = rng.normal(0, 1e-2, 2 * n)
+    return x
+
+
+def test_beams_only_scene_has_two_dof_per_beam():
+    for beams in ([1], [1, 3], [1, 2, 3, 4]):
+        model = assemble(scene_with(beams=beams, sphere=False))
+        assert model.n_states == 4 * len(beams)
+        assert 'sphere' not in model.parts and 'sphere_contact' not in model.parts
+        assert not any(part.startswith('friction') for part in model.parts)
+
+
+def test_full_scene_has_sphere_states_and_all_parts():
+    model = assemble(scene_with())
+    assert model.n_states == 4 * 4 + 13
+    assert model.parts == ('beams', 'electrostatics:closed_form', 'ground_contact', 'sphere',
+                           'sphere_contact', 'friction:viscous', 'friction:coulomb',
+                           'friction:stribeck')
+
+
+@pytest.mark.parametrize('patched', ['quat_to_matrix', 'friction_magnitude', 'onset_gate'])
+def test_beams_only_scene_never_calls_sphere_or_friction_code(monkeypatch, patched):
+    rng = np.random.default_rng(1)
+    model = assemble(scene_with(sphere=False), jit=False)
+    x = _random_state(model, rng)
+    monkeypatch.setattr(dynamics, patched, _raise)
+    dxdt = model.rhs(0.0, x, np.full(4, 30.0))
+    assert np.all(np.isfinite(dxdt))
+
+
+def test_parts_switched_off_are_never_called(monkeypatch):
+    rng = np.random.default_rng(2)
+    model = assemble(scene_with(sphere=False, ground_contact=False, electrostatics=False),
+                     jit=False)
+    x = _random_state(model, rng)
+    x[0:8:2] = -9.5e-6  # deep in what would be ground contact
+    for name in ('contact_force', 'capacitance_of', 'quat_to_matrix', 'friction_magnitude'):
+        monkeypatch.setattr(dynamics, name, _raise)
+    assert np.all(np.isfinite(model.rhs(0.0, x, np.full(4, 80.0))))
+
+
+def test_patched_part_is_detected_when_the_scene_needs_it(monkeypatch):
+    # Guards the two tests above: the patch really intercepts the kernel's calls.
+    model = assemble(scene_with(), jit=False)
+    x = np.zeros(model.n_states)
+    x[model.sphere_offset + 3] = 1.0
+    monkeypatch.setattr(dynamics, 'quat_to_matrix', _raise)
+    with pytest.raises(AssertionError, match='left out'):
+        model.rhs(0.0, x, np.zeros(4))
+
+
+def test_compiled_and_python_kernels_agree():
+    rng = np.random.default_rng(3)
+    scene = scene_with()
+    fast, slow = assemble(scene), assemble(scene, jit=False)
+    from sphere_sim.initial_state import rest_state
+
+    x = rest_state(fast)
+    x = x + 1e-9 * rng.normal(size=x.size) * (np.abs(x) > 0)
+    x[fast.sphere_offset + 7:] += rng.normal(0, 1e-3, 6)
+    u = np.array([35.0, 35.0, 80.0, 80.0])
+    np.testing.assert_allclose(fast.rhs(0, x, u), slow.rhs(0, x, u), rtol=1e-9, atol=1e-12)

@@ -1,0 +1,83 @@
+import math
+
+import pytest
+
+from sphere_sim.parameters import ParameterError, load_parameter_set
+from sphere_sim.scene import SceneError, load_scene, scene_from_dict
+
+
+def test_table_a1_is_in_si_units():
+    p = load_parameter_set('table_a1')
+    assert p.beam.mass_kg == pytest.approx(96.695e-9, rel=1e-12, abs=0)
+    assert p.beam.stiffness_z_n_per_m == 35.0
+    assert p.beam.stiffness_phi_nm_per_rad == pytest.approx(20e-6, rel=1e-12, abs=0)
+    assert p.beam.inertia_kg_m2 == pytest.approx(2.665e-14, rel=1e-12, abs=0)
+    assert p.sphere.mass_kg == pytest.approx(30.973e-6, rel=1e-12, abs=0)
+    assert p.sphere.cut_angle_rad == pytest.approx(math.pi / 2)
+    assert p.friction.reading == 'dissipative'
+
+
+def test_bare_parallel_plate_pull_in_of_table_is_near_42_volts():
+    # V_PI = sqrt(8 k g^3 / (27 eps0 A)) for the rear electrode gap z_0 - z_G.
+    b = load_parameter_set('table_a1').beam
+    gap = b.suspension_z_m - b.ground_z_m
+    area = b.electrode_length_m * b.electrode_width_m
+    v_pi = math.sqrt(8 * b.stiffness_z_n_per_m * gap**3 / (27 * 8.8541878128e-12 * area))
+    assert 42.0 < v_pi < 43.0
+
+
+def test_calibrated_moves_only_declared_uncertain_parameters():
+    table = load_parameter_set('table_a1').to_dict()
+    cal = load_parameter_set('calibrated')
+    declared = {u.path for u in cal.uncertain}
+    assert declared
+    changed = set()
+    for section in ('beam', 'electrostatics', 'sphere', 'contact', 'friction'):
+        for key, value in cal.to_dict()[section].items():
+            if table[section][key] != value:
+                changed.add(f'{section}.{key}')
+    assert changed <= declared
+    for u in cal.uncertain:
+        assert u.low <= cal.get(u.path) <= u.high, u.path
+        assert u.reason.strip()
+
+
+def test_digest_tracks_values_not_names():
+    a = load_parameter_set('table_a1')
+    assert a.digest() == a.replace(**{'beam.mass_kg': a.beam.mass_kg}).digest()
+    assert a.digest() != a.replace(**{'beam.mass_kg': 1e-7}).digest()
+
+
+def test_unknown_parameter_set_and_key_are_named(tmp_path):
+    with pytest.raises(ParameterError, match='available'):
+        load_parameter_set('no_such_set')
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('base: table_a1\noverrides:\n  beam.mass: 1.0\n')
+    with pytest.raises(ParameterError, match=r'beam\.mass'):
+        load_parameter_set(str(bad))
+
+
+def test_scene_errors_name_the_key_and_the_choices():
+    with pytest.raises(SceneError, match=r"'capacitance'.*closed_form"):
+        scene_from_dict({'capacitance': 'spline'})
+    with pytest.raises(SceneError, match=r'unknown key.*gravitty'):
+        scene_from_dict({'effects': {'gravitty': True}})
+    with pytest.raises(SceneError, match="'beams'"):
+        scene_from_dict({'beams': [1, 5]})
+    with pytest.raises(SceneError, match='width_s must be >= 0'):
+        scene_from_dict({'voltage_programme': {'pulses': [
+            {'beam': 1, 'amplitude_v': 10, 'start_s': 0, 'width_s': -1}]}})
+    with pytest.raises(SceneError, match='exceeds the limit'):
+        scene_from_dict({'voltage_programme': {'pulses': [
+            {'beam': 1, 'amplitude_v': 81, 'start_s': 0, 'width_s': 1e-3}]}})
+    with pytest.raises(SceneError, match='lacks'):
+        scene_from_dict({'beams': [1, 2], 'voltage_programme': {'pulses': [
+            {'beam': 3, 'amplitude_v': 10, 'start_s': 0, 'width_s': 1e-3}]}})
+    with pytest.raises(SceneError, match='shipped scenes'):
+        load_scene('no_such_scene')
+
+
+def test_shipped_scenes_load():
+    for name in ('rest', 'four_beam_pulse', 'asymmetric_kick', 'beams_only'):
+        scene = load_scene(name)
+        assert scene.duration_s > 0
