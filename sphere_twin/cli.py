@@ -15,6 +15,11 @@ from msg_defs.ros_env import ensure_localhost_discovery
 COMMAND_MODULES = (
     'doctor',
     'demo',
+    'kick',
+    'pullin',
+    'calibrate',
+    'capacitance',
+    'validate',
 )
 
 

@@ -2,7 +2,6 @@
 
 import dataclasses
 
-from sphere_sim.programme import Pulse, PulseProgramme
 from sphere_sim.scene import Effects, load_scene
 
 
@@ -30,12 +29,4 @@ def scene_with(base='rest', beams=None, sphere=None, programme=None, duration_s=
     return scene.replace(**changes)
 
 
-def pulses(amplitudes_v, start_s=0.0, width_s=0.005, beams=(1, 2, 3, 4)):
-    """One rectangular pulse per beam with the given amplitudes."""
-    return PulseProgramme(tuple(Pulse(b, float(a), start_s, width_s)
-                                for b, a in zip(beams, amplitudes_v, strict=True) if a))
-
-
-CONSERVATIVE = dict(damping=False, contact_losses=False, viscous=False, coulomb=False,
-                    stribeck=False)
-__all__ = ['CONSERVATIVE', 'Effects', 'pulses', 'scene_with']
+__all__ = ['Effects', 'scene_with']

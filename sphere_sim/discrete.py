@@ -1,0 +1,76 @@
+"""The discrete kick model x_{t+1} = f(x_t, a_t, u_K) of §4, as an interface.
+
+A *kick plant* maps the sphere's resting surface normal, an action (a kick direction) and an
+intensity u_K in [0, 1] to the next resting normal. The lookup table built from the continuous
+model, the continuous model itself and the synthetic plants of the tests all implement it, so
+controllers never know which one they drive.
+"""
+
+import dataclasses
+import math
+from typing import Protocol
+
+import numpy as np
+
+# The four diagonal kicks of the paper: hind-left kick -> normal moves towards -45 deg, and its
+# rotations by 90 deg (Fig. 7). Angles are polar angles of the normal's x-y displacement.
+DIAGONAL_DIRECTIONS_RAD = tuple(math.radians(a) for a in (-45.0, 45.0, 135.0, -135.0))
+# With the axis-parallel kicks of §6, eight directions.
+EIGHT_DIRECTIONS_RAD = tuple(math.radians(a) for a in (-45.0, 0.0, 45.0, 90.0, 135.0, 180.0,
+                                                      -135.0, -90.0))
+CONE_HALF_ANGLE_RAD = math.radians(40.0)  # the state space investigated in the paper
+
+
+@dataclasses.dataclass(frozen=True)
+class KickResult:
+    """Outcome of one kick.
+
+    Attributes
+    ----------
+    normal : ndarray, shape (3,)
+        Resting unit surface normal after the kick settles.
+    peak_deviation_rad : float
+        Largest angle between the transient normal and the final one (the overshoot of §6).
+    settle_time_s : float
+        Time until the normal stays within the settling band of its final value.
+    """
+
+    normal: np.ndarray
+    peak_deviation_rad: float = 0.0
+    settle_time_s: float = 0.0
+
+
+class KickPlant(Protocol):
+    """What a controller may ask of the device: the kick directions it offers and a kick."""
+
+    directions_rad: tuple
+
+    def kick(self, normal, action, intensity):
+        """Apply kick ``action`` (index into ``directions_rad``) of intensity in [0, 1].
+
+        Parameters
+        ----------
+        normal : ndarray, shape (3,)
+            Current resting unit surface normal.
+        action : int
+        intensity : float
+
+        Returns
+        -------
+        KickResult
+        """
+
+
+def normal_from_xy(x_sn, y_sn):
+    """Unit normal with the given x and y components (eq. 53), z >= 0."""
+    z2 = 1.0 - x_sn * x_sn - y_sn * y_sn
+    if z2 < 0.0:
+        raise ValueError(f'({x_sn}, {y_sn}) is not the x-y part of a unit vector')
+    return np.array([x_sn, y_sn, math.sqrt(z2)])
+
+
+def angle_between(a, b):
+    """Angle (rad) between two unit vectors, robust for tiny angles."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    return math.atan2(np.linalg.norm(np.cross(a, b)), float(a @ b))

@@ -1,0 +1,37 @@
+"""``sphere-twin validate``: the continuous model's rest, symmetry and energy figures."""
+
+from sphere_sim import validation
+
+
+def register(subparsers):
+    parser = subparsers.add_parser(
+        'validate', help='print the rest, symmetry and energy figures of the physics model',
+        description='Rest equilibrium (§4.1), symmetry of equal and mirrored pulses, and the '
+                    'energy balance with and without losses; the same functions the tests use.')
+    parser.add_argument('--params', default='calibrated', help='parameter set for the rest check')
+    parser.set_defaults(func=run)
+
+
+def run(args):
+    rest = validation.rest_report(args.params)
+    on_edge = 'yes' if (rest.front_gaps_m < 0).all() else 'no'
+    front_nm = rest.front_gaps_m.min() * 1e9
+    rear_um = rest.rear_gaps_m.min() * 1e6
+    print(f'rest ({args.params}): largest force imbalance {rest.force_imbalance:.2e} of the weight '
+          f'per tip; tips on the front edge: {on_edge} (front gap {front_nm:+.2f} nm, rear gap '
+          f'{rear_um:.2f} um)')
+    print(f'rest drift over {rest.duration_s:.0f} s: tilt {rest.tilt_drift_rad:.2e} rad, '
+          f'position {rest.position_drift_m:.2e} m')
+    tilt, lift = validation.symmetric_pulse_tilt()
+    print(f'equal 50 V pulses: largest tilt {tilt:.2e} rad (sphere lifted {lift * 1e6:.1f} um)')
+    mismatch, excursion = validation.mirror_mismatch()
+    print(f'mirrored programme: normals differ by {mismatch:.2e} (largest x-y excursion '
+          f'{excursion:.2e})')
+    surplus, impacts = validation.lossless_drop()
+    print(f'lossless drop: {impacts} impacts, energy error {surplus:.2e} of m g h')
+    surplus, work = validation.lossless_pulse()
+    print(f'lossless pulse: energy error {surplus:.2e} of the electrical work ({work:.3e} J)')
+    peak, final = validation.lossy_kick()
+    print(f'kick with losses: energy surplus at most {peak:+.2e}, finally {final:+.2e} of the '
+          'electrical work')
+    return 0
