@@ -20,6 +20,7 @@ COMMAND_MODULES = (
     'calibrate',
     'capacitance',
     'validate',
+    'optimize',
 )
 
 

@@ -34,4 +34,8 @@ def run(args):
     peak, final = validation.lossy_kick()
     print(f'kick with losses: energy surplus at most {peak:+.2e}, finally {final:+.2e} of the '
           'electrical work')
+    for tilt_deg in (20.0, 35.0):
+        rate = validation.tilted_creep_rate(tilt_deg)
+        print(f'tilted rest at {tilt_deg:.0f} deg creeps back at {rate * 57.29578:.2f} deg/s '
+              '(regularised friction has no stiction)')
     return 0
