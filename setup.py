@@ -1,4 +1,4 @@
-"""Installs sphere_twin as an ament_python ROS 2 package (colcon) or a plain Python package (pip)."""
+"""Install sphere_twin as an ament_python ROS 2 package (colcon) or a Python package (pip)."""
 
 from glob import glob
 

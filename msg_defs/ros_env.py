@@ -5,9 +5,13 @@ unless the user chose a range explicitly.
 """
 
 import os
+import signal
 
 DISCOVERY_RANGE_VAR = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
 DEFAULT_DISCOVERY_RANGE = 'LOCALHOST'
+DOMAIN_ID_VAR = 'ROS_DOMAIN_ID'
+# What the RMW uses when ROS_DOMAIN_ID is unset.
+DEFAULT_DOMAIN_ID = 0
 
 
 def ensure_localhost_discovery(environ=None):
@@ -29,3 +33,21 @@ def ensure_localhost_discovery(environ=None):
     env = os.environ if environ is None else environ
     env.setdefault(DISCOVERY_RANGE_VAR, DEFAULT_DISCOVERY_RANGE)
     return env[DISCOVERY_RANGE_VAR]
+
+
+def _raise_keyboard_interrupt(signum, frame):
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def install_shutdown_signal_handlers():
+    """Make SIGINT and SIGTERM both end a node with ``KeyboardInterrupt``.
+
+    A process started in the background by a non-interactive shell inherits SIGINT as
+    ignored, and SIGTERM's default action kills without cleanup; either way a supervisor that
+    signals the node's PID would not get a clean exit. Call this before ``rclpy.init()``:
+    rclpy then installs its own handlers on top, which wake the executor and chain to these,
+    so ``rclpy.spin`` ends with ``KeyboardInterrupt`` or ``ExternalShutdownException``, both
+    of which a node's ``main`` treats as a normal shutdown.
+    """
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)

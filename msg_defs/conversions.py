@@ -1,0 +1,261 @@
+"""numpy <-> message conversions for the topics of :mod:`msg_defs.topics`.
+
+Functions named ``*_to_msg`` build a message from arrays, ``*_from_msg`` read one back.
+Both validate: a message that does not follow the contract raises ``ValueError`` with a
+message saying what is wrong, so a node can log it and drop the message instead of acting
+on it. No rclpy here; stamps are ``builtin_interfaces/Time`` (a node passes
+``self.get_clock().now().to_msg()``).
+"""
+
+import math
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Vector3Stamped
+from sensor_msgs.msg import JointState
+
+from msg_defs.topics import (
+    BEAM_COUNT,
+    BEAM_NAMES,
+    BEAM_STATE_JOINT_NAMES,
+    MAX_ABS_VOLTAGE_V,
+    WORLD_FRAME,
+)
+
+# A published normal is a float64 unit vector; anything further from length 1 than this did
+# not come from a normalised rotation and is rejected.
+UNIT_NORM_TOLERANCE = 1e-6
+
+NANOSECONDS_PER_SECOND = 1_000_000_000
+
+
+def time_from_ns(stamp_ns):
+    """``builtin_interfaces/Time`` for a time in integer nanoseconds (>= 0)."""
+    stamp_ns = int(stamp_ns)
+    if stamp_ns < 0:
+        raise ValueError(f'stamp must be >= 0 ns, got {stamp_ns}')
+    sec, nanosec = divmod(stamp_ns, NANOSECONDS_PER_SECOND)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def ns_from_time(stamp):
+    """Integer nanoseconds of a ``builtin_interfaces/Time``."""
+    return stamp.sec * NANOSECONDS_PER_SECOND + stamp.nanosec
+
+
+def _finite_vector(values, length, what):
+    """``values`` as a float array of shape (length,), or ValueError."""
+    try:
+        array = np.asarray(values, dtype=float)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f'{what}: not numeric ({error})') from None
+    if array.shape != (length,):
+        raise ValueError(f'{what}: expected shape ({length},), got {array.shape}')
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f'{what}: values must be finite, got {array.tolist()}')
+    return array
+
+
+def _unit_vector(values, what):
+    vector = _finite_vector(values, 3, what)
+    norm = float(np.linalg.norm(vector))
+    if abs(norm - 1.0) > UNIT_NORM_TOLERANCE:
+        raise ValueError(f'{what}: expected a unit vector, got length {norm:.9g}')
+    return vector
+
+
+def _stamp_or_zero(stamp):
+    return Time() if stamp is None else stamp
+
+
+# --- surface normal (geometry_msgs/Vector3Stamped) ----------------------------------------
+
+def surface_normal_to_msg(normal, stamp=None, frame_id=WORLD_FRAME):
+    """Message for ``/sphere/surface_normal`` (or ``/sphere/reference``).
+
+    Parameters
+    ----------
+    normal : array_like, shape (3,)
+        Unit surface normal in ``frame_id``.
+    stamp : builtin_interfaces.msg.Time, optional
+        Header stamp; time 0 if omitted.
+    frame_id : str
+        Frame the vector is expressed in.
+
+    Returns
+    -------
+    geometry_msgs.msg.Vector3Stamped
+
+    Raises
+    ------
+    ValueError
+        If ``normal`` is not a finite unit vector of length 3.
+    """
+    x, y, z = _unit_vector(normal, 'surface normal')
+    msg = Vector3Stamped()
+    msg.header.stamp = _stamp_or_zero(stamp)
+    msg.header.frame_id = frame_id
+    msg.vector.x, msg.vector.y, msg.vector.z = float(x), float(y), float(z)
+    return msg
+
+
+def surface_normal_from_msg(msg, frame_id=WORLD_FRAME):
+    """The unit normal carried by a ``Vector3Stamped``.
+
+    Parameters
+    ----------
+    msg : geometry_msgs.msg.Vector3Stamped
+    frame_id : str
+        Frame the vector must be expressed in.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+
+    Raises
+    ------
+    ValueError
+        If the frame differs from ``frame_id`` or the vector is not a finite unit vector.
+    """
+    if msg.header.frame_id != frame_id:
+        raise ValueError(f'surface normal: expected frame_id {frame_id!r}, '
+                         f'got {msg.header.frame_id!r}')
+    return _unit_vector((msg.vector.x, msg.vector.y, msg.vector.z), 'surface normal')
+
+
+# --- beam voltages (sensor_msgs/JointState, volts in effort) ------------------------------
+
+def voltages_to_msg(voltages_v, stamp=None, max_abs_voltage_v=MAX_ABS_VOLTAGE_V):
+    """Message for ``/beams/voltage_command`` or ``/beams/voltage``.
+
+    Parameters
+    ----------
+    voltages_v : array_like, shape (4,)
+        Voltage of beam 1..4 (V).
+    stamp : builtin_interfaces.msg.Time, optional
+        Header stamp; time 0 if omitted.
+    max_abs_voltage_v : float
+        Largest admissible magnitude (V).
+
+    Returns
+    -------
+    sensor_msgs.msg.JointState
+        Joints ``beam_1 .. beam_4`` with the voltages in ``effort``.
+
+    Raises
+    ------
+    ValueError
+        If the voltages are not 4 finite values within the limit.
+    """
+    voltages = _checked_voltages(voltages_v, max_abs_voltage_v)
+    msg = JointState()
+    msg.header.stamp = _stamp_or_zero(stamp)
+    msg.name = list(BEAM_NAMES)
+    msg.effort = voltages.tolist()
+    return msg
+
+
+def voltages_from_msg(msg, max_abs_voltage_v=MAX_ABS_VOLTAGE_V):
+    """Beam voltages of a ``JointState``, in beam order 1..4 whatever the joint order.
+
+    Parameters
+    ----------
+    msg : sensor_msgs.msg.JointState
+        Joints ``beam_1 .. beam_4``, each exactly once, voltages in ``effort``.
+    max_abs_voltage_v : float
+        Largest admissible magnitude (V).
+
+    Returns
+    -------
+    ndarray, shape (4,)
+        Voltages of beam 1..4 (V).
+
+    Raises
+    ------
+    ValueError
+        On missing, unknown or repeated joint names, an ``effort`` whose length differs from
+        the names', non-finite values, or a voltage beyond the limit.
+    """
+    names = list(msg.name)
+    if sorted(names) != sorted(BEAM_NAMES):
+        raise ValueError(f'voltages: expected joint names {list(BEAM_NAMES)} (any order, each '
+                         f'once), got {names}')
+    effort = list(msg.effort)
+    if len(effort) != len(names):
+        raise ValueError(f'voltages: {len(names)} joint names but {len(effort)} effort values')
+    by_name = dict(zip(names, effort, strict=True))
+    return _checked_voltages([by_name[name] for name in BEAM_NAMES], max_abs_voltage_v)
+
+
+def _checked_voltages(voltages_v, max_abs_voltage_v):
+    voltages = _finite_vector(voltages_v, BEAM_COUNT, 'voltages')
+    if not (math.isfinite(max_abs_voltage_v) and max_abs_voltage_v > 0):
+        raise ValueError(f'voltage limit must be a positive number, got {max_abs_voltage_v}')
+    worst = float(np.max(np.abs(voltages)))
+    if worst > max_abs_voltage_v:
+        raise ValueError(f'voltages: |V| = {worst:g} V exceeds the limit '
+                         f'{max_abs_voltage_v:g} V')
+    return voltages
+
+
+# --- beam state (sensor_msgs/JointState, joints beam_k_z and beam_k_phi) ------------------
+
+def beam_state_to_msg(z_m, phi_rad, z_rate_m_per_s=None, phi_rate_rad_per_s=None, stamp=None):
+    """Message for ``/beams/state``.
+
+    Parameters
+    ----------
+    z_m, phi_rad : array_like, shape (4,)
+        Height (m) and tilt (rad) of beam 1..4.
+    z_rate_m_per_s, phi_rate_rad_per_s : array_like, shape (4,), optional
+        Their rates; ``velocity`` stays empty unless both are given.
+    stamp : builtin_interfaces.msg.Time, optional
+        Header stamp; time 0 if omitted.
+
+    Returns
+    -------
+    sensor_msgs.msg.JointState
+        Joints :data:`msg_defs.topics.BEAM_STATE_JOINT_NAMES`, interleaved z, phi per beam.
+
+    Raises
+    ------
+    ValueError
+        If an array is not 4 finite values, or only one of the rates is given.
+    """
+    msg = JointState()
+    msg.header.stamp = _stamp_or_zero(stamp)
+    msg.name = list(BEAM_STATE_JOINT_NAMES)
+    msg.position = _interleave(z_m, phi_rad, 'beam position').tolist()
+    if (z_rate_m_per_s is None) != (phi_rate_rad_per_s is None):
+        raise ValueError('beam state: give both rates or neither')
+    if z_rate_m_per_s is not None:
+        msg.velocity = _interleave(z_rate_m_per_s, phi_rate_rad_per_s, 'beam velocity').tolist()
+    return msg
+
+
+def beam_state_from_msg(msg):
+    """Heights and tilts of a ``/beams/state`` message.
+
+    Returns
+    -------
+    z_m, phi_rad : ndarray, shape (4,)
+        Height (m) and tilt (rad) of beam 1..4.
+
+    Raises
+    ------
+    ValueError
+        If the joint names are not exactly :data:`BEAM_STATE_JOINT_NAMES` in that order, or
+        the positions are not finite.
+    """
+    if tuple(msg.name) != BEAM_STATE_JOINT_NAMES:
+        raise ValueError(f'beam state: expected joint names {list(BEAM_STATE_JOINT_NAMES)}, '
+                         f'got {list(msg.name)}')
+    position = _finite_vector(msg.position, 2 * BEAM_COUNT, 'beam position')
+    return position[0::2].copy(), position[1::2].copy()
+
+
+def _interleave(z_values, phi_values, what):
+    joined = np.empty(2 * BEAM_COUNT)
+    joined[0::2] = _finite_vector(z_values, BEAM_COUNT, f'{what} z')
+    joined[1::2] = _finite_vector(phi_values, BEAM_COUNT, f'{what} phi')
+    return joined

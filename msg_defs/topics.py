@@ -1,0 +1,220 @@
+"""The topic contract: every topic's name, message type, QoS, frame and units.
+
+Nodes, the recorder and the tests take these from here and nowhere else. All quantities are
+SI. Beams are numbered 1..4 as in the physics model; the joint names below carry that number.
+
+Encodings that the message types leave open
+-------------------------------------------
+Beam state (``/beams/state``, sensor_msgs/JointState)
+    Each beam has two degrees of freedom, the height z of its suspension point and its tilt
+    phi, so it appears as two joints, beam-major: ``beam_1_z, beam_1_phi, beam_2_z, ...``
+    (:data:`BEAM_STATE_JOINT_NAMES`). ``position`` holds z in m for ``*_z`` joints and phi in
+    rad for ``*_phi`` joints; ``velocity`` holds their rates (m/s, rad/s) or is empty;
+    ``effort`` is empty.
+Beam voltages (``/beams/voltage``, ``/beams/voltage_command``, sensor_msgs/JointState)
+    One joint per beam, ``beam_1 .. beam_4`` (:data:`BEAM_NAMES`), in any order; the voltage
+    in V is in ``effort``, ``position`` and ``velocity`` are empty.
+Pulse programme (``/beams/pulse_program``, trajectory_msgs/JointTrajectory)
+    ``joint_names`` are :data:`BEAM_NAMES`; each point's ``effort`` holds the beam voltages
+    in V from its ``time_from_start`` until the next point's (zero-order hold, the last
+    point's voltages hold until the programme is replaced). ``header.stamp`` is when the
+    programme starts.
+Sphere state (``/sphere/state``, nav_msgs/Odometry)
+    Pose of the sphere frame ``sphere`` in ``world``: the sphere centre in m and the
+    orientation quaternion; the twist (m/s, rad/s) is expressed in ``sphere`` as the message
+    definition requires.
+"""
+
+import dataclasses
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import Vector3Stamped
+from nav_msgs.msg import Odometry
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory
+
+WORLD_FRAME = 'world'
+SPHERE_FRAME = 'sphere'
+
+BEAM_COUNT = 4
+BEAM_NAMES = tuple(f'beam_{k}' for k in range(1, BEAM_COUNT + 1))
+BEAM_DOFS = ('z', 'phi')
+BEAM_STATE_JOINT_NAMES = tuple(f'{beam}_{dof}' for beam in BEAM_NAMES for dof in BEAM_DOFS)
+
+# Hardware limit of the actuators (paper §4.1); the same value bounds voltage programmes in
+# sphere_sim.programme. A command beyond it is rejected, not clipped.
+MAX_ABS_VOLTAGE_V = 80.0
+
+
+@dataclasses.dataclass(frozen=True)
+class QosSpec:
+    """A QoS profile as plain data (history is always keep-last).
+
+    Attributes
+    ----------
+    depth : int
+        History depth.
+    reliable : bool
+        Reliable (True) or best-effort (False) delivery.
+    transient_local : bool
+        Whether late-joining subscribers receive the last ``depth`` messages.
+    """
+
+    depth: int
+    reliable: bool = True
+    transient_local: bool = False
+
+    def to_profile(self):
+        """The equivalent ``rclpy.qos.QoSProfile``.
+
+        rclpy is imported here rather than at module level so that the contract can be read
+        by tools that never join a ROS graph (the CLI, the process supervisor, analysis).
+        """
+        from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+        return QoSProfile(
+            history=HistoryPolicy.KEEP_LAST,
+            depth=self.depth,
+            reliability=(ReliabilityPolicy.RELIABLE if self.reliable
+                         else ReliabilityPolicy.BEST_EFFORT),
+            durability=(DurabilityPolicy.TRANSIENT_LOCAL if self.transient_local
+                        else DurabilityPolicy.VOLATILE),
+        )
+
+
+# Streams and commands: reliable, so a recorder or a test sees every message on localhost.
+STREAM_QOS = QosSpec(depth=10)
+# Programmes and references stay valid until replaced, so late joiners get the current one.
+LATCHED_QOS = QosSpec(depth=1, transient_local=True)
+# rclpy's and rclcpp's time sources subscribe to /clock best-effort with depth 1.
+CLOCK_QOS = QosSpec(depth=1, reliable=False)
+
+
+@dataclasses.dataclass(frozen=True)
+class Topic:
+    """One topic of the contract.
+
+    Attributes
+    ----------
+    name : str
+        Absolute topic name.
+    msg_type : type
+        Message class.
+    qos : QosSpec
+        QoS every publisher and subscriber uses.
+    frame_id : str
+        ``header.frame_id`` of the messages, '' where the message has no frame.
+    units : str
+        Units of the payload fields.
+    description : str
+        What the topic carries and who publishes it.
+    """
+
+    name: str
+    msg_type: type
+    qos: QosSpec
+    frame_id: str
+    units: str
+    description: str
+
+
+SURFACE_NORMAL = Topic(
+    name='/sphere/surface_normal',
+    msg_type=Vector3Stamped,
+    qos=STREAM_QOS,
+    frame_id=WORLD_FRAME,
+    units='1 (unit vector)',
+    description='Unit normal of the sphere\'s flattened mirror face; published by the simulator.',
+)
+SPHERE_STATE = Topic(
+    name='/sphere/state',
+    msg_type=Odometry,
+    qos=STREAM_QOS,
+    frame_id=WORLD_FRAME,
+    units='m, quaternion, m/s, rad/s',
+    description=f'Full rigid-body state of the sphere; child frame \'{SPHERE_FRAME}\'.',
+)
+BEAM_STATE = Topic(
+    name='/beams/state',
+    msg_type=JointState,
+    qos=STREAM_QOS,
+    frame_id='',
+    units='m and rad (position), m/s and rad/s (velocity)',
+    description='Height z and tilt phi of each beam, joints beam_k_z and beam_k_phi.',
+)
+BEAM_VOLTAGE = Topic(
+    name='/beams/voltage',
+    msg_type=JointState,
+    qos=STREAM_QOS,
+    frame_id='',
+    units='V (effort)',
+    description='Voltages the simulator applies to beam_1..beam_4.',
+)
+VOLTAGE_COMMAND = Topic(
+    name='/beams/voltage_command',
+    msg_type=JointState,
+    qos=STREAM_QOS,
+    frame_id='',
+    units='V (effort)',
+    description='Voltages requested for beam_1..beam_4; held until the next command.',
+)
+PULSE_PROGRAM = Topic(
+    name='/beams/pulse_program',
+    msg_type=JointTrajectory,
+    qos=LATCHED_QOS,
+    frame_id='',
+    units='V (effort), s (time_from_start)',
+    description='Piecewise-constant voltage programme for beam_1..beam_4.',
+)
+SPHERE_REFERENCE = Topic(
+    name='/sphere/reference',
+    msg_type=Vector3Stamped,
+    qos=LATCHED_QOS,
+    frame_id=WORLD_FRAME,
+    units='1 (unit vector)',
+    description='Surface normal the controller should reach.',
+)
+CONTROLLER_STATUS = Topic(
+    name='/controller/status',
+    msg_type=DiagnosticArray,
+    qos=STREAM_QOS,
+    frame_id='',
+    units='-',
+    description='Health and mode of the running controller, one status per controller.',
+)
+CLOCK = Topic(
+    name='/clock',
+    msg_type=Clock,
+    qos=CLOCK_QOS,
+    frame_id='',
+    units='s (simulated time)',
+    description='Simulated time, published by the simulator when use_sim_time is wanted.',
+)
+
+ALL_TOPICS = (
+    SURFACE_NORMAL,
+    SPHERE_STATE,
+    BEAM_STATE,
+    BEAM_VOLTAGE,
+    VOLTAGE_COMMAND,
+    PULSE_PROGRAM,
+    SPHERE_REFERENCE,
+    CONTROLLER_STATUS,
+    CLOCK,
+)
+
+
+def topic_by_name(name):
+    """The :class:`Topic` called ``name``.
+
+    Raises
+    ------
+    KeyError
+        If the contract has no such topic.
+    """
+    for topic in ALL_TOPICS:
+        if topic.name == name:
+            return topic
+    raise KeyError(f'no topic {name!r} in the contract; known: '
+                   + ', '.join(t.name for t in ALL_TOPICS))

@@ -1,0 +1,106 @@
+"""The monitor node: counts surface-normal messages and reports once a second.
+
+On exit, by a signal or after ``max_messages``, it prints the line
+``received N messages on /sphere/surface_normal`` to standard output, which the demo and
+the tests read (see :mod:`sphere_twin.monitor_summary`).
+"""
+
+import numpy as np
+import rclpy
+from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.task import Future
+
+from msg_defs.conversions import surface_normal_from_msg
+from msg_defs.ros_env import ensure_localhost_discovery, install_shutdown_signal_handlers
+from msg_defs.topics import SURFACE_NORMAL
+from sphere_twin.monitor_summary import summary_line
+
+REPORT_PERIOD_S = 1.0
+# ROS integer parameters are int64; this bound only keeps the descriptor's range finite.
+MAX_MESSAGES_LIMIT = 2**31 - 1
+
+
+class MonitorNode(Node):
+    """Counts messages on ``/sphere/surface_normal``.
+
+    Attributes
+    ----------
+    count : int
+        Messages received so far (valid or not); stops growing once ``max_messages`` is hit.
+    invalid_count : int
+        How many of them broke the contract (logged as warnings).
+    done : rclpy.task.Future
+        Completes with the count when ``max_messages`` (> 0) messages have arrived.
+    """
+
+    def __init__(self, **node_kwargs):
+        super().__init__('monitor', **node_kwargs)
+        self.declare_parameter(
+            'max_messages', 0,
+            ParameterDescriptor(
+                description='Exit after this many messages; 0 runs until stopped.',
+                integer_range=[IntegerRange(from_value=0, to_value=MAX_MESSAGES_LIMIT, step=1)],
+                read_only=True,
+            ))
+        self.max_messages = self.get_parameter('max_messages').value
+        self.count = 0
+        self.invalid_count = 0
+        self.latest_normal = None
+        self.done = Future()
+        self._count_at_last_report = 0
+        self.create_subscription(
+            SURFACE_NORMAL.msg_type, SURFACE_NORMAL.name, self.on_message,
+            SURFACE_NORMAL.qos.to_profile())
+        self.create_timer(REPORT_PERIOD_S, self.on_report_timer)
+
+    def on_message(self, msg):
+        """Count one message; complete :attr:`done` at ``max_messages``."""
+        if self.done.done():
+            return
+        self.count += 1
+        try:
+            self.latest_normal = surface_normal_from_msg(msg)
+        except ValueError as error:
+            self.invalid_count += 1
+            self.get_logger().warning(f'invalid message on {SURFACE_NORMAL.name}: {error}')
+        if self.max_messages and self.count >= self.max_messages:
+            self.done.set_result(self.count)
+
+    def on_report_timer(self):
+        """Log the count, the rate over the last period and the latest normal."""
+        rate_hz = (self.count - self._count_at_last_report) / REPORT_PERIOD_S
+        self._count_at_last_report = self.count
+        latest = ('none yet' if self.latest_normal is None
+                  else np.array2string(self.latest_normal, precision=4))
+        self.get_logger().info(
+            f'{self.count} messages on {SURFACE_NORMAL.name} ({rate_hz:g} Hz), '
+            f'latest normal {latest}')
+
+    def summary(self):
+        """The final line, ``received N messages on /sphere/surface_normal``."""
+        return summary_line(self.count, SURFACE_NORMAL.name)
+
+
+def main(args=None):
+    ensure_localhost_discovery()
+    install_shutdown_signal_handlers()
+    rclpy.init(args=args)
+    node = None
+    try:
+        # Constructed inside the try: a signal during start-up is a clean shutdown too.
+        node = MonitorNode()
+        # Never completes when max_messages is 0, so the node then runs until signalled.
+        rclpy.spin_until_future_complete(node, node.done)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            print(node.summary(), flush=True)
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

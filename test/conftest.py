@@ -1,0 +1,28 @@
+"""Shared fixtures.
+
+``ros_nodes`` is the only way a test starts ROS node processes: it is built on
+:mod:`sphere_twin.processes`, the same supervisor ``sphere-twin demo`` uses.
+"""
+
+import pytest
+
+from sphere_twin.processes import fresh_domain_id, running_nodes
+
+# Per-signal timeout when stopping at teardown: a node shuts down in well under a second, so
+# this only matters for a hung one, which then gets SIGTERM and SIGKILL.
+TEARDOWN_STOP_TIMEOUT_S = 5.0
+
+
+@pytest.fixture
+def ros_nodes():
+    """Start node processes for one test, on a ROS domain of its own.
+
+    Yields a :class:`sphere_twin.processes.NodeGroup`. ``ros_nodes.start('simulator', args)``
+    starts a node with ``ROS_DOMAIN_ID=ros_nodes.domain_id`` and discovery limited to
+    localhost, and returns its :class:`~sphere_twin.processes.NodeProcess`. Every process
+    started through it is stopped by its PID at teardown (SIGINT, then SIGTERM, then
+    SIGKILL), whether the test passed or not.
+    """
+    with running_nodes(domain_id=fresh_domain_id(),
+                       stop_timeout_s=TEARDOWN_STOP_TIMEOUT_S) as group:
+        yield group

@@ -1,0 +1,151 @@
+"""numpy <-> message conversions: exact round trips, and a clear ValueError for bad input."""
+
+import math
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import Vector3Stamped
+from sensor_msgs.msg import JointState
+
+from msg_defs.conversions import (
+    beam_state_from_msg,
+    beam_state_to_msg,
+    ns_from_time,
+    surface_normal_from_msg,
+    surface_normal_to_msg,
+    time_from_ns,
+    voltages_from_msg,
+    voltages_to_msg,
+)
+from msg_defs.topics import BEAM_STATE_JOINT_NAMES, MAX_ABS_VOLTAGE_V
+
+
+def _normal_msg(x, y, z, frame_id='world'):
+    msg = Vector3Stamped()
+    msg.header.frame_id = frame_id
+    msg.vector.x, msg.vector.y, msg.vector.z = x, y, z
+    return msg
+
+
+def _voltage_msg(names, effort):
+    msg = JointState()
+    msg.name = list(names)
+    msg.effort = [float(v) for v in effort]
+    return msg
+
+
+# --- time ----------------------------------------------------------------------------------
+
+def test_time_round_trip_splits_seconds_and_nanoseconds():
+    stamp = time_from_ns(12_345_678_901)
+    assert (stamp.sec, stamp.nanosec) == (12, 345_678_901)
+    assert ns_from_time(stamp) == 12_345_678_901
+    with pytest.raises(ValueError, match='>= 0'):
+        time_from_ns(-1)
+
+
+# --- surface normal ------------------------------------------------------------------------
+
+def test_surface_normal_round_trip_is_exact():
+    normal = np.array([0.48, -0.6, 0.64])
+    normal /= np.linalg.norm(normal)
+    msg = surface_normal_to_msg(normal, stamp=time_from_ns(2_500_000_000))
+    assert msg.header.frame_id == 'world'
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (2, 500_000_000)
+    back = surface_normal_from_msg(msg)
+    assert back.shape == (3,)
+    np.testing.assert_array_equal(back, normal)
+
+
+@pytest.mark.parametrize(('normal', 'reason'), [
+    ([0.0, 0.0, 2.0], 'unit vector'),
+    ([0.0, 0.0, 0.0], 'unit vector'),
+    ([0.0, 1.0], r'shape \(3,\)'),
+    ([[0.0, 0.0, 1.0]], r'shape \(3,\)'),
+    ([0.0, math.nan, 1.0], 'finite'),
+    ([0.0, 0.0, math.inf], 'finite'),
+    (['a', 'b', 'c'], 'not numeric'),
+])
+def test_surface_normal_to_msg_rejects_non_unit_or_malformed(normal, reason):
+    with pytest.raises(ValueError, match=reason):
+        surface_normal_to_msg(normal)
+
+
+def test_surface_normal_from_msg_checks_frame_and_length():
+    np.testing.assert_array_equal(surface_normal_from_msg(_normal_msg(0.0, 0.6, 0.8)),
+                                  [0.0, 0.6, 0.8])
+    with pytest.raises(ValueError, match="frame_id 'world', got 'sphere'"):
+        surface_normal_from_msg(_normal_msg(0.0, 0.0, 1.0, frame_id='sphere'))
+    with pytest.raises(ValueError, match=r'length 1\.1'):
+        surface_normal_from_msg(_normal_msg(0.0, 0.0, 1.1))
+    with pytest.raises(ValueError, match='finite'):
+        surface_normal_from_msg(_normal_msg(math.nan, 0.0, 1.0))
+
+
+# --- voltages ------------------------------------------------------------------------------
+
+def test_voltage_round_trip_keeps_beam_order_and_values():
+    voltages = np.array([0.0, 12.5, -40.0, MAX_ABS_VOLTAGE_V])
+    msg = voltages_to_msg(voltages, stamp=time_from_ns(7))
+    assert list(msg.name) == ['beam_1', 'beam_2', 'beam_3', 'beam_4']
+    assert list(msg.effort) == voltages.tolist()
+    assert len(msg.position) == len(msg.velocity) == 0
+    np.testing.assert_array_equal(voltages_from_msg(msg), voltages)
+
+
+def test_voltages_from_msg_reorders_joints_to_beam_order():
+    msg = _voltage_msg(['beam_3', 'beam_1', 'beam_4', 'beam_2'], [30.0, 10.0, 40.0, 20.0])
+    np.testing.assert_array_equal(voltages_from_msg(msg), [10.0, 20.0, 30.0, 40.0])
+
+
+@pytest.mark.parametrize(('names', 'effort', 'reason'), [
+    (['beam_1', 'beam_2', 'beam_3'], [1, 2, 3], 'expected joint names'),
+    (['beam_1', 'beam_2', 'beam_3', 'beam_3'], [1, 2, 3, 4], 'expected joint names'),
+    (['beam_1', 'beam_2', 'beam_3', 'beam_5'], [1, 2, 3, 4], 'expected joint names'),
+    (['beam_1', 'beam_2', 'beam_3', 'beam_4', 'beam_5'], [1, 2, 3, 4, 5],
+     'expected joint names'),
+    (['beam_1', 'beam_2', 'beam_3', 'beam_4'], [1, 2, 3], '4 joint names but 3 effort'),
+    (['beam_1', 'beam_2', 'beam_3', 'beam_4'], [], '4 joint names but 0 effort'),
+    (['beam_1', 'beam_2', 'beam_3', 'beam_4'], [1, math.nan, 3, 4], 'finite'),
+    (['beam_1', 'beam_2', 'beam_3', 'beam_4'], [1, 2, math.inf, 4], 'finite'),
+    (['beam_1', 'beam_2', 'beam_3', 'beam_4'], [1, 2, 3, -80.5], 'exceeds the limit 80 V'),
+])
+def test_voltages_from_msg_rejects_bad_commands(names, effort, reason):
+    with pytest.raises(ValueError, match=reason):
+        voltages_from_msg(_voltage_msg(names, effort))
+
+
+def test_voltage_limit_is_configurable_and_applies_both_ways():
+    msg = voltages_to_msg([5.0, 5.0, 5.0, 5.0])
+    with pytest.raises(ValueError, match='exceeds the limit 4 V'):
+        voltages_from_msg(msg, max_abs_voltage_v=4.0)
+    with pytest.raises(ValueError, match='exceeds the limit'):
+        voltages_to_msg([0.0, 0.0, 0.0, 100.0])
+    with pytest.raises(ValueError, match=r'shape \(4,\)'):
+        voltages_to_msg([1.0, 2.0])
+
+
+# --- beam state ----------------------------------------------------------------------------
+
+def test_beam_state_round_trip_interleaves_z_and_phi():
+    z_m = np.array([1e-6, 2e-6, 3e-6, 4e-6])
+    phi_rad = np.array([-1e-3, 0.0, 1e-3, 2e-3])
+    z_rate = np.array([0.01, 0.02, 0.03, 0.04])
+    phi_rate = np.array([-5.0, 5.0, 6.0, 7.0])
+    msg = beam_state_to_msg(z_m, phi_rad, z_rate, phi_rate)
+    assert tuple(msg.name) == BEAM_STATE_JOINT_NAMES
+    assert list(msg.position[:4]) == [1e-6, -1e-3, 2e-6, 0.0]
+    assert list(msg.velocity[:4]) == [0.01, -5.0, 0.02, 5.0]
+    z_back, phi_back = beam_state_from_msg(msg)
+    np.testing.assert_array_equal(z_back, z_m)
+    np.testing.assert_array_equal(phi_back, phi_rad)
+
+
+def test_beam_state_rejects_wrong_names_and_half_rates():
+    msg = beam_state_to_msg(np.zeros(4), np.zeros(4))
+    assert len(msg.velocity) == 0
+    msg.name = list(reversed(msg.name))
+    with pytest.raises(ValueError, match='expected joint names'):
+        beam_state_from_msg(msg)
+    with pytest.raises(ValueError, match='both rates or neither'):
+        beam_state_to_msg(np.zeros(4), np.zeros(4), z_rate_m_per_s=np.zeros(4))
