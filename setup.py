@@ -10,7 +10,7 @@ setup(
     name=PACKAGE_NAME,
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*']),
-    package_data={'sphere_sim': ['scenes/*.yaml', 'params/*.yaml']},
+    package_data={'sphere_sim': ['scenes/*.yaml', 'params/*.yaml', 'tables/*.npz']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE_NAME]),
         ('share/' + PACKAGE_NAME, ['package.xml']),

@@ -8,7 +8,9 @@ images of a design under the device's symmetry (``sphere_sim.symmetry``).
 """
 
 import dataclasses
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -73,6 +75,15 @@ class KickDesign:
 
     def to_dict(self):
         return dataclasses.asdict(self)
+
+    @classmethod
+    def load(cls, path):
+        """The design saved by ``sphere-twin optimize-kick`` (its JSON's ``design``)."""
+        data = dict(json.loads(Path(path).read_text())['design'])
+        data.pop('direction_deg', None)
+        data['low_beams'] = tuple(data['low_beams'])
+        data['high_beams'] = tuple(data['high_beams'])
+        return cls(**data)
 
 
 def cardan_of_normal(normal):

@@ -21,6 +21,8 @@ COMMAND_MODULES = (
     'capacitance',
     'validate',
     'optimize',
+    'table',
+    'primitives',
 )
 
 

@@ -52,3 +52,26 @@ def plot_lines(x, ys, labels, xlabel, ylabel, path, title='', logx=False, logy=F
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return np.asarray(x)
+
+
+def plot_offsets(solutions, path):
+    """Fig. 8 layout: the offset (V) at each grid state and the remaining direction error."""
+    x = np.array([s.x_sn for s in solutions])
+    y = np.array([s.y_sn for s in solutions])
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.5))
+    panels = ((np.array([s.offset_v for s in solutions]), 'offset (V)', 'coolwarm'),
+              (np.degrees([abs(s.direction_error_rad) for s in solutions]),
+               '|direction error| after offset (deg)', 'viridis'))
+    for ax, (value, label, cmap) in zip(axes, panels, strict=True):
+        art = ax.scatter(x, y, c=value, cmap=cmap, s=140, marker='s')
+        fig.colorbar(art, ax=ax, label=label)
+        ax.set_xlabel('$x_{sn}$')
+        ax.set_ylabel('$y_{sn}$')
+        ax.set_aspect('equal')
+        ax.grid(alpha=0.3)
+    axes[0].set_title('voltage offset on the compensating beam')
+    axes[1].set_title('residual direction error')
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path

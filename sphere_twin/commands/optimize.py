@@ -10,7 +10,15 @@ from sphere_sim.kick_optimization import optimise_kick
 from sphere_sim.kicks import KickDesign
 
 DEFAULT_OUTPUT = 'bench/results/kick_optimization.json'
+AXIS_OUTPUT = 'bench/results/kick_optimization_axis.json'
 PAPER_ROTATION_DEG = 0.54
+# Templates: the paper's hind-left kick, and an axis-parallel one (§6's future work): the
+# right beam at the high voltage, the other three at the low one, mirror-symmetric about the
+# x axis, so that its rotation can only go along x.
+TEMPLATES = {
+    'diagonal': KickDesign(),
+    'axis': KickDesign(direction_rad=0.0, low_beams=(1, 2, 4), high_beams=(3,)),
+}
 
 
 def register(subparsers):
@@ -19,12 +27,15 @@ def register(subparsers):
         description='Maximise the rotation of the hind-left kick (35 V on beams 1-2, 80 V on '
                     'beams 3-4; free widths and delay) towards -45 deg with scipy differential '
                     'evolution, seeded, with parallel workers; writes the result as JSON.')
+    parser.add_argument('--kick', choices=sorted(TEMPLATES), default='diagonal',
+                        help='diagonal (hind-left, towards -45 deg) or axis (towards +x)')
     parser.add_argument('--params', default='calibrated', help='parameter set')
     parser.add_argument('--seed', type=int, default=1)
     parser.add_argument('--popsize', type=int, default=8, help='population per parameter')
     parser.add_argument('--maxiter', type=int, default=12, help='generations')
     parser.add_argument('--workers', type=int, default=2, help='parallel processes')
-    parser.add_argument('--output', default=DEFAULT_OUTPUT, help='JSON path')
+    parser.add_argument('--output', default=None,
+                        help=f'JSON path (default {DEFAULT_OUTPUT}, or {AXIS_OUTPUT} for axis)')
     parser.set_defaults(func=run)
 
 
@@ -34,11 +45,12 @@ def run(args):
             bar.set_postfix(best_deg=f'{math.degrees(best):.4f}')
             bar.update()
 
-        best = optimise_kick(KickDesign(), args.params, seed=args.seed, popsize=args.popsize,
-                             maxiter=args.maxiter, workers=args.workers, progress=progress)
+        best = optimise_kick(TEMPLATES[args.kick], args.params, seed=args.seed,
+                             popsize=args.popsize, maxiter=args.maxiter, workers=args.workers,
+                             progress=progress)
     data = best.to_dict()
     data['parameter_set'] = args.params
-    path = Path(args.output)
+    path = Path(args.output or (AXIS_OUTPUT if args.kick == 'axis' else DEFAULT_OUTPUT))
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(data, indent=2) + '\n')
     d = best.design
@@ -46,7 +58,8 @@ def run(args):
           f'beams {d.high_beams} {d.width_high_s * 1e3:.3f} ms at {d.high_v:.0f} V; '
           f'delay {d.delay_s * 1e3:+.3f} ms ({best.evaluations} simulations)')
     print(f'rotation {best.rotation_deg:.4f} deg towards {best.direction_deg:+.1f} deg '
-          f'({best.along_deg:+.4f} deg along -45 deg; paper: {PAPER_ROTATION_DEG} deg), '
+          f'({best.along_deg:+.4f} deg along {math.degrees(d.direction_rad):+.0f} deg; '
+          f'paper, diagonal: {PAPER_ROTATION_DEG} deg), '
           f'settled after {best.settle_time_s * 1e3:.1f} ms')
     print(f'wrote {path}')
     return 0

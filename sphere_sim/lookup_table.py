@@ -1,0 +1,186 @@
+"""The discrete model x_{t+1} = f(x_t, a_t, u_K) as a lookup table over the kick's outcomes (§5).
+
+The table holds, for the reference kick (the hind-left design) at resting normals on a grid of
+(x_sn, y_sn) inside the cone and intensities u_K, the normal's displacement at the end of the
+kick window, the transient peak and the settling time; it is linearly interpolated. Other kick
+directions and the other half of the cone are images under the device's symmetry (Fig. 7): the
+grid covers only y_sn >= -x_sn (plus one band of nodes beyond it, for interpolation).
+
+A table is a ``.npz`` file carrying its format version and the digests of the parameter set and
+of the kick it was built from; loading it for other parameters is refused.
+"""
+
+import dataclasses
+import enum
+import hashlib
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+from scipy.interpolate import RegularGridInterpolator
+
+from sphere_sim.discrete import CONE_HALF_ANGLE_RAD, KickResult
+from sphere_sim.kicks import KickDesign
+from sphere_sim.symmetry import KICK_AXIS_MIRROR, Symmetry
+
+TABLE_FORMAT_VERSION = 1
+DEFAULT_TABLE_PATH = Path(__file__).parent / 'tables' / 'default_kick_table.npz'
+CONE_MARGIN = 1.05  # nodes slightly beyond the cone keep interpolation inside it linear
+REFERENCE_DIRECTION_RAD = math.radians(-45.0)
+
+
+class Drift(enum.Enum):
+    """What to do with the drift of a tilted sphere that is not kicked (the u_K = 0 entry).
+
+    The regularised friction of eq. (47) has no stiction, so a tilted sphere creeps back towards
+    level during the kick window (docs/parameters.md, "Creep"). ``KEEP`` reports the model as it
+    is; ``REMOVE`` subtracts the unkicked drift, giving the stable resting states the paper's
+    discrete model assumes (§4: "the sphere stably remains in its new position").
+    """
+
+    KEEP = 'keep'
+    REMOVE = 'remove'
+
+
+class TableError(ValueError):
+    """A table file that is missing, malformed, of another version or for other parameters."""
+
+
+@dataclasses.dataclass(frozen=True)
+class TableSpec:
+    """What a table is built from: grid, intensities, kick design, window and parameters."""
+
+    grid_step: float = 0.12  # about 7 deg: 83 states in the half cone
+    # Denser at low intensity, where the high pair crosses its pull-in threshold.
+    intensities: tuple = (0.0, 0.15, 0.3, 0.5, 0.75, 1.0)
+    window_s: float = 0.06
+    rtol: float = 1e-6
+    parameter_set: str = 'calibrated'
+    design: KickDesign = dataclasses.field(default_factory=KickDesign)
+    cone_half_angle_rad: float = CONE_HALF_ANGLE_RAD
+
+    def axis(self):
+        """Grid nodes (shape (n,)) of x_sn and of y_sn, symmetric about 0."""
+        half = math.ceil(CONE_MARGIN * math.sin(self.cone_half_angle_rad) / self.grid_step)
+        return self.grid_step * np.arange(-half, half + 1)
+
+    def nodes(self):
+        """(i, j, x, y) of the nodes to simulate: within the cone and not deep below y = -x."""
+        axis = self.axis()
+        out = []
+        for i, x in enumerate(axis):
+            for j, y in enumerate(axis):
+                reach = CONE_MARGIN * math.sin(self.cone_half_angle_rad) + self.grid_step
+                in_cone = math.hypot(x, y) <= reach
+                if in_cone and y >= -x - 1.5 * self.grid_step:
+                    out.append((i, j, float(x), float(y)))
+        return out
+
+    def digest(self, params_digest):
+        text = json.dumps({'spec': _jsonable(self), 'params': params_digest}, sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _jsonable(obj):
+    if dataclasses.is_dataclass(obj):
+        return {k: _jsonable(v) for k, v in dataclasses.asdict(obj).items()}
+    if isinstance(obj, dict):
+        return {k: _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    return obj
+
+
+@dataclasses.dataclass(frozen=True)
+class LookupTable:
+    """A built table; implements the :class:`~sphere_sim.discrete.KickPlant` interface.
+
+    Attributes
+    ----------
+    axis : ndarray, shape (n,)
+    intensities : ndarray, shape (m,)
+    displacement : ndarray, shape (n, n, m, 2)
+        Normal's x-y displacement of the reference kick (NaN where not simulated).
+    peak_rad, settle_s : ndarray, shape (n, n, m)
+    meta : dict
+    """
+
+    axis: np.ndarray
+    intensities: np.ndarray
+    displacement: np.ndarray
+    peak_rad: np.ndarray
+    settle_s: np.ndarray
+    meta: dict
+    drift: Drift = Drift.KEEP
+    directions_rad: tuple = tuple(REFERENCE_DIRECTION_RAD + q * 0.5 * math.pi for q in range(4))
+
+    def __post_init__(self):
+        grid = (self.axis, self.axis, self.intensities)
+        displacement = self.displacement
+        if self.drift is Drift.REMOVE:
+            if self.intensities[0] != 0.0:
+                raise TableError('removing the drift needs the u_K = 0 entries in the table')
+            displacement = displacement - displacement[:, :, :1, :]
+        values = np.concatenate([displacement, self.peak_rad[..., None],
+                                 self.settle_s[..., None]], axis=-1)
+        object.__setattr__(self, '_interp', RegularGridInterpolator(
+            grid, values, method='linear', bounds_error=False, fill_value=np.nan))
+
+    # --- the KickPlant interface -----------------------------------------------------------
+    def kick(self, normal, action, intensity):
+        """Interpolated outcome of kick ``action`` (0..3) at ``intensity`` from ``normal``."""
+        g = Symmetry(int(action) % 4)
+        local = g.inverse().apply_vector(normal)
+        mirror = local[1] < -local[0]
+        if mirror:
+            local = KICK_AXIS_MIRROR.apply_vector(local)
+        values = self._interp([[local[0], local[1], float(np.clip(intensity, 0.0, 1.0))]])[0]
+        if np.any(np.isnan(values)):
+            raise TableError(f'normal {np.round(normal, 4).tolist()} lies outside the table')
+        moved = np.array([local[0] + values[0], local[1] + values[1], 0.0])
+        moved[2] = math.sqrt(max(0.0, 1.0 - moved[0] ** 2 - moved[1] ** 2))
+        if mirror:
+            moved = KICK_AXIS_MIRROR.apply_vector(moved)
+        return KickResult(g.apply_vector(moved), float(values[2]), float(values[3]))
+
+    # --- files -----------------------------------------------------------------------------
+    def save(self, path):
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(path, axis=self.axis, intensities=self.intensities,
+                            displacement=self.displacement, peak_rad=self.peak_rad,
+                            settle_s=self.settle_s, meta=json.dumps(self.meta, sort_keys=True))
+        return path
+
+    @classmethod
+    def load(cls, path=DEFAULT_TABLE_PATH, params=None, drift=Drift.KEEP):
+        """Load a table; with ``params`` given, refuse one built for other parameters."""
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                meta = json.loads(str(data['meta']))
+                arrays = {k: data[k] for k in ('axis', 'intensities', 'displacement', 'peak_rad',
+                                               'settle_s')}
+        except FileNotFoundError as exc:
+            raise TableError(f'no table at {path}; build one with `sphere-twin table build`') \
+                from exc
+        except (KeyError, ValueError, OSError) as exc:
+            raise TableError(f'{path} is not a sphere_twin kick table: {exc}') from exc
+        if meta.get('format_version') != TABLE_FORMAT_VERSION:
+            raise TableError(f'{path} has table format {meta.get("format_version")}, this '
+                             f'version reads {TABLE_FORMAT_VERSION}; rebuild it')
+        if params is not None and meta.get('params_digest') != params.digest():
+            raise TableError(
+                f'{path} was built for parameter set {meta.get("parameter_set")!r} (digest '
+                f'{meta.get("params_digest")}), not for {params.name!r} (digest '
+                f'{params.digest()}); rebuild it with `sphere-twin table build`')
+        return cls(meta=meta, drift=drift, **arrays)
+
+    @classmethod
+    def load_current(cls, path=DEFAULT_TABLE_PATH, drift=Drift.KEEP):
+        """Load a table and refuse it unless its parameter set still has the values it had."""
+        from sphere_sim.parameters import load_parameter_set
+
+        meta = cls.load(path).meta
+        return cls.load(path, params=load_parameter_set(meta['parameter_set']), drift=drift)

@@ -1,0 +1,98 @@
+"""``sphere-twin primitives width|offsets``: the kick's characteristics of §4 (Fig. 8 and 10)."""
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from sphere_sim.kick_characteristics import (
+    OFFSET_DIRECTION_TOL_RAD,
+    rotation_width_curves,
+    voltage_offsets,
+)
+from sphere_sim.kicks import KickDesign
+from sphere_twin.commands.optimize import DEFAULT_OUTPUT as DEFAULT_DESIGN
+
+RESULTS = Path('bench/results')
+
+
+def register(subparsers):
+    parser = subparsers.add_parser(
+        'primitives', help="a kick's rotation width and voltage offsets (Fig. 10, Fig. 8)",
+        description='Characteristics of the optimised kick, measured as its own effect (the '
+                    "unkicked sphere's drift over the same window removed).")
+    sub = parser.add_subparsers(dest='primitives_command', metavar='ACTION', required=True)
+    width = sub.add_parser('width', help='rotation width against intensity u_K (Fig. 10)',
+                           description='Rotation width against u_K in [0, 1] for initial '
+                                       'tilts alpha; writes a PNG and JSON.')
+    width.add_argument('--alphas-deg', type=float, nargs='+', default=[0.0, 20.0, 35.0])
+    width.add_argument('--intensities', type=int, default=11, help='points in [0, 1]')
+    offsets = sub.add_parser('offsets', help='voltage offsets over the cone (Fig. 8)',
+                             description='For each grid state, the offset on the compensating '
+                                         'beam that puts the kick on its nominal direction.')
+    offsets.add_argument('--grid-step', type=float, default=0.16, help='step in x_sn and y_sn')
+    offsets.add_argument('--workers', type=int, default=2, help='local processes')
+    for p in (width, offsets):
+        p.add_argument('--params', default='calibrated', help='parameter set')
+        p.add_argument('--design', default=DEFAULT_DESIGN,
+                       help='kick optimisation JSON whose design to use')
+        p.add_argument('--out', default=str(RESULTS), help='output directory')
+    width.set_defaults(func=run_width)
+    offsets.set_defaults(func=run_offsets)
+
+
+def run_width(args):
+    from sphere_twin.plots import plot_lines
+
+    design = KickDesign.load(args.design)
+    intensities = np.linspace(0.0, 1.0, args.intensities)
+    total = len(args.alphas_deg) * (intensities.size + 1)
+    with tqdm(total=total, desc='kicks', unit='kick') as bar:
+        curves = rotation_width_curves(design, args.alphas_deg, intensities, args.params,
+                                       progress=bar.update)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    png = out / 'rotation_width.png'
+    plot_lines(intensities, [np.degrees(c.width_rad) for c in curves],
+               [f'alpha = {c.alpha_deg:.0f} deg' for c in curves], 'intensity $u_K$',
+               'rotation width (deg)', png,
+               title='Rotation width of the optimised kick (drift removed), cf. Fig. 10')
+    data = {'parameter_set': args.params, 'design': design.to_dict(),
+            'curves': [{'alpha_deg': c.alpha_deg, 'intensities': c.intensities.tolist(),
+                        'width_deg': np.degrees(c.width_rad).tolist(),
+                        'direction_deg': np.degrees(c.direction_rad).tolist(),
+                        'drift_deg': math.degrees(c.drift_rad)} for c in curves]}
+    (out / 'rotation_width.json').write_text(json.dumps(data, indent=2) + '\n')
+    print(f'{"u_K":>5} ' + ' '.join(f'{f"alpha {c.alpha_deg:.0f}":>10}' for c in curves))
+    for i, u in enumerate(intensities):
+        print(f'{u:5.2f} ' + ' '.join(f'{math.degrees(c.width_rad[i]):10.4f}' for c in curves))
+    print('unkicked drift over the window (deg): ' + ', '.join(
+        f'alpha {c.alpha_deg:.0f}: {math.degrees(c.drift_rad):.4f}' for c in curves))
+    print(f'wrote {png}')
+    return 0
+
+
+def run_offsets(args):
+    from sphere_twin.plots import plot_offsets
+
+    design = KickDesign.load(args.design)
+    with tqdm(desc='states', unit='state') as bar:
+        solutions = voltage_offsets(design, args.grid_step, parameter_set=args.params,
+                                    workers=args.workers, progress=bar.update)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    png = plot_offsets(solutions, out / 'voltage_offsets.png')
+    (out / 'voltage_offsets.json').write_text(json.dumps(
+        {'parameter_set': args.params, 'design': design.to_dict(),
+         'direction_tolerance_deg': math.degrees(OFFSET_DIRECTION_TOL_RAD),
+         'states': [s.__dict__ for s in solutions]}, indent=2) + '\n')
+    before = np.degrees([abs(s.direction_error_without_rad) for s in solutions])
+    after = np.degrees([abs(s.direction_error_rad) for s in solutions])
+    print(f'{len(solutions)} states; direction error without offset: median {np.median(before):.2f}'
+          f' deg, max {before.max():.2f} deg')
+    print(f'wrote {png}')
+    print(f'residual direction error: median {np.median(after):.2f} deg, '
+          f'max {after.max():.2f} deg over {len(solutions)} states')
+    return 0

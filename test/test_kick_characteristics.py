@@ -1,0 +1,71 @@
+"""Voltage-offset search, the compensating-beam rule and the drift-free kick effect."""
+
+import math
+
+import numpy as np
+import pytest
+
+from sphere_sim.discrete import normal_from_xy
+from sphere_sim.kick_characteristics import (KickEffect, compensating_beam, find_offset,
+                                             offset_grid)
+from sphere_sim.kicks import KickDesign
+from sphere_sim.symmetry import KICK_AXIS_MIRROR
+
+
+def test_offset_search_finds_the_root_inside_the_bracket_of_a_non_monotone_error():
+    calls = []
+
+    def error(v):  # zero at 8 V; a second, far sign change beyond 30 V
+        calls.append(v)
+        return math.atan(0.05 * (v - 8.0)) * (1.0 if v < 30.0 else -1.0)
+
+    offset, residual, evaluations = find_offset(error, (-10.0, 5.0, 10.0, 20.0, 45.0),
+                                                tol_rad=1e-3, refinements=6)
+    assert offset == pytest.approx(8.0, abs=0.05)
+    assert abs(residual) <= 1e-3
+    assert evaluations == len(calls) <= 6 + 6
+
+
+def test_offset_search_without_a_sign_change_returns_the_best_scanned_offset():
+    offset, residual, evaluations = find_offset(lambda v: 0.1 + 0.001 * (v - 5.0) ** 2,
+                                                (-10.0, 5.0, 10.0), tol_rad=1e-3)
+    assert (offset, evaluations) == (5.0, 4)
+    assert residual == pytest.approx(0.1)
+
+
+def test_compensating_beam_follows_the_half_space_and_mirrors_with_the_kick_axis():
+    design = KickDesign()
+    upper_right = normal_from_xy(0.2, 0.1)
+    lower_left = normal_from_xy(-0.2, -0.1)
+    assert compensating_beam(design, upper_right) == 1
+    assert compensating_beam(design, lower_left) == 2
+    # Mirroring at the kick axis swaps the half-spaces and the two low beams.
+    for x, y in offset_grid(0.16, math.radians(40.0)):
+        normal = normal_from_xy(x, y)
+        if abs(x + y) < 1e-9:
+            continue  # on the kick line itself
+        image = KICK_AXIS_MIRROR.apply_vector(normal)
+        assert KICK_AXIS_MIRROR.beam_map()[compensating_beam(design, normal)] == \
+            compensating_beam(design, image)
+
+
+def test_offset_grid_stays_inside_the_cone_and_is_symmetric():
+    nodes = offset_grid(0.16, math.radians(40.0))
+    assert all(math.hypot(x, y) <= math.sin(math.radians(40.0)) + 1e-12 for x, y in nodes)
+    assert {(round(-x, 9), round(-y, 9)) for x, y in nodes} == \
+        {(round(x, 9), round(y, 9)) for x, y in nodes}
+
+
+def test_kick_effect_width_and_direction():
+    effect = KickEffect(np.array([1e-3, -1e-3]), np.array([5e-3, 0.0]))
+    assert effect.width_rad == pytest.approx(math.sqrt(2) * 1e-3)
+    assert effect.direction_rad == pytest.approx(math.radians(-45.0))
+
+
+def test_design_round_trips_through_the_optimisation_json(tmp_path):
+    import json
+
+    design = KickDesign(width_low_s=1.2e-3, width_high_s=0.4e-3, delay_s=0.65e-3)
+    path = tmp_path / 'kick.json'
+    path.write_text(json.dumps({'design': {**design.to_dict(), 'direction_deg': -45.0}}))
+    assert KickDesign.load(path) == design

@@ -1,0 +1,150 @@
+"""The discrete kick table: engines agree, resume works, versions and parameters are checked."""
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+
+from sphere_sim.discrete import normal_from_xy
+from sphere_sim.lookup_table import LookupTable, TableError, TableSpec
+from sphere_sim.table_build import build_table, direct_kick, jobs_of
+
+# A small table: a 6 deg cone, one intensity, a 5 ms window; enough to exercise every path.
+SMALL = TableSpec(grid_step=0.06, intensities=(1.0,), window_s=5e-3, rtol=1e-6,
+                  cone_half_angle_rad=math.radians(6.0))
+
+
+@pytest.fixture(scope='module')
+def serial_build(tmp_path_factory):
+    """The table built in this process, and the partial file it wrote on the way."""
+    partial = tmp_path_factory.mktemp('table') / 'table.partial.jsonl'
+    return build_table(SMALL, workers=1, partial_path=partial), partial
+
+
+@pytest.fixture(scope='module')
+def serial_table(serial_build):
+    return serial_build[0]
+
+
+def test_pool_gives_the_same_table_as_one_process(serial_table):
+    pooled = build_table(SMALL, workers=2)
+    np.testing.assert_array_equal(pooled.displacement, serial_table.displacement)
+    assert np.count_nonzero(~np.isnan(serial_table.peak_rad)) == len(jobs_of(SMALL))
+
+
+def test_dask_local_cluster_gives_the_same_table(serial_table):
+    from distributed import LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, host='127.0.0.1',
+                      dashboard_address=None, processes=True) as cluster:
+        table = build_table(SMALL, scheduler=cluster.scheduler_address)
+    np.testing.assert_array_equal(table.displacement, serial_table.displacement)
+
+
+def test_interrupted_build_resumes_without_redoing_entries(tmp_path, serial_build):
+    first, complete = serial_build
+    partial = tmp_path / 'table.partial.jsonl'
+    lines = complete.read_text().splitlines()
+    # Keep the header and half the entries, and cut the last kept line short as a kill would.
+    kept = lines[:1 + len(lines[1:]) // 2]
+    partial.write_text('\n'.join(kept) + '\n' + lines[len(kept)][:10])
+    seen = []
+    resumed = build_table(SMALL, workers=1, partial_path=partial,
+                          progress=lambda done, total: seen.append(done))
+    assert seen[0] == len(kept) - 1  # resumed from the saved entries
+    np.testing.assert_array_equal(resumed.displacement, first.displacement)
+
+
+def test_table_round_trips_and_refuses_other_parameters(tmp_path, serial_table):
+    from sphere_sim.parameters import load_parameter_set
+
+    path = serial_table.save(tmp_path / 't.npz')
+    params = load_parameter_set('calibrated')
+    loaded = LookupTable.load(path, params=params)
+    np.testing.assert_array_equal(loaded.displacement, serial_table.displacement)
+    other = params.replace(**{'beam.stiffness_z_n_per_m': 36.0})
+    with pytest.raises(TableError, match='rebuild'):
+        LookupTable.load(path, params=other)
+    meta = dict(serial_table.meta, format_version=999)
+    dataclasses.replace(serial_table, meta=meta).save(tmp_path / 'old.npz')
+    with pytest.raises(TableError, match='format'):
+        LookupTable.load(tmp_path / 'old.npz')
+    (tmp_path / 'junk.npz').write_bytes(b'not a table')
+    with pytest.raises(TableError, match='not a sphere_twin kick table'):
+        LookupTable.load(tmp_path / 'junk.npz')
+
+
+def test_interpolation_is_exact_on_nodes_and_symmetric_images_match_simulation(serial_table):
+    spec_nodes = SMALL.nodes()
+    i, j, x, y = next(node for node in spec_nodes if node[2] > 0 and node[3] > 0)
+    normal = normal_from_xy(x, y)
+    entry = serial_table.kick(normal, 0, 1.0).normal
+    np.testing.assert_allclose(entry[:2] - normal[:2], serial_table.displacement[i, j, 0],
+                               atol=1e-15)
+    # Action 2 is the same kick turned by 180 deg: from the turned state the table's image and
+    # a direct simulation of the turned programme agree.
+    turned = np.array([-x, -y, normal[2]])
+    predicted = serial_table.kick(turned, 2, 1.0).normal
+    simulated = direct_kick(SMALL, turned, 2, 1.0).normal
+    np.testing.assert_allclose(predicted, simulated, atol=1e-9)
+
+
+def test_outside_the_table_is_a_clear_error(serial_table):
+    with pytest.raises(TableError, match='outside'):
+        serial_table.kick(normal_from_xy(0.5, 0.0), 0, 1.0)
+
+
+def test_meta_records_what_the_table_came_from(serial_table):
+    meta = serial_table.meta
+    assert meta['parameter_set'] == 'calibrated'
+    assert json.loads(json.dumps(meta))['spec']['window_s'] == SMALL.window_s
+
+
+# --- the shipped default table --------------------------------------------------------------
+
+@pytest.fixture(scope='module')
+def shipped():
+    return LookupTable.load_current()
+
+
+def test_shipped_table_matches_the_committed_optimised_kick(shipped):
+    """From rest, the table's full kick is the optimisation's result, turned for each action."""
+    from pathlib import Path
+
+    from sphere_sim.discrete import angle_between
+
+    optimised = json.loads((Path(__file__).parents[1] / 'bench' / 'results' /
+                            'kick_optimization.json').read_text())
+    up = np.array([0.0, 0.0, 1.0])
+    for action, direction in enumerate(shipped.directions_rad):
+        moved = shipped.kick(up, action, 1.0).normal
+        d = moved[:2]
+        assert math.degrees(angle_between(up, moved)) == pytest.approx(
+            optimised['rotation_deg'], rel=0.02)
+        assert math.remainder(math.atan2(d[1], d[0]) - direction, 2 * math.pi) == \
+            pytest.approx(0.0, abs=1e-6)
+
+
+def test_shipped_table_drift_is_back_towards_level_and_removable(shipped):
+    from sphere_sim.lookup_table import Drift
+
+    still = LookupTable.load_current(drift=Drift.REMOVE)
+    for x, y in ((0.3, 0.1), (-0.2, 0.35), (0.0, -0.4)):
+        normal = normal_from_xy(x, y)
+        drifted = shipped.kick(normal, 1, 0.0).normal
+        assert np.hypot(*drifted[:2]) < np.hypot(x, y)  # creeps towards level
+        np.testing.assert_allclose(still.kick(normal, 1, 0.0).normal, normal, atol=1e-12)
+        kicked = shipped.kick(normal, 1, 1.0).normal
+        effect = still.kick(normal, 1, 1.0).normal
+        np.testing.assert_allclose(kicked[:2] - drifted[:2], effect[:2] - normal[:2],
+                                   atol=1e-9)
+
+
+def test_shipped_table_kick_grows_with_intensity_above_the_pull_in_threshold(shipped):
+    """Below u_K ~ 0.17 the high pair stays under its 42.6 V threshold: hardly any rotation."""
+    up = np.array([0.0, 0.0, 1.0])
+    widths = [np.hypot(*shipped.kick(up, 0, u).normal[:2]) for u in (0.0, 0.3, 0.5, 0.75, 1.0)]
+    assert widths[0] < 0.05 * widths[-1]
+    assert np.all(np.diff(widths) > 0.0)
