@@ -10,15 +10,18 @@ on it. No rclpy here; stamps are ``builtin_interfaces/Time`` (a node passes
 import math
 
 import numpy as np
-from builtin_interfaces.msg import Time
+from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Vector3Stamped
+from nav_msgs.msg import Odometry
 from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from msg_defs.topics import (
     BEAM_COUNT,
     BEAM_NAMES,
     BEAM_STATE_JOINT_NAMES,
     MAX_ABS_VOLTAGE_V,
+    SPHERE_FRAME,
     WORLD_FRAME,
 )
 
@@ -191,6 +194,10 @@ def _checked_voltages(voltages_v, max_abs_voltage_v):
     voltages = _finite_vector(voltages_v, BEAM_COUNT, 'voltages')
     if not (math.isfinite(max_abs_voltage_v) and max_abs_voltage_v > 0):
         raise ValueError(f'voltage limit must be a positive number, got {max_abs_voltage_v}')
+    # The drivers are unipolar: the electrostatic force goes with V^2, so a negative command
+    # is a sign error upstream, not a request.
+    if np.any(voltages < 0.0):
+        raise ValueError(f'voltages: must be >= 0 V, got {voltages.tolist()}')
     worst = float(np.max(np.abs(voltages)))
     if worst > max_abs_voltage_v:
         raise ValueError(f'voltages: |V| = {worst:g} V exceeds the limit '
@@ -259,3 +266,141 @@ def _interleave(z_values, phi_values, what):
     joined[0::2] = _finite_vector(z_values, BEAM_COUNT, f'{what} z')
     joined[1::2] = _finite_vector(phi_values, BEAM_COUNT, f'{what} phi')
     return joined
+
+
+# --- pulse programme (trajectory_msgs/JointTrajectory, volts in effort) -------------------
+
+def programme_to_msg(times_s, voltages_v, stamp=None, max_abs_voltage_v=MAX_ABS_VOLTAGE_V):
+    """Message for ``/beams/pulse_program`` from zero-order-hold segments.
+
+    Parameters
+    ----------
+    times_s : array_like, shape (n,)
+        Start of each segment relative to ``stamp`` (s), >= 0 and strictly increasing.
+    voltages_v : array_like, shape (n, 4)
+        Voltages of beam 1..4 (V) from each start until the next.
+    stamp : builtin_interfaces.msg.Time, optional
+        When the programme starts; time 0 (start on receipt) if omitted.
+
+    Raises
+    ------
+    ValueError
+        If the segments break the contract (see :func:`programme_from_msg`).
+    """
+    times, volts = _checked_segments(times_s, voltages_v, max_abs_voltage_v)
+    msg = JointTrajectory()
+    msg.header.stamp = _stamp_or_zero(stamp)
+    msg.joint_names = list(BEAM_NAMES)
+    for t, row in zip(times, volts, strict=True):
+        point = JointTrajectoryPoint()
+        sec, nanosec = divmod(round(t * NANOSECONDS_PER_SECOND), NANOSECONDS_PER_SECOND)
+        point.time_from_start = Duration(sec=int(sec), nanosec=int(nanosec))
+        point.effort = row.tolist()
+        msg.points.append(point)
+    return msg
+
+
+def programme_from_msg(msg, max_abs_voltage_v=MAX_ABS_VOLTAGE_V):
+    """Segments of a ``/beams/pulse_program`` message, beams in order 1..4.
+
+    Returns
+    -------
+    times_s : ndarray, shape (n,)
+    voltages_v : ndarray, shape (n, 4)
+
+    Raises
+    ------
+    ValueError
+        On joint names other than ``beam_1 .. beam_4`` (any order, each once), no points, a
+        point whose ``effort`` length differs from the names', non-finite, negative or
+        above-limit volts, negative or non-increasing times, or a last point that does not
+        switch every beam off (it would hold for ever).
+    """
+    names = list(msg.joint_names)
+    if sorted(names) != sorted(BEAM_NAMES):
+        raise ValueError(f'pulse programme: expected joint names {list(BEAM_NAMES)} (any '
+                         f'order, each once), got {names}')
+    if not msg.points:
+        raise ValueError('pulse programme: no points')
+    order = [names.index(name) for name in BEAM_NAMES]
+    times, rows = [], []
+    for i, point in enumerate(msg.points):
+        effort = list(point.effort)
+        if len(effort) != len(names):
+            raise ValueError(f'pulse programme: point {i} has {len(effort)} effort values for '
+                             f'{len(names)} joints')
+        times.append(point.time_from_start.sec
+                     + point.time_from_start.nanosec / NANOSECONDS_PER_SECOND)
+        rows.append([effort[k] for k in order])
+    return _checked_segments(times, rows, max_abs_voltage_v)
+
+
+def _checked_segments(times_s, voltages_v, max_abs_voltage_v):
+    times = _finite_vector(times_s, len(times_s), 'pulse programme times')
+    if times.size == 0:
+        raise ValueError('pulse programme: no points')
+    if times[0] < 0.0:
+        raise ValueError(f'pulse programme: times must be >= 0 s, got {times[0]:g} s')
+    if np.any(np.diff(times) <= 0.0):
+        raise ValueError(f'pulse programme: times must increase strictly, got {times.tolist()}')
+    volts = np.array([_checked_voltages(row, max_abs_voltage_v) for row in voltages_v])
+    if volts.shape != (times.size, BEAM_COUNT):
+        raise ValueError(f'pulse programme: {times.size} times but {len(volts)} voltage rows')
+    if np.any(volts[-1] != 0.0):
+        raise ValueError('pulse programme: the last point must switch every beam off (0 V)')
+    return times, volts
+
+
+# --- sphere state (nav_msgs/Odometry) -----------------------------------------------------
+
+def sphere_state_to_msg(position_m, quaternion_wxyz, velocity_m_per_s, omega_body_rad_per_s,
+                        stamp=None):
+    """Message for ``/sphere/state``.
+
+    Parameters
+    ----------
+    position_m : array_like, shape (3,)
+        Full-sphere centre in ``world`` (m).
+    quaternion_wxyz : array_like, shape (4,)
+        Orientation of ``sphere`` in ``world``, scalar first (normalised here).
+    velocity_m_per_s : array_like, shape (3,)
+        Centre velocity in ``world`` (m/s); expressed in ``sphere`` in the message, as
+        nav_msgs/Odometry requires.
+    omega_body_rad_per_s : array_like, shape (3,)
+        Angular velocity in ``sphere`` (rad/s).
+    """
+    q = _finite_vector(quaternion_wxyz, 4, 'quaternion')
+    norm = float(np.linalg.norm(q))
+    if norm == 0.0:
+        raise ValueError('quaternion: zero length')
+    q = q / norm
+    p = _finite_vector(position_m, 3, 'position')
+    v_world = _finite_vector(velocity_m_per_s, 3, 'velocity')
+    w = _finite_vector(omega_body_rad_per_s, 3, 'angular velocity')
+    # v_body = R(q)^T v_world, with R(q) v = v + 2 u x (u x v + w v) for q = (w, u).
+    u = -q[1:]  # the conjugate rotates world vectors into the body
+    v_body = v_world + 2.0 * np.cross(u, np.cross(u, v_world) + q[0] * v_world)
+    msg = Odometry()
+    msg.header.stamp = _stamp_or_zero(stamp)
+    msg.header.frame_id = WORLD_FRAME
+    msg.child_frame_id = SPHERE_FRAME
+    pose = msg.pose.pose
+    pose.position.x, pose.position.y, pose.position.z = map(float, p)
+    pose.orientation.w, pose.orientation.x, pose.orientation.y, pose.orientation.z = map(
+        float, q)
+    twist = msg.twist.twist
+    twist.linear.x, twist.linear.y, twist.linear.z = map(float, v_body)
+    twist.angular.x, twist.angular.y, twist.angular.z = map(float, w)
+    return msg
+
+
+def sphere_state_from_msg(msg):
+    """(position_m, quaternion_wxyz) of a ``/sphere/state`` message."""
+    if msg.header.frame_id != WORLD_FRAME or msg.child_frame_id != SPHERE_FRAME:
+        raise ValueError(f'sphere state: expected frames {WORLD_FRAME!r} -> {SPHERE_FRAME!r}, '
+                         f'got {msg.header.frame_id!r} -> {msg.child_frame_id!r}')
+    pose = msg.pose.pose
+    position = _finite_vector((pose.position.x, pose.position.y, pose.position.z), 3,
+                              'position')
+    o = pose.orientation
+    return position, _finite_vector((o.w, o.x, o.y, o.z), 4, 'quaternion')

@@ -33,6 +33,7 @@ from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import MarkerArray
 
 WORLD_FRAME = 'world'
 SPHERE_FRAME = 'sphere'
@@ -183,6 +184,23 @@ CONTROLLER_STATUS = Topic(
     units='-',
     description='Health and mode of the running controller, one status per controller.',
 )
+DIAGNOSTICS = Topic(
+    name='/diagnostics',
+    msg_type=DiagnosticArray,
+    qos=STREAM_QOS,
+    frame_id='',
+    units='-',
+    description='Rejected commands and plant health from the simulator (the ROS convention '
+                'for diagnostics, so rqt_runtime_monitor and Foxglove show them).',
+)
+MARKERS = Topic(
+    name='/twin/markers',
+    msg_type=MarkerArray,
+    qos=STREAM_QOS,
+    frame_id=WORLD_FRAME,
+    units='m',
+    description='Mirror, sphere and beams as markers for RViz or Foxglove.',
+)
 CLOCK = Topic(
     name='/clock',
     msg_type=Clock,
@@ -201,6 +219,8 @@ ALL_TOPICS = (
     PULSE_PROGRAM,
     SPHERE_REFERENCE,
     CONTROLLER_STATUS,
+    DIAGNOSTICS,
+    MARKERS,
     CLOCK,
 )
 

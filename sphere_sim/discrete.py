@@ -69,6 +69,12 @@ def normal_from_xy(x_sn, y_sn):
     return np.array([x_sn, y_sn, math.sqrt(z2)])
 
 
+def normal_from_cardan(alpha_deg, beta_deg=0.0):
+    """Surface normal of Cardan angles (alpha, beta, 0) in degrees (eq. A1, 53)."""
+    a, b = math.radians(alpha_deg), math.radians(beta_deg)
+    return np.array([math.sin(b), -math.sin(a) * math.cos(b), math.cos(a) * math.cos(b)])
+
+
 def angle_between(a, b):
     """Angle (rad) between two unit vectors, robust for tiny angles."""
     a = np.asarray(a, dtype=float)

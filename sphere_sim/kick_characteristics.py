@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from sphere_sim.discrete import CONE_HALF_ANGLE_RAD, normal_from_xy
+from sphere_sim.discrete import CONE_HALF_ANGLE_RAD, normal_from_cardan, normal_from_xy
 from sphere_sim.initial_state import rest_state
 from sphere_sim.kicks import KICK_WINDOW_S, KickDesign, cardan_of_normal, simulate_kick
 from sphere_sim.model import assemble
@@ -88,12 +88,6 @@ class KickBench:
         return KickEffect(moved[:2] - normal[:2] - drift, drift)
 
 
-def normal_at_tilt(alpha_deg, beta_deg=0.0):
-    """Surface normal of Cardan angles (alpha, beta, 0) (eq. A1, 53)."""
-    a, b = math.radians(alpha_deg), math.radians(beta_deg)
-    return np.array([math.sin(b), -math.sin(a) * math.cos(b), math.cos(a) * math.cos(b)])
-
-
 @dataclasses.dataclass(frozen=True)
 class WidthCurve:
     """Rotation width (rad) over intensities for one initial tilt."""
@@ -118,7 +112,7 @@ def rotation_width_curves(design=None, alphas_deg=(0.0, 20.0, 35.0), intensities
     bench = KickBench(parameter_set)
     curves = []
     for alpha in alphas_deg:
-        normal = normal_at_tilt(alpha)
+        normal = normal_from_cardan(alpha)
         effects = []
         for u in intensities:
             effects.append(bench.effect(normal, design, float(u)))

@@ -77,6 +77,18 @@ class TableSpec:
                     out.append((i, j, float(x), float(y)))
         return out
 
+    def to_dict(self):
+        return json.loads(json.dumps(_jsonable(self)))
+
+    @classmethod
+    def from_dict(cls, data):
+        data = dict(data)
+        design = dict(data.pop('design'))
+        design['low_beams'] = tuple(design['low_beams'])
+        design['high_beams'] = tuple(design['high_beams'])
+        data['intensities'] = tuple(data['intensities'])
+        return cls(design=KickDesign(**design), **data)
+
     def digest(self, params_digest):
         text = json.dumps({'spec': _jsonable(self), 'params': params_digest}, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
@@ -176,6 +188,11 @@ class LookupTable:
                 f'{meta.get("params_digest")}), not for {params.name!r} (digest '
                 f'{params.digest()}); rebuild it with `sphere-twin table build`')
         return cls(meta=meta, drift=drift, **arrays)
+
+    @property
+    def spec(self):
+        """The :class:`TableSpec` the table was built from."""
+        return TableSpec.from_dict(self.meta['spec'])
 
     @classmethod
     def load_current(cls, path=DEFAULT_TABLE_PATH, drift=Drift.KEEP):

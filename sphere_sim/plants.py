@@ -1,58 +1,251 @@
-"""Plants the simulator node can run: anything with ``step(dt_s, voltages_v) -> normal``.
+"""Plants the simulator node runs: the continuous model or the discrete kick model.
 
-The node only needs to advance a plant by a time step under the beam voltages held over that
-step and read the mirror's surface normal back, so that is the whole interface; the physics
-model plugs in behind it without the node changing.
+A plant holds simulated time and takes the two commands the device takes, voltages held on the
+beams and a timed pulse programme, then advances to a later time and reports a
+:class:`PlantSnapshot`. The node neither knows nor cares which plant it drives; a plant that
+cannot carry out a command raises :class:`PlantError` and stays as it was.
 """
 
+import dataclasses
+import itertools
 from typing import Protocol
 
 import numpy as np
 
+from sphere_sim.initial_state import initial_state
+from sphere_sim.kicks import KICK_WINDOW_S, KickDesign
+from sphere_sim.programme import Pulse, PulseProgramme
+from sphere_sim.solve import simulate
+from sphere_sim.symmetry import Symmetry
+
 BEAM_COUNT = 4
-# The flattened face points straight up when the sphere rests on the four beam tips.
-RESTING_NORMAL = np.array([0.0, 0.0, 1.0])
+LIVE_RTOL = 1e-6  # the tolerance the kicks and the table were computed with
+# A decoded programme matches a kick of the design if its edges agree to this (a message
+# carries times in whole nanoseconds) and its voltages to this.
+DECODE_TIME_TOL_S = 1e-8
+DECODE_VOLTAGE_TOL_V = 1e-6
+
+
+class PlantError(ValueError):
+    """A command the plant cannot carry out (it is left unchanged)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class PlantSnapshot:
+    """What a plant reports at one instant.
+
+    Attributes
+    ----------
+    time_s : float
+    normal : ndarray, shape (3,)
+        Unit surface normal in ``world``.
+    voltages_v : ndarray, shape (4,)
+        Voltages applied to beams 1..4 (V).
+    sphere : tuple or None
+        (position_m (3,), quaternion_wxyz (4,), velocity_m_per_s (3,), omega_body_rad_per_s
+        (3,)) where the plant has a rigid-body sphere.
+    beams : tuple or None
+        (z_m (4,), phi_rad (4,), zdot_m_per_s (4,), phidot_rad_per_s (4,)) where it has beams.
+    """
+
+    time_s: float
+    normal: np.ndarray
+    voltages_v: np.ndarray
+    sphere: tuple = None
+    beams: tuple = None
 
 
 class Plant(Protocol):
     """What the simulator node drives."""
 
-    def step(self, dt_s: float, voltages_v: np.ndarray) -> np.ndarray:
-        """Advance by ``dt_s`` (s) with ``voltages_v`` (V, shape (4,)) held on beams 1..4.
+    time_s: float
+    busy_until_s: float  # when the last command's effect is over (programme end + settling)
 
-        Returns the unit surface normal in the world frame, shape (3,), afterwards.
-        """
-        ...
+    def hold(self, voltages_v):
+        """Hold ``voltages_v`` (V, shape (4,)) on the beams from now on."""
+
+    def run_programme(self, programme):
+        """Start ``programme`` (a PulseProgramme, times from now)."""
+
+    def advance(self, t_end_s):
+        """Advance simulated time to ``t_end_s`` (s)."""
+
+    def snapshot(self):
+        """The :class:`PlantSnapshot` now."""
 
 
-class RestingPlant:
-    """Placeholder plant: the sphere at rest, whatever the voltages.
+class VoltageSchedule:
+    """Piecewise-constant beam voltages over absolute simulated time.
 
-    Validates its inputs like a real plant would, so the node's wiring is exercised, and
-    keeps the simulated time so callers can check that it advances.
-
-    Attributes
-    ----------
-    time_s : float
-        Simulated time (s), the sum of the steps taken.
+    A new command replaces whatever the schedule held from its start time on, so the most
+    recent command always wins, as on the device's drivers.
     """
 
     def __init__(self):
+        self.times_s = [0.0]
+        self.voltages_v = [np.zeros(BEAM_COUNT)]
+
+    def replace_from(self, t_s, times_s, voltages_v):
+        """From ``t_s`` on, the segments ``times_s`` (relative, from 0) and ``voltages_v``."""
+        keep = [i for i, t in enumerate(self.times_s) if t < t_s]
+        self.times_s = [self.times_s[i] for i in keep] + [t_s + float(t) for t in times_s]
+        self.voltages_v = [self.voltages_v[i] for i in keep] + [np.array(v, dtype=float)
+                                                                for v in voltages_v]
+
+    def voltages_at(self, t_s):
+        i = int(np.searchsorted(self.times_s, t_s, side='right')) - 1
+        return self.voltages_v[max(i, 0)].copy()
+
+    def edges_between(self, t0_s, t1_s):
+        return [t for t in self.times_s if t0_s < t < t1_s]
+
+    def forget_before(self, t_s):
+        """Drop segments that ended before ``t_s`` (the schedule stays short in long runs)."""
+        i = int(np.searchsorted(self.times_s, t_s, side='right')) - 1
+        if i > 0:
+            del self.times_s[:i]
+            del self.voltages_v[:i]
+
+
+class ContinuousPlant:
+    """The physics model of §3, integrated between commands and sample times.
+
+    Parameters
+    ----------
+    model : sphere_sim.model.Model
+        With a sphere (its surface normal is the plant's output).
+    x0 : ndarray, shape (n_states,), optional
+        Initial state; the scene's initial state by default.
+    rtol : float
+    settle_window_s : float
+        Time after a programme's last edge until its effect counts as over.
+    """
+
+    def __init__(self, model, x0=None, rtol=LIVE_RTOL, settle_window_s=KICK_WINDOW_S):
+        if not model.has_sphere:
+            raise PlantError('the continuous plant needs a scene with the sphere')
+        self.model = model
+        self.x = np.array(initial_state(model) if x0 is None else x0, dtype=float)
+        self.rtol = rtol
+        self.settle_window_s = settle_window_s
         self.time_s = 0.0
+        self.busy_until_s = 0.0
+        self.schedule = VoltageSchedule()
+        self.stats_nfev = 0
 
-    def step(self, dt_s, voltages_v):
-        """Advance by ``dt_s`` (s); returns the resting normal ``[0, 0, 1]``.
+    def hold(self, voltages_v):
+        self.schedule.replace_from(self.time_s, [0.0], [voltages_v])
 
-        Raises
-        ------
-        ValueError
-            If ``dt_s`` is not a positive finite number or ``voltages_v`` is not 4 finite
-            values.
-        """
-        if not (np.isfinite(dt_s) and dt_s > 0):
-            raise ValueError(f'dt_s must be a positive finite number, got {dt_s}')
-        voltages = np.asarray(voltages_v, dtype=float)
-        if voltages.shape != (BEAM_COUNT,) or not np.all(np.isfinite(voltages)):
-            raise ValueError(f'voltages_v must be {BEAM_COUNT} finite values, got {voltages_v}')
-        self.time_s += dt_s
-        return RESTING_NORMAL.copy()
+    def run_programme(self, programme):
+        times, volts = programme.segments()
+        self.schedule.replace_from(self.time_s, times, volts)
+        self.busy_until_s = self.time_s + programme.duration_s + self.settle_window_s
+
+    def advance(self, t_end_s):
+        bounds = [self.time_s, *self.schedule.edges_between(self.time_s, t_end_s), t_end_s]
+        for t0, t1 in itertools.pairwise(bounds):
+            if t1 <= t0:
+                continue
+            volts = self.schedule.voltages_at(t0)
+            constant = PulseProgramme(tuple(Pulse(b + 1, float(v), t0, t1 - t0)
+                                            for b, v in enumerate(volts) if v != 0.0))
+            traj = simulate(self.model, self.x, t1, constant, rtol=self.rtol,
+                            sample_period_s=t1 - t0, t_start_s=t0)
+            self.x = traj.final_state.copy()
+            self.stats_nfev += traj.stats.nfev
+        self.time_s = max(self.time_s, t_end_s)
+        self.schedule.forget_before(self.time_s)
+
+    def snapshot(self):
+        m, x = self.model, self.x
+        o = m.sphere_offset
+        sphere = (x[o:o + 3].copy(), x[o + 3:o + 7].copy(), x[o + 7:o + 10].copy(),
+                  x[o + 10:o + 13].copy())
+        beams = tuple(np.array(c, dtype=float) for c in m.beam_coordinates(x))
+        return PlantSnapshot(self.time_s, m.surface_normal(x), self.schedule.voltages_at(
+            self.time_s), sphere, beams)
+
+
+def kick_programmes(design, intensity, n_actions=4):
+    """The pulse programme of each action (the design turned by quarter turns) at u_K."""
+    reference = design.programme(intensity)
+    return [Symmetry(a).apply_programme(reference) for a in range(n_actions)]
+
+
+def decode_kick(design, programme, n_actions=4):
+    """(action, intensity) of the design's kick that ``programme`` is, or PlantError.
+
+    The intensity follows from the largest voltage of the high pair; the action from which
+    quarter turn of the design has the same segments.
+    """
+    times, volts = programme.segments()
+    span = design.high_v - design.low_v
+    intensity = float(np.clip((volts.max() - design.low_v) / span, 0.0, 1.0)) if span else 1.0
+    for action, candidate in enumerate(kick_programmes(design, intensity, n_actions)):
+        c_times, c_volts = candidate.segments()
+        if (c_times.shape == times.shape and np.allclose(c_times, times, rtol=0.0,
+                                                         atol=DECODE_TIME_TOL_S)
+                and np.allclose(c_volts, volts, rtol=0.0, atol=DECODE_VOLTAGE_TOL_V)):
+            return action, intensity
+    raise PlantError('the discrete plant executes only the kicks of its design (any quarter '
+                     'turn, any intensity); this programme is none of them')
+
+
+class DiscretePlant:
+    """The discrete model x_{t+1} = f(x_t, a_t, u_K) behind the device's interface.
+
+    A pulse programme is decoded into the kick (action, intensity) it is, and the resting
+    normal jumps to the kick's outcome at the end of the kick window; voltages other than
+    0 V held on the beams are refused, since the table knows only kicks.
+
+    Parameters
+    ----------
+    kick_plant : sphere_sim.discrete.KickPlant
+        Usually a :class:`sphere_sim.lookup_table.LookupTable`.
+    design : KickDesign
+        The design whose programmes the plant accepts.
+    normal0 : ndarray, shape (3,), optional
+    window_s : float
+        Delay from the programme's start to the new resting normal.
+    """
+
+    def __init__(self, kick_plant, design=None, normal0=None, window_s=KICK_WINDOW_S):
+        self.kick_plant = kick_plant
+        self.design = KickDesign() if design is None else design
+        self.normal = np.array([0.0, 0.0, 1.0] if normal0 is None else normal0, dtype=float)
+        self.window_s = window_s
+        self.time_s = 0.0
+        self.busy_until_s = 0.0
+        self.schedule = VoltageSchedule()
+        self._pending = None  # (time_s, normal)
+        self.kicks = 0
+
+    def hold(self, voltages_v):
+        if np.any(np.asarray(voltages_v) != 0.0):
+            raise PlantError('the discrete plant models kicks only: send a pulse programme, '
+                             'or 0 V on every beam')
+        self.schedule.replace_from(self.time_s, [0.0], [np.zeros(BEAM_COUNT)])
+
+    def run_programme(self, programme):
+        if self._pending is not None:
+            raise PlantError(f'a kick is still running until t = {self._pending[0]:.4f} s')
+        action, intensity = decode_kick(self.design, programme,
+                                        len(self.kick_plant.directions_rad))
+        result = self.kick_plant.kick(self.normal, action, intensity)
+        times, volts = programme.segments()
+        self.schedule.replace_from(self.time_s, times, volts)
+        done = self.time_s + max(self.window_s, programme.duration_s)
+        self._pending = (done, np.asarray(result.normal, dtype=float))
+        self.busy_until_s = done
+        self.kicks += 1
+
+    def advance(self, t_end_s):
+        if self._pending is not None and t_end_s >= self._pending[0]:
+            self.normal = self._pending[1]
+            self._pending = None
+        self.time_s = max(self.time_s, t_end_s)
+        self.schedule.forget_before(self.time_s)
+
+    def snapshot(self):
+        return PlantSnapshot(self.time_s, self.normal.copy(),
+                             self.schedule.voltages_at(self.time_s))

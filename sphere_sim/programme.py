@@ -92,6 +92,52 @@ class PulseProgramme:
                 out[beams.index(pulse.beam)] += pulse.amplitude_v
         return out
 
+    def segments(self, beams=(1, 2, 3, 4)):
+        """The programme as zero-order-hold segments.
+
+        Returns
+        -------
+        times_s : ndarray, shape (n,)
+            Start of each segment, from 0, increasing; the last segment (all pulses over)
+            lasts for ever.
+        voltages_v : ndarray, shape (n, len(beams))
+        """
+        times = sorted({0.0, *self.edges()})
+        return np.array(times), np.array([self.voltages_at(t, beams) for t in times])
+
+    @property
+    def duration_s(self):
+        """End of the last pulse (s)."""
+        return max((p.end_s for p in self.pulses), default=0.0)
+
+    @classmethod
+    def from_segments(cls, times_s, voltages_v, voltage_limit_v=DEFAULT_VOLTAGE_LIMIT_V):
+        """Inverse of :meth:`segments` for beams 1..4; the last segment must be all zero.
+
+        Raises
+        ------
+        ProgrammeError
+            For times that are not finite, negative or strictly increasing, shapes that do
+            not match, or a last segment that is not zero (it would hold for ever).
+        """
+        times = np.asarray(times_s, dtype=float)
+        volts = np.asarray(voltages_v, dtype=float)
+        if times.ndim != 1 or volts.shape != (times.size, 4):
+            raise ProgrammeError(f'expected n times and n x 4 voltages, got shapes '
+                                 f'{times.shape} and {volts.shape}')
+        if not (np.all(np.isfinite(times)) and np.all(np.isfinite(volts))):
+            raise ProgrammeError('times and voltages must be finite')
+        if times.size and times[0] < 0.0:
+            raise ProgrammeError(f'times must be >= 0, got {times[0]} s')
+        if np.any(np.diff(times) <= 0.0):
+            raise ProgrammeError(f'times must increase strictly, got {times.tolist()}')
+        if times.size and np.any(volts[-1] != 0.0):
+            raise ProgrammeError('the last segment must switch every beam off (0 V)')
+        pulses = [Pulse(beam, float(v), float(t0), float(t1 - t0))
+                  for t0, t1, row in zip(times[:-1], times[1:], volts[:-1], strict=True)
+                  for beam, v in zip((1, 2, 3, 4), row, strict=True) if v != 0.0]
+        return cls(tuple(pulses), voltage_limit_v)
+
     def mirrored(self, beam_map):
         """The same programme with beams renamed by ``beam_map`` (dict old -> new)."""
         return PulseProgramme(tuple(dataclasses.replace(p, beam=beam_map[p.beam])

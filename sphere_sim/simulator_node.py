@@ -1,83 +1,215 @@
-"""The simulator node: steps a plant at a fixed rate and publishes the mirror's surface normal.
+"""The simulator node: the twin behind the device's topics.
 
-Subscribes to ``/beams/voltage_command`` and holds the last valid command on the beams; a
-command that breaks the contract is logged and dropped, the previous one stays in force.
+Takes ``/beams/voltage_command`` and ``/beams/pulse_program``, runs the continuous or the
+discrete plant, and publishes ``/sphere/surface_normal`` (what the device's sensor measures,
+with optional seeded noise), ``/sphere/state``, ``/beams/state`` and ``/beams/voltage`` (the
+truth), markers, ``/clock`` and ``/diagnostics``. A command that breaks the contract is
+rejected with a logged error and a diagnostics entry; it never reaches the plant.
 """
 
 import os
+import time
 
-import numpy as np
 import rclpy
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
 
-from msg_defs.conversions import surface_normal_to_msg, voltages_from_msg
+from msg_defs.conversions import (
+    beam_state_to_msg,
+    ns_from_time,
+    programme_from_msg,
+    sphere_state_to_msg,
+    surface_normal_to_msg,
+    time_from_ns,
+    voltages_from_msg,
+    voltages_to_msg,
+)
+from msg_defs.markers import twin_markers
 from msg_defs.ros_env import (
     DISCOVERY_RANGE_VAR,
     ensure_localhost_discovery,
     install_shutdown_signal_handlers,
 )
-from msg_defs.topics import BEAM_COUNT, SURFACE_NORMAL, VOLTAGE_COMMAND
-from sphere_sim.plants import RestingPlant
+from msg_defs.topics import (
+    BEAM_STATE,
+    BEAM_VOLTAGE,
+    CLOCK,
+    DIAGNOSTICS,
+    MARKERS,
+    PULSE_PROGRAM,
+    SPHERE_STATE,
+    SURFACE_NORMAL,
+    VOLTAGE_COMMAND,
+)
+
+# The physics (scipy, numba, the kick table) is imported when the node is built, not with this
+# module, so that main() installs its signal handlers first: a SIGINT during the seconds of
+# start-up is then a clean shutdown like any other.
+PLANT_KINDS = ('discrete', 'continuous')
 
 DEFAULT_PUBLISH_RATE_HZ = 50.0
 MAX_PUBLISH_RATE_HZ = 1000.0
+MARKER_EVERY_N_SAMPLES = 5
+# As-fast-as-possible and lockstep runs still yield to the executor between samples, so
+# commands are taken in between.
+FAST_TIMER_PERIOD_S = 1e-4
+# While idle in lockstep, the last sample is repeated at this wall-clock period so that a
+# subscriber that joined late still receives the state.
+IDLE_REPEAT_PERIOD_S = 0.2
+NS_PER_S = 1_000_000_000
+
+
+def _descriptor(description, read_only=True, float_range=None, int_range=None):
+    d = ParameterDescriptor(description=description, read_only=read_only)
+    if float_range is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=float(float_range[0]),
+                                                     to_value=float(float_range[1]), step=0.0)]
+    if int_range is not None:
+        d.integer_range = [IntegerRange(from_value=int_range[0], to_value=int_range[1], step=1)]
+    return d
 
 
 class SimulatorNode(Node):
-    """Runs a :class:`sphere_sim.plants.Plant` and publishes its surface normal.
-
-    Each timer tick advances the plant by one period under the voltages in force and
-    publishes the resulting normal, so simulated time advances by ``1/publish_rate_hz`` per
-    message.
+    """Runs a plant (``sphere_sim.plants``) through :class:`sphere_sim.twin.TwinRunner`.
 
     Parameters
     ----------
     plant : sphere_sim.plants.Plant, optional
-        The plant to run; a :class:`~sphere_sim.plants.RestingPlant` by default.
+        Overrides the ``plant``/``scene``/``table`` parameters (for tests).
     **node_kwargs
         Passed to ``rclpy.node.Node`` (e.g. ``context``).
     """
 
     def __init__(self, plant=None, **node_kwargs):
+        from sphere_sim.twin import TwinRunner
+        from sphere_sim.twin_setup import build_plant
+
         super().__init__('simulator', **node_kwargs)
-        self.declare_parameter(
-            'publish_rate_hz', DEFAULT_PUBLISH_RATE_HZ,
-            ParameterDescriptor(
-                description='Rate at which the plant is stepped and the normal published (Hz).',
-                floating_point_range=[FloatingPointRange(
-                    from_value=1.0, to_value=MAX_PUBLISH_RATE_HZ, step=0.0)],
-                read_only=True,
-            ))
-        self.publish_rate_hz = self.get_parameter('publish_rate_hz').value
+        p = self._declare_parameters()
+        self.publish_rate_hz = p['publish_rate_hz']
         self.period_s = 1.0 / self.publish_rate_hz
-        self.plant = RestingPlant() if plant is None else plant
-        self.voltages_v = np.zeros(BEAM_COUNT)
-
-        self._normal_publisher = self.create_publisher(
-            SURFACE_NORMAL.msg_type, SURFACE_NORMAL.name, SURFACE_NORMAL.qos.to_profile())
-        self.create_subscription(
-            VOLTAGE_COMMAND.msg_type, VOLTAGE_COMMAND.name, self.on_voltage_command,
-            VOLTAGE_COMMAND.qos.to_profile())
-        self.create_timer(self.period_s, self.on_timer)
+        self.real_time_factor = p['real_time_factor']
+        if plant is None:
+            plant = build_plant(p['plant'], p['scene'], p['table'] or None)
+        self.runner = TwinRunner(plant, self.period_s, p['noise_std_rad'], p['seed'],
+                                 p['lockstep'])
+        self._topic_publishers = {topic.name: self.create_publisher(
+            topic.msg_type, topic.name, topic.qos.to_profile())
+            for topic in (SURFACE_NORMAL, SPHERE_STATE, BEAM_STATE, BEAM_VOLTAGE, MARKERS,
+                          CLOCK, DIAGNOSTICS)}
+        self.create_subscription(VOLTAGE_COMMAND.msg_type, VOLTAGE_COMMAND.name,
+                                 self.on_voltage_command, VOLTAGE_COMMAND.qos.to_profile())
+        self.create_subscription(PULSE_PROGRAM.msg_type, PULSE_PROGRAM.name,
+                                 self.on_pulse_program, PULSE_PROGRAM.qos.to_profile())
+        paced = self.real_time_factor > 0 and not p['lockstep']
+        period = self.period_s / self.real_time_factor if paced else FAST_TIMER_PERIOD_S
+        self.create_timer(period, self.on_timer)
+        self._last_sample = None
+        self._last_repeat_wall_s = 0.0
+        self._wall_start_s = time.perf_counter()
         self.get_logger().info(
-            f'{DISCOVERY_RANGE_VAR}={os.environ.get(DISCOVERY_RANGE_VAR, "(unset)")}, '
-            f'domain id {self.context.get_domain_id()}; publishing {SURFACE_NORMAL.name} at '
-            f'{self.publish_rate_hz:g} Hz')
+            f'{DISCOVERY_RANGE_VAR}={os.environ.get(DISCOVERY_RANGE_VAR, "(unset)")}, domain id '
+            f'{self.context.get_domain_id()}; {p["plant"]} plant, scene {p["scene"]}, '
+            f'{self.publish_rate_hz:g} Hz, real-time factor {self.real_time_factor:g}'
+            f'{", lockstep" if p["lockstep"] else ""}; publishing {SURFACE_NORMAL.name}')
 
+    def _declare_parameters(self):
+        specs = {
+            'plant': ('discrete', _descriptor(
+                f'Plant to run: {" or ".join(PLANT_KINDS)} (the lookup table of kicks).')),
+            'scene': ('rest', _descriptor('Scene (shipped name or YAML path): parameters, '
+                                          'beams, sphere and initial state.')),
+            'table': ('', _descriptor('Kick table (.npz) of the discrete plant; empty for the '
+                                      'shipped default.')),
+            'publish_rate_hz': (DEFAULT_PUBLISH_RATE_HZ, _descriptor(
+                'Samples per simulated second (Hz).',
+                float_range=(1.0, MAX_PUBLISH_RATE_HZ))),
+            'real_time_factor': (1.0, _descriptor(
+                'Simulated seconds per wall second; 0 runs as fast as possible.',
+                float_range=(0.0, 1000.0))),
+            'seed': (0, _descriptor('Seed of the measurement noise.', int_range=(0, 2**31 - 1))),
+            'noise_std_rad': (0.0, _descriptor(
+                'Standard deviation of the measured normal per tangential axis (rad).',
+                float_range=(0.0, 0.1))),
+            'lockstep': (False, _descriptor(
+                'Advance simulated time only while a command is in effect: runs are then '
+                'identical whatever the wall-clock timing.')),
+        }
+        return {name: self.declare_parameter(name, default, descriptor).value
+                for name, (default, descriptor) in specs.items()}
+
+    # --- commands ----------------------------------------------------------------------
     def on_voltage_command(self, msg):
-        """Hold a valid command on the beams; log and drop an invalid one."""
+        # ValueError covers both the contract (conversions) and the runner's CommandError.
         try:
-            self.voltages_v = voltages_from_msg(msg)
+            self.runner.command_voltages(voltages_from_msg(msg))
         except ValueError as error:
-            self.get_logger().error(f'dropped {VOLTAGE_COMMAND.name}: {error}')
+            self.runner.counters.rejected += 1
+            self._report_rejection(VOLTAGE_COMMAND.name, str(error))
 
+    def on_pulse_program(self, msg):
+        try:
+            times, volts = programme_from_msg(msg)
+            start_s = ns_from_time(msg.header.stamp) / NS_PER_S
+            self.runner.command_programme(times, volts, start_s)
+        except ValueError as error:
+            self.runner.counters.rejected += 1
+            self._report_rejection(PULSE_PROGRAM.name, str(error))
+
+    def _report_rejection(self, topic, reason):
+        """Log and publish a rejection (already counted)."""
+        self.get_logger().error(f'rejected {topic}: {reason}')
+        self._publish_diagnostics(DiagnosticStatus.ERROR, f'rejected {topic}: {reason}')
+
+    def _publish_diagnostics(self, level, message):
+        c = self.runner.counters
+        status = DiagnosticStatus(level=level, name='simulator: commands',
+                                  hardware_id='sphere_twin', message=message)
+        status.values = [KeyValue(key=k, value=str(v)) for k, v in (
+            ('accepted', c.accepted), ('rejected', c.rejected), ('programmes', c.programmes),
+            ('samples', c.samples), ('simulated_time_s', f'{self.runner.time_s:.6f}'))]
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = time_from_ns(round(self.runner.time_s * NS_PER_S))
+        self._topic_publishers[DIAGNOSTICS.name].publish(array)
+
+    # --- time --------------------------------------------------------------------------
     def on_timer(self):
-        """Advance the plant by one period and publish the surface normal."""
-        normal = self.plant.step(self.period_s, self.voltages_v)
-        self._normal_publisher.publish(
-            surface_normal_to_msg(normal, stamp=self.get_clock().now().to_msg()))
+        sample, refused = self.runner.tick()
+        for reason in refused:
+            self._report_rejection('plant', reason)
+        if sample is None:
+            now = time.perf_counter()
+            if self._last_sample is not None and \
+                    now - self._last_repeat_wall_s > IDLE_REPEAT_PERIOD_S:
+                self._last_repeat_wall_s = now
+                self._publish(self._last_sample, markers=False)
+            return
+        self._last_sample = sample
+        self._publish(sample, markers=self.runner.counters.samples % MARKER_EVERY_N_SAMPLES == 1)
+
+    def _publish(self, sample, markers):
+        snap = sample.snapshot
+        stamp = time_from_ns(round(snap.time_s * NS_PER_S))
+        pub = self._topic_publishers
+        pub[CLOCK.name].publish(Clock(clock=stamp))
+        pub[SURFACE_NORMAL.name].publish(surface_normal_to_msg(sample.measured_normal, stamp))
+        pub[BEAM_VOLTAGE.name].publish(voltages_to_msg(snap.voltages_v, stamp))
+        if snap.sphere is not None:
+            pub[SPHERE_STATE.name].publish(sphere_state_to_msg(*snap.sphere, stamp=stamp))
+        if snap.beams is not None:
+            pub[BEAM_STATE.name].publish(beam_state_to_msg(*snap.beams, stamp=stamp))
+        if markers:
+            beams = snap.beams if snap.beams is not None else (None, None)
+            position = snap.sphere[0] if snap.sphere is not None else None
+            pub[MARKERS.name].publish(twin_markers(snap.normal, stamp, position, beams[0],
+                                                   beams[1]))
+
+    def achieved_real_time_factor(self):
+        wall = time.perf_counter() - self._wall_start_s
+        return self.runner.time_s / wall if wall > 0 else 0.0
 
 
 def main(args=None):
@@ -93,6 +225,11 @@ def main(args=None):
         pass
     finally:
         if node is not None:
+            # The context may already be shut down by the signal: print, not log to rosout.
+            c = node.runner.counters
+            print(f'simulator: simulated {node.runner.time_s:.3f} s, {c.samples} samples, '
+                  f'{c.programmes} programmes, {c.rejected} rejected; real-time factor '
+                  f'{node.achieved_real_time_factor():.3f}', flush=True)
             node.destroy_node()
         rclpy.try_shutdown()
 

@@ -18,7 +18,7 @@ from threadpoolctl import threadpool_limits
 
 from sphere_sim.discrete import normal_from_xy
 from sphere_sim.initial_state import rest_state
-from sphere_sim.kicks import KickDesign, cardan_of_normal, simulate_kick
+from sphere_sim.kicks import cardan_of_normal, simulate_kick
 from sphere_sim.lookup_table import TABLE_FORMAT_VERSION, LookupTable, TableSpec
 from sphere_sim.model import assemble
 from sphere_sim.scene import load_scene
@@ -46,16 +46,11 @@ def jobs_of(spec):
 
 
 def spec_to_dict(spec):
-    return json.loads(json.dumps(dataclasses.asdict(spec)))
+    return spec.to_dict()
 
 
 def spec_from_dict(data):
-    data = dict(data)
-    design = dict(data.pop('design'))
-    design['low_beams'] = tuple(design['low_beams'])
-    design['high_beams'] = tuple(design['high_beams'])
-    data['intensities'] = tuple(data['intensities'])
-    return TableSpec(design=KickDesign(**design), **data)
+    return TableSpec.from_dict(data)
 
 
 @lru_cache(maxsize=4)

@@ -85,7 +85,7 @@ def test_surface_normal_from_msg_checks_frame_and_length():
 # --- voltages ------------------------------------------------------------------------------
 
 def test_voltage_round_trip_keeps_beam_order_and_values():
-    voltages = np.array([0.0, 12.5, -40.0, MAX_ABS_VOLTAGE_V])
+    voltages = np.array([0.0, 12.5, 40.0, MAX_ABS_VOLTAGE_V])
     msg = voltages_to_msg(voltages, stamp=time_from_ns(7))
     assert list(msg.name) == ['beam_1', 'beam_2', 'beam_3', 'beam_4']
     assert list(msg.effort) == voltages.tolist()
@@ -108,7 +108,8 @@ def test_voltages_from_msg_reorders_joints_to_beam_order():
     (['beam_1', 'beam_2', 'beam_3', 'beam_4'], [], '4 joint names but 0 effort'),
     (['beam_1', 'beam_2', 'beam_3', 'beam_4'], [1, math.nan, 3, 4], 'finite'),
     (['beam_1', 'beam_2', 'beam_3', 'beam_4'], [1, 2, math.inf, 4], 'finite'),
-    (['beam_1', 'beam_2', 'beam_3', 'beam_4'], [1, 2, 3, -80.5], 'exceeds the limit 80 V'),
+    (['beam_1', 'beam_2', 'beam_3', 'beam_4'], [1, 2, 3, 80.5], 'exceeds the limit 80 V'),
+    (['beam_1', 'beam_2', 'beam_3', 'beam_4'], [1, 2, 3, -0.5], 'must be >= 0 V'),
 ])
 def test_voltages_from_msg_rejects_bad_commands(names, effort, reason):
     with pytest.raises(ValueError, match=reason):
@@ -149,3 +150,30 @@ def test_beam_state_rejects_wrong_names_and_half_rates():
         beam_state_from_msg(msg)
     with pytest.raises(ValueError, match='both rates or neither'):
         beam_state_to_msg(np.zeros(4), np.zeros(4), z_rate_m_per_s=np.zeros(4))
+
+
+def test_programme_round_trip_keeps_segments_to_the_nanosecond():
+    from msg_defs.conversions import programme_from_msg, programme_to_msg
+
+    times = np.array([0.0, 6.518267571e-4, 1.0456e-3, 1.2081210929e-3])
+    volts = np.array([[35, 35, 0, 0], [35, 35, 80, 80], [35, 35, 0, 0], [0, 0, 0, 0]], float)
+    msg = programme_to_msg(times, volts, stamp=time_from_ns(3))
+    assert list(msg.joint_names) == ['beam_1', 'beam_2', 'beam_3', 'beam_4']
+    back_times, back_volts = programme_from_msg(msg)
+    np.testing.assert_allclose(back_times, times, rtol=0, atol=0.5e-9)
+    np.testing.assert_array_equal(back_volts, volts)
+
+
+def test_sphere_state_message_carries_the_body_frame_twist():
+    from msg_defs.conversions import sphere_state_from_msg, sphere_state_to_msg
+
+    half = math.radians(30.0)
+    q = np.array([math.cos(half), 0.0, 0.0, math.sin(half)])  # 60 deg about z
+    msg = sphere_state_to_msg([1e-6, 0.0, 2e-6], q, [1.0, 0.0, 0.0], [0.0, 0.0, 5.0])
+    linear = msg.twist.twist.linear
+    # World +x seen from a body turned by 60 deg about z.
+    np.testing.assert_allclose([linear.x, linear.y, linear.z],
+                               [math.cos(2 * half), -math.sin(2 * half), 0.0], atol=1e-15)
+    position, quaternion = sphere_state_from_msg(msg)
+    np.testing.assert_array_equal(position, [1e-6, 0.0, 2e-6])
+    np.testing.assert_allclose(quaternion, q, atol=1e-15)

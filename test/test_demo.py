@@ -19,7 +19,7 @@ def _demo(**kwargs):
 
 
 def test_demo_reports_messages_crossing_and_clean_exits():
-    code, lines = _demo(duration_s=3.0)
+    code, lines = _demo(duration_s=6.0)
     assert code == 0, '\n'.join(lines)
     started = [line for line in lines if line.startswith('demo: started')]
     assert [line.split()[2] for line in started] == ['simulator', 'monitor']
@@ -27,8 +27,8 @@ def test_demo_reports_messages_crossing_and_clean_exits():
     assert all(line.endswith('exit code 0') for line in lines if line.startswith('demo: stopped'))
     match = re.match(r'demo: OK: (\d+) messages on /sphere/surface_normal crossed', lines[-1])
     assert match, lines[-1]
-    # 50 Hz for 3 s less start-up and discovery: well above zero, at most all of them.
-    assert 20 <= int(match.group(1)) <= 150
+    # 50 Hz for 6 s less start-up and discovery: well above zero, at most all of them.
+    assert 20 <= int(match.group(1)) <= 300
 
 
 def test_demo_fails_when_no_messages_cross():

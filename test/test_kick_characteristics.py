@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from sphere_sim.discrete import normal_from_xy
-from sphere_sim.kick_characteristics import (KickEffect, compensating_beam, find_offset,
-                                             offset_grid)
+from sphere_sim.kick_characteristics import KickEffect, compensating_beam, find_offset, offset_grid
 from sphere_sim.kicks import KickDesign
 from sphere_sim.symmetry import KICK_AXIS_MIRROR
 

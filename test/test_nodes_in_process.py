@@ -3,11 +3,14 @@
 import numpy as np
 import pytest
 import rclpy
+from builtin_interfaces.msg import Duration
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from msg_defs.conversions import surface_normal_to_msg, voltages_to_msg
+from msg_defs.conversions import programme_to_msg, surface_normal_to_msg, voltages_to_msg
 from msg_defs.ros_env import DISCOVERY_RANGE_VAR
+from sphere_sim.plants import PlantSnapshot
 from sphere_sim.simulator_node import SimulatorNode
 from sphere_twin.monitor_node import MonitorNode
 from sphere_twin.processes import fresh_domain_id
@@ -18,14 +21,27 @@ TILTED_NORMAL = np.array([0.0, 0.6, 0.8])
 
 
 class RecordingPlant:
-    """Remembers every step and answers with a fixed, tilted normal."""
+    """Remembers every command and advance, and answers with a fixed, tilted normal."""
 
     def __init__(self):
-        self.steps = []
+        self.time_s = 0.0
+        self.busy_until_s = 0.0
+        self.held = []
+        self.programmes = []
+        self.voltages_v = np.zeros(4)
 
-    def step(self, dt_s, voltages_v):
-        self.steps.append((dt_s, np.array(voltages_v)))
-        return TILTED_NORMAL.copy()
+    def hold(self, voltages_v):
+        self.held.append((self.time_s, np.array(voltages_v)))
+        self.voltages_v = np.array(voltages_v)
+
+    def run_programme(self, programme):
+        self.programmes.append((self.time_s, programme))
+
+    def advance(self, t_end_s):
+        self.time_s = t_end_s
+
+    def snapshot(self):
+        return PlantSnapshot(self.time_s, TILTED_NORMAL.copy(), self.voltages_v.copy())
 
 
 @pytest.fixture
@@ -45,32 +61,81 @@ def simulator(context):
     node.destroy_node()
 
 
-def test_simulator_holds_valid_commands_and_steps_one_period(simulator):
+def test_simulator_holds_valid_commands_from_the_next_sample_on(simulator):
     assert simulator.publish_rate_hz == 50.0
-    simulator.on_timer()
+    simulator.on_timer()  # the initial sample, at t = 0
     simulator.on_voltage_command(voltages_to_msg([10.0, 20.0, 30.0, 40.0]))
     simulator.on_timer()
     simulator.on_timer()
-    steps = simulator.plant.steps
-    assert [dt for dt, _ in steps] == [0.02, 0.02, 0.02]
-    np.testing.assert_array_equal(steps[0][1], [0.0, 0.0, 0.0, 0.0])
-    np.testing.assert_array_equal(steps[2][1], [10.0, 20.0, 30.0, 40.0])
+    plant = simulator.runner.plant
+    assert plant.time_s == pytest.approx(0.04)
+    assert len(plant.held) == 1
+    np.testing.assert_array_equal(plant.held[0][1], [10.0, 20.0, 30.0, 40.0])
 
 
-@pytest.mark.parametrize('bad', [
+def test_simulator_starts_a_valid_programme(simulator):
+    simulator.on_timer()
+    simulator.on_pulse_program(programme_to_msg([0.0, 1e-3, 3e-3],
+                                                [[35, 35, 80, 80], [35, 35, 0, 0], [0] * 4]))
+    simulator.on_timer()
+    (_t_s, programme), = simulator.runner.plant.programmes
+    assert programme.duration_s == pytest.approx(3e-3)
+    np.testing.assert_array_equal(programme.voltages_at(0.5e-3), [35, 35, 80, 80])
+
+
+def _programme_msg(names, points):
+    msg = JointTrajectory(joint_names=names)
+    for t, effort in points:
+        sec, nanosec = divmod(round(t * 1e9), 1_000_000_000)
+        msg.points.append(JointTrajectoryPoint(effort=effort, time_from_start=Duration(
+            sec=int(sec), nanosec=int(nanosec))))
+    return msg
+
+
+BEAMS = ['beam_1', 'beam_2', 'beam_3', 'beam_4']
+BAD_VOLTAGES = [
     JointState(name=['beam_1', 'beam_2', 'beam_3'], effort=[1.0, 2.0, 3.0]),
-    JointState(name=['beam_1', 'beam_2', 'beam_3', 'beam_4'], effort=[1.0, 2.0, 3.0, 81.0]),
-    JointState(name=['beam_1', 'beam_2', 'beam_3', 'beam_4'], effort=[1.0, float('nan'), 3.0, 4.0]),
-], ids=['three_beams', 'over_limit', 'nan'])
-def test_simulator_drops_invalid_commands_and_keeps_the_last_valid_one(simulator, bad):
+    JointState(name=BEAMS, effort=[1.0, 2.0, 3.0, 81.0]),
+    JointState(name=BEAMS, effort=[1.0, float('nan'), 3.0, 4.0]),
+    JointState(name=BEAMS, effort=[1.0, float('inf'), 3.0, 4.0]),
+    JointState(name=BEAMS, effort=[1.0, -2.0, 3.0, 4.0]),
+    JointState(name=['beam_1', 'beam_2', 'beam_3', 'beam_9'], effort=[1.0, 2.0, 3.0, 4.0]),
+    JointState(name=BEAMS, effort=[1.0, 2.0, 3.0]),
+]
+BAD_PROGRAMMES = [
+    _programme_msg(BEAMS, [(1e-3, [10.0] * 4), (0.5e-3, [0.0] * 4)]),  # times decrease
+    _programme_msg(BEAMS, [(1e-3, [10.0] * 4), (1e-3, [0.0] * 4)]),  # times repeat
+    _programme_msg(BEAMS, [(0.0, [10.0, 90.0, 0, 0]), (1e-3, [0.0] * 4)]),  # above limit
+    _programme_msg(BEAMS, [(0.0, [10.0, -5.0, 0, 0]), (1e-3, [0.0] * 4)]),  # negative volts
+    _programme_msg(BEAMS, [(0.0, [10.0, float('nan'), 0, 0]), (1e-3, [0.0] * 4)]),
+    _programme_msg(BEAMS, [(0.0, [10.0, 10.0, 10.0]), (1e-3, [0.0] * 4)]),  # wrong length
+    _programme_msg(['beam_1', 'beam_2', 'beam_3', 'beam_x'], [(0.0, [1.0] * 4),
+                                                                (1e-3, [0.0] * 4)]),
+    _programme_msg(BEAMS, [(0.0, [10.0] * 4)]),  # never switches off
+    _programme_msg(BEAMS, []),  # empty
+]
+
+
+@pytest.mark.parametrize('bad', BAD_VOLTAGES)
+def test_simulator_rejects_bad_voltage_commands_before_the_plant(simulator, bad):
     simulator.on_voltage_command(voltages_to_msg([5.0, 5.0, 5.0, 5.0]))
     simulator.on_voltage_command(bad)
     simulator.on_timer()
-    np.testing.assert_array_equal(simulator.plant.steps[-1][1], [5.0, 5.0, 5.0, 5.0])
+    plant = simulator.runner.plant
+    assert len(plant.held) == 1 and np.all(plant.held[-1][1] == 5.0)
+    assert simulator.runner.counters.rejected == 1
+
+
+@pytest.mark.parametrize('bad', BAD_PROGRAMMES)
+def test_simulator_rejects_bad_programmes_before_the_plant(simulator, bad):
+    simulator.on_pulse_program(bad)
+    simulator.on_timer()
+    assert simulator.runner.plant.programmes == []
+    assert simulator.runner.counters.rejected == 1
 
 
 def test_simulator_rate_comes_from_the_parameter_and_is_read_only(context):
-    node = SimulatorNode(context=context,
+    node = SimulatorNode(plant=RecordingPlant(), context=context,
                          parameter_overrides=[Parameter('publish_rate_hz', value=200.0)])
     try:
         assert node.period_s == pytest.approx(0.005)

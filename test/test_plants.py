@@ -1,33 +1,129 @@
-"""The placeholder plant: holds the resting normal, advances time, validates its inputs."""
+"""The simulator's plants and runner, without ROS: schedules, kick decoding, lockstep, noise."""
 
 import math
 
 import numpy as np
 import pytest
 
-from sphere_sim.plants import RestingPlant
+from msg_defs.conversions import programme_from_msg, programme_to_msg
+from sphere_sim.discrete import angle_between, normal_from_xy
+from sphere_sim.kicks import simulate_kick
+from sphere_sim.lookup_table import LookupTable
+from sphere_sim.plants import (
+    ContinuousPlant,
+    DiscretePlant,
+    PlantError,
+    VoltageSchedule,
+    decode_kick,
+    kick_programmes,
+)
+from sphere_sim.programme import Pulse, PulseProgramme
+from sphere_sim.twin import CommandError, TwinRunner
+from sphere_sim.twin_setup import build_plant
 
 
-def test_resting_plant_keeps_the_normal_up_and_counts_time():
-    plant = RestingPlant()
-    for _ in range(4):
-        normal = plant.step(0.02, np.array([80.0, 0.0, -80.0, 10.0]))
-        np.testing.assert_array_equal(normal, [0.0, 0.0, 1.0])
-    assert plant.time_s == pytest.approx(0.08)
-    # The caller owns the returned array; changing it must not change the plant.
-    normal[2] = -1.0
-    np.testing.assert_array_equal(plant.step(0.02, np.zeros(4)), [0.0, 0.0, 1.0])
+@pytest.fixture(scope='module')
+def table():
+    return LookupTable.load_current()
 
 
-@pytest.mark.parametrize(('dt_s', 'voltages_v', 'reason'), [
-    (0.0, np.zeros(4), 'dt_s'),
-    (-0.01, np.zeros(4), 'dt_s'),
-    (math.nan, np.zeros(4), 'dt_s'),
-    (0.01, np.zeros(3), 'voltages_v'),
-    (0.01, [0.0, 0.0, math.inf, 0.0], 'voltages_v'),
-])
-def test_resting_plant_rejects_bad_steps(dt_s, voltages_v, reason):
-    plant = RestingPlant()
-    with pytest.raises(ValueError, match=reason):
-        plant.step(dt_s, voltages_v)
-    assert plant.time_s == 0.0
+def test_schedule_keeps_the_past_and_lets_the_latest_command_win():
+    schedule = VoltageSchedule()
+    schedule.replace_from(0.0, [0.0, 1e-3, 2e-3], [[1] * 4, [2] * 4, [0] * 4])
+    schedule.replace_from(1.5e-3, [0.0], [[7] * 4])
+    assert schedule.voltages_at(0.5e-3)[0] == 1
+    assert schedule.voltages_at(1.2e-3)[0] == 2
+    assert schedule.voltages_at(1.5e-3)[0] == 7  # an edge belongs to the segment after it
+    assert schedule.voltages_at(5e-3)[0] == 7
+    assert schedule.edges_between(0.0, 1.0) == [1e-3, 1.5e-3]
+
+
+def test_every_kick_decodes_to_its_action_and_intensity_after_a_message_round_trip(table):
+    design = table.spec.design
+    for intensity in (0.2, 0.55, 1.0):
+        for action, programme in enumerate(kick_programmes(design, intensity)):
+            times, volts = programme_from_msg(programme_to_msg(*programme.segments()))
+            received = PulseProgramme.from_segments(times, volts)
+            decoded_action, decoded_intensity = decode_kick(design, received)
+            assert decoded_action == action
+            assert decoded_intensity == pytest.approx(intensity, abs=1e-12)
+
+
+def test_a_programme_that_is_no_kick_of_the_design_is_refused(table):
+    other = PulseProgramme((Pulse(1, 60.0, 0.0, 2e-3),))
+    with pytest.raises(PlantError, match='none of them'):
+        decode_kick(table.spec.design, other)
+
+
+def test_discrete_plant_jumps_to_the_tables_outcome_at_the_end_of_the_window(table):
+    start = normal_from_xy(0.1, -0.05)
+    plant = DiscretePlant(table, table.spec.design, start, table.spec.window_s)
+    plant.run_programme(kick_programmes(table.spec.design, 0.8)[2])
+    expected = table.kick(start, 2, 0.8).normal
+    plant.advance(0.5 * table.spec.window_s)
+    np.testing.assert_array_equal(plant.snapshot().normal, start)
+    with pytest.raises(PlantError, match='still running'):
+        plant.run_programme(kick_programmes(table.spec.design, 0.8)[0])
+    plant.advance(table.spec.window_s)
+    np.testing.assert_array_equal(plant.snapshot().normal, expected)
+    with pytest.raises(PlantError, match='kicks only'):
+        plant.hold([10.0, 0.0, 0.0, 0.0])
+
+
+def test_continuous_plant_reproduces_a_direct_simulation_of_the_kick():
+    plant = build_plant('continuous')
+    assert isinstance(plant, ContinuousPlant)
+    x0 = plant.x.copy()
+    design = LookupTable.load_current().spec.design
+    programme = design.programme(1.0)
+    plant.run_programme(programme)
+    for k in range(1, 4):  # advance in three unequal steps across the pulse edges
+        plant.advance(k * 0.4e-3 + (1e-3 if k == 3 else 0.0))
+    plant.advance(0.02)
+    direct, _ = simulate_kick(plant.model, plant.model.surface_normal(x0), programme,
+                              window_s=0.02, x_rest=x0)
+    assert angle_between(plant.snapshot().normal, direct.normal) < 1e-7
+    assert plant.snapshot().sphere[0].shape == (3,)
+
+
+def test_lockstep_runner_answers_each_command_with_its_samples_then_idles(table):
+    plant = DiscretePlant(table, table.spec.design, window_s=table.spec.window_s)
+    runner = TwinRunner(plant, period_s=0.02, lockstep=True)
+    first, _ = runner.tick()
+    assert first.snapshot.time_s == 0.0
+    assert runner.tick() == (None, [])  # idle: nothing in effect
+    runner.command_programme(*kick_programmes(table.spec.design, 1.0)[0].segments())
+    times = []
+    while (sample := runner.tick()[0]) is not None:
+        times.append(sample.snapshot.time_s)
+    assert times == pytest.approx([0.02, 0.04, 0.06])  # the window is 0.06 s
+    settled = plant.snapshot().normal
+    assert angle_between(settled, [0, 0, 1]) > 0
+    np.testing.assert_array_equal(settled, table.kick(np.array([0, 0, 1.0]), 0, 1.0).normal)
+
+
+def test_rejected_programme_never_reaches_the_plant(table):
+    plant = DiscretePlant(table, table.spec.design)
+    runner = TwinRunner(plant, period_s=0.02)
+    with pytest.raises(CommandError, match='exceeds the limit'):
+        runner.command_programme([0.0, 1e-3], [[90.0, 0, 0, 0], [0] * 4])
+    with pytest.raises(CommandError, match='>= 0 V'):
+        runner.command_programme([0.0, 1e-3], [[-5.0, 0, 0, 0], [0] * 4])
+    with pytest.raises(CommandError, match='in \\[0, 80'):
+        runner.command_voltages([1.0, 2.0, float('nan'), 0.0])
+    runner.tick()
+    runner.tick()
+    assert plant.kicks == 0
+
+
+def test_measurement_noise_is_seeded_and_has_the_stated_spread():
+    sigma = math.radians(0.1)
+    normal = normal_from_xy(0.3, 0.2)
+    a = TwinRunner(build_plant('discrete'), 0.02, noise_std_rad=sigma, seed=7)
+    b = TwinRunner(build_plant('discrete'), 0.02, noise_std_rad=sigma, seed=7)
+    readings = np.array([a.measure(normal) for _ in range(4000)])
+    np.testing.assert_array_equal(readings[:5], [b.measure(normal) for _ in range(5)])
+    np.testing.assert_allclose(np.linalg.norm(readings, axis=1), 1.0, atol=1e-12)
+    errors = np.array([angle_between(r, normal) for r in readings])
+    # The angle of a 2-D isotropic Gaussian error is Rayleigh: RMS = sqrt(2) sigma.
+    assert np.sqrt(np.mean(errors ** 2)) == pytest.approx(math.sqrt(2) * sigma, rel=0.05)

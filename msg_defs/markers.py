@@ -1,0 +1,95 @@
+"""The twin drawn for RViz or Foxglove: sphere, mirror face and beams as a MarkerArray.
+
+Geometry is to scale (m) in ``world``. The mirror is a thin disc on the flat face; beams are
+boxes from their suspension towards the centre, tilted by phi.
+"""
+
+import math
+
+import numpy as np
+from geometry_msgs.msg import Point, Pose, Quaternion, Vector3
+from std_msgs.msg import ColorRGBA
+from visualization_msgs.msg import Marker, MarkerArray
+
+from msg_defs.topics import MARKERS
+
+SPHERE_RADIUS_M = 1.0e-3
+FACE_RADIUS_M = 1.0e-3  # the cut at phi = 90 deg leaves a face of the sphere's radius
+FACE_THICKNESS_M = 20e-6
+BEAM_LENGTH_M = 1.4e-3
+BEAM_WIDTH_M = 200e-6
+BEAM_THICKNESS_M = 50e-6
+BEAM_SUSPENSION_RADIUS_M = 1.4e-3 + 0.4e-3  # tip at d_B / 2 from the centre
+NAMESPACE = 'sphere_twin'
+
+
+def _quaternion_from_normal(normal):
+    """Shortest rotation taking +z to ``normal`` (w, x, y, z)."""
+    z = np.array([0.0, 0.0, 1.0])
+    axis = np.cross(z, normal)
+    s = float(np.linalg.norm(axis))
+    c = float(np.dot(z, normal))
+    if s < 1e-15:
+        return np.array([1.0, 0.0, 0.0, 0.0]) if c > 0 else np.array([0.0, 1.0, 0.0, 0.0])
+    half = 0.5 * math.atan2(s, c)
+    return np.concatenate([[math.cos(half)], math.sin(half) * axis / s])
+
+
+def _marker(marker_id, kind, stamp, position, quaternion_wxyz, scale, rgba):
+    m = Marker()
+    m.header.frame_id = MARKERS.frame_id
+    m.header.stamp = stamp
+    m.ns = NAMESPACE
+    m.id = marker_id
+    m.type = kind
+    m.action = Marker.ADD
+    w, x, y, z = (float(v) for v in quaternion_wxyz)
+    m.pose = Pose(position=Point(x=float(position[0]), y=float(position[1]),
+                                 z=float(position[2])),
+                  orientation=Quaternion(w=w, x=x, y=y, z=z))
+    m.scale = Vector3(x=float(scale[0]), y=float(scale[1]), z=float(scale[2]))
+    m.color = ColorRGBA(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
+    return m
+
+
+def twin_markers(normal, stamp, sphere_position_m=None, beam_z_m=None, beam_phi_rad=None):
+    """MarkerArray of the twin.
+
+    Parameters
+    ----------
+    normal : ndarray, shape (3,)
+        Surface normal (orients sphere and mirror where no quaternion is known).
+    stamp : builtin_interfaces.msg.Time
+    sphere_position_m : ndarray, shape (3,), optional
+        Full-sphere centre; on the tips' nominal height if omitted.
+    beam_z_m, beam_phi_rad : ndarray, shape (4,), optional
+        Beam coordinates; beams drawn flat at z = 0 if omitted.
+    """
+    centre = np.zeros(3) if sphere_position_m is None else np.asarray(sphere_position_m)
+    q = _quaternion_from_normal(np.asarray(normal, dtype=float))
+    out = MarkerArray()
+    out.markers.append(_marker(0, Marker.SPHERE, stamp, centre, q, [2 * SPHERE_RADIUS_M] * 3,
+                               (0.6, 0.6, 0.65, 0.6)))
+    out.markers.append(_marker(1, Marker.CYLINDER, stamp, centre, q,
+                               [2 * FACE_RADIUS_M, 2 * FACE_RADIUS_M, FACE_THICKNESS_M],
+                               (0.2, 0.6, 1.0, 1.0)))
+    z = np.zeros(4) if beam_z_m is None else np.asarray(beam_z_m)
+    phi = np.zeros(4) if beam_phi_rad is None else np.asarray(beam_phi_rad)
+    for k in range(4):
+        # Beam k's suspension lies at polar angle 180 deg - k * 90 deg; the beam points inwards.
+        angle = math.pi - k * 0.5 * math.pi
+        inward = -np.array([math.cos(angle), math.sin(angle), 0.0])
+        base = -inward * BEAM_SUSPENSION_RADIUS_M + np.array([0.0, 0.0, z[k]])
+        mid = base + 0.5 * BEAM_LENGTH_M * np.array([inward[0] * math.cos(phi[k]),
+                                                     inward[1] * math.cos(phi[k]),
+                                                     math.sin(phi[k])])
+        yaw = math.atan2(inward[1], inward[0])
+        pitch = -phi[k]
+        qb = np.array([math.cos(yaw / 2) * math.cos(pitch / 2),
+                       -math.sin(yaw / 2) * math.sin(pitch / 2),
+                       math.cos(yaw / 2) * math.sin(pitch / 2),
+                       math.sin(yaw / 2) * math.cos(pitch / 2)])
+        out.markers.append(_marker(2 + k, Marker.CUBE, stamp, mid, qb,
+                                   [BEAM_LENGTH_M, BEAM_WIDTH_M, BEAM_THICKNESS_M],
+                                   (0.85, 0.55, 0.2, 1.0)))
+    return out
