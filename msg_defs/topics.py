@@ -86,7 +86,7 @@ class QosSpec:
 
 # Streams and commands: reliable, so a recorder or a test sees every message on localhost.
 STREAM_QOS = QosSpec(depth=10)
-# Programmes and references stay valid until replaced, so late joiners get the current one.
+# References stay valid until replaced, so late joiners get the current one.
 LATCHED_QOS = QosSpec(depth=1, transient_local=True)
 # rclpy's and rclcpp's time sources subscribe to /clock best-effort with depth 1.
 CLOCK_QOS = QosSpec(depth=1, reliable=False)
@@ -163,7 +163,9 @@ VOLTAGE_COMMAND = Topic(
 PULSE_PROGRAM = Topic(
     name='/beams/pulse_program',
     msg_type=JointTrajectory,
-    qos=LATCHED_QOS,
+    # Not latched: a programme is a one-off kick, and a simulator (re)joining late must not
+    # replay the last one.
+    qos=STREAM_QOS,
     frame_id='',
     units='V (effort), s (time_from_start)',
     description='Piecewise-constant voltage programme for beam_1..beam_4.',

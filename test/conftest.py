@@ -26,3 +26,12 @@ def ros_nodes():
     with running_nodes(domain_id=fresh_domain_id(),
                        stop_timeout_s=TEARDOWN_STOP_TIMEOUT_S) as group:
         yield group
+
+
+@pytest.fixture
+def twin():
+    """A lockstep simulator (discrete plant) on a private domain; see sphere_twin.testing."""
+    from sphere_twin.testing import lockstep_twin
+
+    with lockstep_twin(plant='discrete', seed=0) as client:
+        yield client

@@ -53,3 +53,15 @@ def test_zero_intensity_is_no_kick_and_a_full_kick_moves_and_settles():
     assert rotation > 1e-5
     assert kicked.peak_deviation_rad > rotation  # the transient overshoots the final state
     assert 0 < kicked.settle_time_s < 0.06
+
+
+def test_hind_left_kick_gives_equal_positive_alpha_and_beta():
+    """Beam numbering (clockwise, top view, y up): 35 V on beams 1-2 and 80 V on 3-4 is the
+    paper's hind-left kick, which §4.1 reports as alpha = beta > 0."""
+    from sphere_sim.lookup_table import LookupTable
+
+    table = LookupTable.load_current()
+    assert table.spec.design.low_beams == (1, 2) and table.spec.design.high_beams == (3, 4)
+    alpha, beta, _ = cardan_of_normal(table.kick(np.array([0.0, 0.0, 1.0]), 0, 1.0).normal)
+    assert alpha > 0.0 and beta > 0.0
+    assert alpha == pytest.approx(beta, rel=1e-6)  # the design is symmetric about the diagonal

@@ -9,6 +9,7 @@ from msg_defs.topics import (
     BEAM_STATE_JOINT_NAMES,
     CLOCK,
     PULSE_PROGRAM,
+    SPHERE_REFERENCE,
     SURFACE_NORMAL,
     VOLTAGE_COMMAND,
     WORLD_FRAME,
@@ -44,7 +45,9 @@ def test_qos_specs_become_the_intended_profiles():
     assert command.reliability == ReliabilityPolicy.RELIABLE
     assert command.durability == DurabilityPolicy.VOLATILE
     assert command.depth == 10
-    programme = PULSE_PROGRAM.qos.to_profile()
-    assert programme.durability == DurabilityPolicy.TRANSIENT_LOCAL
-    assert programme.depth == 1
+    # A programme is a one-off kick: never replayed to a late joiner.
+    assert PULSE_PROGRAM.qos.to_profile().durability == DurabilityPolicy.VOLATILE
+    reference = SPHERE_REFERENCE.qos.to_profile()
+    assert reference.durability == DurabilityPolicy.TRANSIENT_LOCAL
+    assert reference.depth == 1
     assert CLOCK.qos.to_profile().reliability == ReliabilityPolicy.BEST_EFFORT
