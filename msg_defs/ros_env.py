@@ -51,3 +51,42 @@ def install_shutdown_signal_handlers():
     """
     signal.signal(signal.SIGINT, signal.default_int_handler)
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+
+
+def run_node(build, args=None, spin=None, farewell=None):
+    """The ``main()`` of every executable: hygiene, init, build, spin, clean shutdown.
+
+    Follows ros2/demos: the node is built inside the ``try`` so that a signal during start-up
+    is a clean shutdown too, and ``KeyboardInterrupt`` or ``ExternalShutdownException`` end
+    the spin normally.
+
+    Parameters
+    ----------
+    build : callable
+        ``build() -> rclpy.node.Node``.
+    args : list of str, optional
+        Command-line arguments for ``rclpy.init``.
+    spin : callable, optional
+        ``spin(node)``; ``rclpy.spin`` by default.
+    farewell : callable, optional
+        ``farewell(node) -> str``, printed (not logged: the context may already be shut down
+        by the signal) before the node is destroyed.
+    """
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    ensure_localhost_discovery()
+    install_shutdown_signal_handlers()
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = build()
+        (spin or rclpy.spin)(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            if farewell is not None:
+                print(farewell(node), flush=True)
+            node.destroy_node()
+        rclpy.try_shutdown()

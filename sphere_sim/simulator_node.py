@@ -10,10 +10,8 @@ rejected with a logged error and a diagnostics entry; it never reaches the plant
 import os
 import time
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
@@ -28,11 +26,7 @@ from msg_defs.conversions import (
     voltages_to_msg,
 )
 from msg_defs.markers import twin_markers
-from msg_defs.ros_env import (
-    DISCOVERY_RANGE_VAR,
-    ensure_localhost_discovery,
-    install_shutdown_signal_handlers,
-)
+from msg_defs.ros_env import DISCOVERY_RANGE_VAR, run_node
 from msg_defs.topics import (
     BEAM_STATE,
     BEAM_VOLTAGE,
@@ -207,31 +201,20 @@ class SimulatorNode(Node):
             pub[MARKERS.name].publish(twin_markers(snap.normal, stamp, position, beams[0],
                                                    beams[1]))
 
+    def summary(self):
+        """The final line: simulated time, samples, programmes, rejections, real-time factor."""
+        c = self.runner.counters
+        return (f'simulator: simulated {self.runner.time_s:.3f} s, {c.samples} samples, '
+                f'{c.programmes} programmes, {c.rejected} rejected; real-time factor '
+                f'{self.achieved_real_time_factor():.3f}')
+
     def achieved_real_time_factor(self):
         wall = time.perf_counter() - self._wall_start_s
         return self.runner.time_s / wall if wall > 0 else 0.0
 
 
 def main(args=None):
-    ensure_localhost_discovery()
-    install_shutdown_signal_handlers()
-    rclpy.init(args=args)
-    node = None
-    try:
-        # Constructed inside the try: a signal during start-up is a clean shutdown too.
-        node = SimulatorNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            # The context may already be shut down by the signal: print, not log to rosout.
-            c = node.runner.counters
-            print(f'simulator: simulated {node.runner.time_s:.3f} s, {c.samples} samples, '
-                  f'{c.programmes} programmes, {c.rejected} rejected; real-time factor '
-                  f'{node.achieved_real_time_factor():.3f}', flush=True)
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(SimulatorNode, args, farewell=SimulatorNode.summary)
 
 
 if __name__ == '__main__':

@@ -8,12 +8,11 @@ the tests read (see :mod:`sphere_twin.monitor_summary`).
 import numpy as np
 import rclpy
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.task import Future
 
 from msg_defs.conversions import surface_normal_from_msg
-from msg_defs.ros_env import ensure_localhost_discovery, install_shutdown_signal_handlers
+from msg_defs.ros_env import run_node
 from msg_defs.topics import SURFACE_NORMAL
 from sphere_twin.monitor_summary import summary_line
 
@@ -84,22 +83,10 @@ class MonitorNode(Node):
 
 
 def main(args=None):
-    ensure_localhost_discovery()
-    install_shutdown_signal_handlers()
-    rclpy.init(args=args)
-    node = None
-    try:
-        # Constructed inside the try: a signal during start-up is a clean shutdown too.
-        node = MonitorNode()
-        # Never completes when max_messages is 0, so the node then runs until signalled.
-        rclpy.spin_until_future_complete(node, node.done)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            print(node.summary(), flush=True)
-            node.destroy_node()
-        rclpy.try_shutdown()
+    # Never completes when max_messages is 0, so the node then runs until signalled.
+    run_node(MonitorNode, args,
+             spin=lambda node: rclpy.spin_until_future_complete(node, node.done),
+             farewell=MonitorNode.summary)
 
 
 if __name__ == '__main__':
