@@ -27,6 +27,9 @@ setup(
             'sphere-twin = sphere_twin.cli:main',
             'simulator = sphere_sim.simulator_node:main',
             'monitor = sphere_twin.monitor_node:main',
+            'recorder = sphere_twin.recorder_node:main',
+            'controller = sphere_control.controller_node:main',
+            'reference = sphere_control.reference_node:main',
         ],
     },
 )

@@ -278,15 +278,30 @@ def rhs_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, dxdt, di
         dxdt[o + 6] = 0.5 * (w * wz + qx * wy - qy * wx) + stab * qz
 
 
-JACOBIAN_STEP = 1e-7  # forward-difference step relative to each state's characteristic scale
+# Difference steps of the Jacobian: JACOBIAN_STEP times each state's characteristic scale
+# (state_scale: 1e-13 m for positions), not times |x_j|: the sphere's height is ~0.8 mm, and a
+# step relative to it (8e-11 m) would straddle a contact only nanometres deep. The floor
+# JACOBIAN_ROUNDING |x_j| keeps the rounding of x_j + h below ~2e-6 of the step.
+JACOBIAN_STEP = 1e-7
+JACOBIAN_STEP_CENTRAL = 6e-6  # ~ eps^(1/3): balances O(h^2) truncation against rounding
+JACOBIAN_ROUNDING = 1e-10
+
+
+@numba.njit(cache=True)
+def _difference_step(x_j, scale_j, relative):
+    """A step h with x_j + h exactly representable, so that (f(x + h) - f(x)) / h is exact
+    in h."""
+    h = max(relative * scale_j, JACOBIAN_ROUNDING * abs(x_j))
+    return (x_j + h) - x_j
 
 
 @numba.njit(cache=True)
 def jacobian_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, scale, jac):
     """d(dx/dt)/dx by compiled forward differences into ``jac``, shape (n, n).
 
-    Steps are ``JACOBIAN_STEP * max(|x_j|, scale_j)`` so that positions in um and rates in m/s
-    are perturbed alike.
+    n + 1 kernel calls. Steps are :func:`_difference_step` with ``JACOBIAN_STEP`` and the
+    characteristic scales ``scale`` (shape (n,)), so that positions in um and rates in m/s
+    are perturbed alike. Why differences and not an analytic Jacobian: docs/numerics.md.
     """
     n = x.size
     f0 = np.empty(n)
@@ -295,9 +310,33 @@ def jacobian_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, sca
     rhs_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, f0, diag)
     xp = x.copy()
     for j in range(n):
-        h = JACOBIAN_STEP * max(abs(x[j]), scale[j])
+        h = _difference_step(x[j], scale[j], JACOBIAN_STEP)
         xp[j] = x[j] + h
         rhs_kernel(t, xp, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, f1, diag)
         for i in range(n):
             jac[i, j] = (f1[i] - f0[i]) / h
+        xp[j] = x[j]
+
+
+@numba.njit(cache=True)
+def jacobian_kernel_central(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, scale, jac):
+    """d(dx/dt)/dx by compiled central differences into ``jac``, shape (n, n).
+
+    Twice the cost of :func:`jacobian_kernel` (2 n kernel calls) for an error of O(h^2)
+    instead of O(h); used as the reference of the Jacobian checks and as an option of the
+    compiled integrator (docs/numerics.md compares the two).
+    """
+    n = x.size
+    fp = np.empty(n)
+    fm = np.empty(n)
+    diag = np.empty(N_DIAG)
+    xp = x.copy()
+    for j in range(n):
+        h = _difference_step(x[j], scale[j], JACOBIAN_STEP_CENTRAL)
+        xp[j] = x[j] + h
+        rhs_kernel(t, xp, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, fp, diag)
+        xp[j] = x[j] - h
+        rhs_kernel(t, xp, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, fm, diag)
+        for i in range(n):
+            jac[i, j] = (fp[i] - fm[i]) / (2.0 * h)
         xp[j] = x[j]

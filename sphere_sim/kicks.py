@@ -95,7 +95,7 @@ def cardan_of_normal(normal):
 
 
 def simulate_kick(model, normal, programme, window_s=KICK_WINDOW_S, rtol=1e-6, x_rest=None,
-                  method='Radau'):
+                  method='fast'):
     """One kick from rest at ``normal``; returns the KickResult and the trajectory.
 
     Parameters

@@ -13,7 +13,7 @@ from typing import Protocol
 import numpy as np
 
 from sphere_sim.initial_state import initial_state
-from sphere_sim.kicks import KICK_WINDOW_S, KickDesign
+from sphere_sim.kicks import KICK_WINDOW_S
 from sphere_sim.programme import Pulse, PulseProgramme
 from sphere_sim.solve import simulate
 from sphere_sim.symmetry import Symmetry
@@ -24,6 +24,9 @@ LIVE_RTOL = 1e-6  # the tolerance the kicks and the table were computed with
 # carries times in whole nanoseconds) and its voltages to this.
 DECODE_TIME_TOL_S = 1e-8
 DECODE_VOLTAGE_TOL_V = 1e-6
+# Times built from sums of periods differ from products in the last bits; events this close
+# count as simultaneous.
+TIME_TOL_S = 1e-9
 
 
 class PlantError(ValueError):
@@ -172,23 +175,27 @@ def kick_programmes(design, intensity, n_actions=4):
     return [Symmetry(a).apply_programme(reference) for a in range(n_actions)]
 
 
-def decode_kick(design, programme, n_actions=4):
-    """(action, intensity) of the design's kick that ``programme`` is, or PlantError.
+def decode_kick(kick_plant, programme):
+    """(action, intensity) of the kick of ``kick_plant`` that ``programme`` is, or PlantError.
 
-    The intensity follows from the largest voltage of the high pair; the action from which
-    quarter turn of the design has the same segments.
+    ``kick_plant`` offers ``design(action)``, ``programme(action, intensity)`` and
+    ``directions_rad``. The
+    intensity follows from the largest voltage; the action from which kick has the same
+    segments at that intensity.
     """
     times, volts = programme.segments()
-    span = design.high_v - design.low_v
-    intensity = float(np.clip((volts.max() - design.low_v) / span, 0.0, 1.0)) if span else 1.0
-    for action, candidate in enumerate(kick_programmes(design, intensity, n_actions)):
-        c_times, c_volts = candidate.segments()
+    for action in range(len(kick_plant.directions_rad)):
+        design = kick_plant.design(action)
+        span = design.high_v - design.low_v
+        intensity = float(np.clip((volts.max() - design.low_v) / span, 0.0, 1.0)) if span \
+            else 1.0
+        c_times, c_volts = kick_plant.programme(action, intensity).segments()
         if (c_times.shape == times.shape and np.allclose(c_times, times, rtol=0.0,
                                                          atol=DECODE_TIME_TOL_S)
                 and np.allclose(c_volts, volts, rtol=0.0, atol=DECODE_VOLTAGE_TOL_V)):
             return action, intensity
-    raise PlantError('the discrete plant executes only the kicks of its design (any quarter '
-                     'turn, any intensity); this programme is none of them')
+    raise PlantError('the discrete plant executes only the kicks of its table (any action, '
+                     'any intensity); this programme is none of them')
 
 
 class DiscretePlant:
@@ -200,18 +207,15 @@ class DiscretePlant:
 
     Parameters
     ----------
-    kick_plant : sphere_sim.discrete.KickPlant
-        Usually a :class:`sphere_sim.lookup_table.LookupTable`.
-    design : KickDesign
-        The design whose programmes the plant accepts.
+    kick_plant : LookupTable or CombinedKickPlant
+        The kicks it knows: outcomes (``kick``) and programmes (``programme``).
     normal0 : ndarray, shape (3,), optional
     window_s : float
         Delay from the programme's start to the new resting normal.
     """
 
-    def __init__(self, kick_plant, design=None, normal0=None, window_s=KICK_WINDOW_S):
+    def __init__(self, kick_plant, normal0=None, window_s=KICK_WINDOW_S):
         self.kick_plant = kick_plant
-        self.design = KickDesign() if design is None else design
         self.normal = np.array([0.0, 0.0, 1.0] if normal0 is None else normal0, dtype=float)
         self.window_s = window_s
         self.time_s = 0.0
@@ -229,8 +233,7 @@ class DiscretePlant:
     def run_programme(self, programme):
         if self._pending is not None:
             raise PlantError(f'a kick is still running until t = {self._pending[0]:.4f} s')
-        action, intensity = decode_kick(self.design, programme,
-                                        len(self.kick_plant.directions_rad))
+        action, intensity = decode_kick(self.kick_plant, programme)
         result = self.kick_plant.kick(self.normal, action, intensity)
         times, volts = programme.segments()
         self.schedule.replace_from(self.time_s, times, volts)
@@ -240,7 +243,7 @@ class DiscretePlant:
         self.kicks += 1
 
     def advance(self, t_end_s):
-        if self._pending is not None and t_end_s >= self._pending[0]:
+        if self._pending is not None and t_end_s >= self._pending[0] - TIME_TOL_S:
             self.normal = self._pending[1]
             self._pending = None
         self.time_s = max(self.time_s, t_end_s)

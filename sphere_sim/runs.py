@@ -38,7 +38,7 @@ class KickOutcome:
         return dataclasses.asdict(self)
 
 
-def run_scene(scene, params=None, rtol=DEFAULT_RTOL, sample_period_s=1e-4, method='Radau'):
+def run_scene(scene, params=None, rtol=DEFAULT_RTOL, sample_period_s=1e-4, method='fast'):
     """Simulate a scene from its initial state for its duration; returns the Trajectory."""
     model = assemble(scene, params)
     x0 = initial_state(model)

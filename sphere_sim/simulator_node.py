@@ -87,7 +87,7 @@ class SimulatorNode(Node):
         self.period_s = 1.0 / self.publish_rate_hz
         self.real_time_factor = p['real_time_factor']
         if plant is None:
-            plant = build_plant(p['plant'], p['scene'], p['table'] or None)
+            plant = build_plant(p['plant'], p['scene'], [t for t in p['tables'] if t])
         self.runner = TwinRunner(plant, self.period_s, p['noise_std_rad'], p['seed'],
                                  p['lockstep'])
         self._topic_publishers = {topic.name: self.create_publisher(
@@ -101,6 +101,7 @@ class SimulatorNode(Node):
         paced = self.real_time_factor > 0 and not p['lockstep']
         period = self.period_s / self.real_time_factor if paced else FAST_TIMER_PERIOD_S
         self.create_timer(period, self.on_timer)
+        self.wait_for_subscribers = p['wait_for_subscribers']
         self._last_sample = None
         self._last_repeat_wall_s = 0.0
         self._wall_start_s = time.perf_counter()
@@ -116,8 +117,10 @@ class SimulatorNode(Node):
                 f'Plant to run: {" or ".join(PLANT_KINDS)} (the lookup table of kicks).')),
             'scene': ('rest', _descriptor('Scene (shipped name or YAML path): parameters, '
                                           'beams, sphere and initial state.')),
-            'table': ('', _descriptor('Kick table (.npz) of the discrete plant; empty for the '
-                                      'shipped default.')),
+            'tables': ([''], _descriptor(
+                'Kick tables (.npz) of the discrete plant, their actions combined (the '
+                'diagonal and the axis-parallel tables give 8 directions); [""] for the '
+                'shipped default.')),
             'publish_rate_hz': (DEFAULT_PUBLISH_RATE_HZ, _descriptor(
                 'Samples per simulated second (Hz).',
                 float_range=(1.0, MAX_PUBLISH_RATE_HZ))),
@@ -128,6 +131,10 @@ class SimulatorNode(Node):
             'noise_std_rad': (0.0, _descriptor(
                 'Standard deviation of the measured normal per tangential axis (rad).',
                 float_range=(0.0, 0.1))),
+            'wait_for_subscribers': (0, _descriptor(
+                f'Hold simulated time at 0 until {SURFACE_NORMAL.name} has this many '
+                'subscribers (DDS discovery takes seconds; a scenario should not start before '
+                'its controller listens).', int_range=(0, 100))),
             'lockstep': (False, _descriptor(
                 'Advance simulated time only while a command is in effect: runs are then '
                 'identical whatever the wall-clock timing.')),
@@ -171,6 +178,14 @@ class SimulatorNode(Node):
 
     # --- time --------------------------------------------------------------------------
     def on_timer(self):
+        normal_pub = self._topic_publishers[SURFACE_NORMAL.name]
+        if self.wait_for_subscribers:
+            if normal_pub.get_subscription_count() < self.wait_for_subscribers:
+                return
+            self.get_logger().info(f'{self.wait_for_subscribers} subscribers on '
+                                   f'{SURFACE_NORMAL.name}: simulated time starts')
+            self.wait_for_subscribers = 0
+            self._wall_start_s = time.perf_counter()
         sample, refused = self.runner.tick()
         for reason in refused:
             self._report_rejection('plant', reason)
@@ -205,8 +220,8 @@ class SimulatorNode(Node):
         """The final line: simulated time, samples, programmes, rejections, real-time factor."""
         c = self.runner.counters
         return (f'simulator: simulated {self.runner.time_s:.3f} s, {c.samples} samples, '
-                f'{c.programmes} programmes, {c.rejected} rejected; real-time factor '
-                f'{self.achieved_real_time_factor():.3f}')
+                f'{c.programmes} programmes ({c.late} late), {c.rejected} rejected; '
+                f'real-time factor {self.achieved_real_time_factor():.3f}')
 
     def achieved_real_time_factor(self):
         wall = time.perf_counter() - self._wall_start_s

@@ -96,5 +96,17 @@ def all_symmetries():
     return tuple(Symmetry(q, m) for m, q in itertools.product((False, True), range(4)))
 
 
+def kick_axis_mirror(direction_rad):
+    """The mirror at the line through the centre along ``direction_rad`` (a multiple of 45 deg).
+
+    A mirror at the x axis followed by q quarter turns is the mirror at the line at q x 45 deg.
+    """
+    eighths = 4.0 * direction_rad / math.pi
+    if abs(eighths - round(eighths)) > 1e-9:
+        raise ValueError(f'a kick axis of the device lies at a multiple of 45 deg, got '
+                         f'{math.degrees(direction_rad)} deg')
+    return Symmetry(round(eighths) % 4, True)
+
+
 # The mirror at the line y = -x (the hind-left kick's own axis): it swaps beams 1<->2 and 3<->4.
-KICK_AXIS_MIRROR = Symmetry(3, True)
+KICK_AXIS_MIRROR = kick_axis_mirror(-0.25 * math.pi)

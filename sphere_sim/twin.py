@@ -9,7 +9,7 @@ import dataclasses
 
 import numpy as np
 
-from sphere_sim.plants import PlantError
+from sphere_sim.plants import TIME_TOL_S, PlantError
 from sphere_sim.programme import ProgrammeError, PulseProgramme
 
 
@@ -31,6 +31,7 @@ class TwinCounters:
     accepted: int = 0
     rejected: int = 0
     programmes: int = 0
+    late: int = 0  # programmes whose start time had passed when they arrived
 
 
 class TwinRunner:
@@ -104,6 +105,8 @@ class TwinRunner:
             raise CommandError(str(error)) from None
         if np.any(programme.segments()[1] < 0.0):
             raise CommandError('programme voltages must be >= 0 V')
+        if 0.0 < start_s < self.time_s - 1e-9:
+            self.counters.late += 1  # started now instead
         self._queue(max(start_s, self.time_s), 'programme', programme)
 
     def _queue(self, start_s, kind, payload):
@@ -114,7 +117,7 @@ class TwinRunner:
     def _apply_due(self):
         """Apply queued commands due now; returns the reasons of those the plant refused."""
         refused = []
-        while self._queued and self._queued[0][0] <= self.time_s + 1e-12:
+        while self._queued and self._queued[0][0] <= self.time_s + TIME_TOL_S:
             _, kind, payload = self._queued.pop(0)
             try:
                 if kind == 'hold':
@@ -132,7 +135,7 @@ class TwinRunner:
     def idle(self):
         """In lockstep: nothing in effect or queued, and the settled sample already out."""
         return (self.lockstep and not self._queued and self._idle_published
-                and self.plant.time_s >= self.plant.busy_until_s)
+                and self.plant.time_s >= self.plant.busy_until_s - TIME_TOL_S)
 
     def tick(self):
         """Advance one period unless idle; returns (Sample or None, refused reasons).
@@ -148,7 +151,8 @@ class TwinRunner:
             refused += self._apply_due()
         snapshot = self.plant.snapshot()
         self.counters.samples += 1
-        if self.lockstep and self.plant.time_s >= self.plant.busy_until_s and not self._queued:
+        if (self.lockstep and self.plant.time_s >= self.plant.busy_until_s - TIME_TOL_S
+                and not self._queued):
             self._idle_published = True
         return Sample(snapshot, self.measure(snapshot.normal)), refused
 

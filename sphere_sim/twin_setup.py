@@ -1,7 +1,7 @@
 """Building the simulator's plant from a scene name and a plant kind (one place for both)."""
 
 from sphere_sim.discrete import normal_from_cardan
-from sphere_sim.lookup_table import DEFAULT_TABLE_PATH, LookupTable
+from sphere_sim.lookup_table import DEFAULT_TABLE_PATH, CombinedKickPlant, LookupTable
 from sphere_sim.model import assemble
 from sphere_sim.plants import ContinuousPlant, DiscretePlant, PlantError
 from sphere_sim.scene import load_scene
@@ -9,11 +9,26 @@ from sphere_sim.scene import load_scene
 PLANT_KINDS = ('discrete', 'continuous')  # also named in sphere_sim.simulator_node
 
 
-def build_plant(kind, scene_name='rest', table_path=None):
+def load_kick_model(table_paths=(), params=None):
+    """The discrete kick model: one table, or several combined into one action set.
+
+    Parameters
+    ----------
+    table_paths : sequence of path
+        Empty for the shipped default (the four diagonal kicks).
+    params : ParameterSet, optional
+        Refuse tables built for other parameters.
+    """
+    paths = list(table_paths) or [DEFAULT_TABLE_PATH]
+    tables = [LookupTable.load(path, params=params) for path in paths]
+    return tables[0] if len(tables) == 1 else CombinedKickPlant(tables)
+
+
+def build_plant(kind, scene_name='rest', table_paths=()):
     """The plant of ``kind`` for the scene's parameters and initial tilt.
 
-    The discrete plant takes the kick design its table was built with and refuses a table
-    built for other parameters than the scene's (:class:`~sphere_sim.lookup_table.TableError`).
+    The discrete plant executes the kicks of its tables and refuses tables built for other
+    parameters than the scene's (:class:`~sphere_sim.lookup_table.TableError`).
 
     Raises
     ------
@@ -24,8 +39,7 @@ def build_plant(kind, scene_name='rest', table_path=None):
     if kind == 'continuous':
         return ContinuousPlant(assemble(scene))
     if kind == 'discrete':
-        table = LookupTable.load(table_path or DEFAULT_TABLE_PATH, params=scene.parameters())
+        kicks = load_kick_model(table_paths, scene.parameters())
         alpha, beta, _ = scene.initial.sphere_angles_deg
-        return DiscretePlant(table, table.spec.design, normal_from_cardan(alpha, beta),
-                             table.spec.window_s)
+        return DiscretePlant(kicks, normal_from_cardan(alpha, beta), kicks.spec.window_s)
     raise PlantError(f'unknown plant {kind!r}; choose one of {", ".join(PLANT_KINDS)}')

@@ -22,7 +22,11 @@ COMMAND_MODULES = (
     'validate',
     'optimize',
     'table',
+    'bench',
     'primitives',
+    'report',
+    'replay_check',
+    'evaluate',
 )
 
 

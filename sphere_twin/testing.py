@@ -39,68 +39,54 @@ class TwinTimeoutError(TimeoutError):
     """The simulator did not answer in time."""
 
 
-class TwinClient:
-    """A test's handle on a running simulator: send commands, read samples.
+def _sample_of(msg):
+    from msg_defs.conversions import ns_from_time, surface_normal_from_msg
+
+    return ns_from_time(msg.header.stamp) * 1e-9, surface_normal_from_msg(msg)
+
+
+class TopicProbe:
+    """A node in the test's own process on a given domain: records topics, publishes.
 
     Parameters
     ----------
-    process : sphere_twin.processes.NodeProcess
     domain_id : int
-    design : sphere_sim.kicks.KickDesign
-        The design whose kicks :meth:`kick` sends.
-    window_s : float
-        Kick window: the settled sample comes this long after the kick's start.
-
-    Attributes
-    ----------
-    process : sphere_twin.processes.NodeProcess
-    domain_id : int
-    samples : list of (time_s, normal)
-        Every measured surface normal received, in order.
-    diagnostics : list of str
-        Messages of every ``/diagnostics`` status received.
+    topics : sequence of msg_defs.topics.Topic
+        Topics to record; their messages collect in ``messages[topic.name]``.
+    process : sphere_twin.processes.NodeProcess, optional
+        A node process to watch: waiting fails early if it exits.
     """
 
-    def __init__(self, process, domain_id, design, window_s):
+    def __init__(self, domain_id, topics=(), process=None):
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
 
-        from msg_defs.conversions import ns_from_time, surface_normal_from_msg
-        from msg_defs.topics import DIAGNOSTICS, PULSE_PROGRAM, SURFACE_NORMAL, VOLTAGE_COMMAND
-
-        self.process = process
         self.domain_id = domain_id
-        self.design = design
-        self.window_s = window_s
-        self.samples = []
-        self.diagnostics = []
+        self.process = process
+        self.messages = {topic.name: [] for topic in topics}
         self._context = rclpy.Context()
         rclpy.init(context=self._context, domain_id=domain_id)
-        self._node = rclpy.create_node('twin_test_client', context=self._context)
+        self.node = rclpy.create_node('twin_test_probe', context=self._context)
         self._executor = SingleThreadedExecutor(context=self._context)
-        self._executor.add_node(self._node)
+        self._executor.add_node(self.node)
+        self._publishers = {}
+        for topic in topics:
+            self.node.create_subscription(topic.msg_type, topic.name,
+                                          self.messages[topic.name].append,
+                                          topic.qos.to_profile())
 
-        def on_normal(msg):
-            self.samples.append((ns_from_time(msg.header.stamp) * 1e-9,
-                                 surface_normal_from_msg(msg)))
-
-        def on_diagnostics(msg):
-            self.diagnostics.extend(status.message for status in msg.status)
-
-        self._node.create_subscription(SURFACE_NORMAL.msg_type, SURFACE_NORMAL.name, on_normal,
-                                       SURFACE_NORMAL.qos.to_profile())
-        self._node.create_subscription(DIAGNOSTICS.msg_type, DIAGNOSTICS.name, on_diagnostics,
-                                       DIAGNOSTICS.qos.to_profile())
-        self._programme_pub = self._node.create_publisher(
-            PULSE_PROGRAM.msg_type, PULSE_PROGRAM.name, PULSE_PROGRAM.qos.to_profile())
-        self._voltage_pub = self._node.create_publisher(
-            VOLTAGE_COMMAND.msg_type, VOLTAGE_COMMAND.name, VOLTAGE_COMMAND.qos.to_profile())
+    def publisher(self, topic):
+        """The probe's publisher on ``topic`` (created once)."""
+        if topic.name not in self._publishers:
+            self._publishers[topic.name] = self.node.create_publisher(
+                topic.msg_type, topic.name, topic.qos.to_profile())
+        return self._publishers[topic.name]
 
     def close(self):
         import rclpy
 
         self._executor.shutdown()
-        self._node.destroy_node()
+        self.node.destroy_node()
         rclpy.try_shutdown(context=self._context)
 
     def spin_until(self, condition, timeout_s=DEFAULT_TIMEOUT_S, what='a condition'):
@@ -108,42 +94,83 @@ class TwinClient:
         deadline = time.monotonic() + timeout_s
         while not condition():
             if time.monotonic() > deadline:
-                raise TwinTimeoutError(f'no {what} within {timeout_s} s; simulator output:\n'
-                                  f'{self.process.stderr_text()[-2000:]}')
-            if not self.process.running:
-                raise TwinTimeoutError(f'the simulator exited with {self.process.returncode}')
+                output = '' if self.process is None else self.process.stderr_text()[-2000:]
+                raise TwinTimeoutError(f'no {what} within {timeout_s} s\n{output}')
+            if self.process is not None and not self.process.running:
+                raise TwinTimeoutError(f'the node process exited with '
+                                       f'{self.process.returncode}')
             self._executor.spin_once(timeout_sec=SPIN_PERIOD_S)
+
+    def wait_for_subscribers(self, topic, timeout_s=DEFAULT_TIMEOUT_S):
+        """Until someone subscribes to ``topic`` (discovery is asynchronous)."""
+        publisher = self.publisher(topic)
+        self.spin_until(lambda: publisher.get_subscription_count() > 0, timeout_s,
+                        f'subscriber on {topic.name}')
+
+
+class TwinClient(TopicProbe):
+    """A test's handle on a running simulator: send commands, read samples.
+
+    Parameters
+    ----------
+    process : sphere_twin.processes.NodeProcess
+    domain_id : int
+    kicks : sphere_sim.lookup_table.LookupTable or CombinedKickPlant
+        The kicks :meth:`kick` sends (their programmes).
+    window_s : float
+        Kick window: the settled sample comes this long after the kick's start.
+
+    Attributes
+    ----------
+    samples : list of (time_s, normal)
+        Every measured surface normal received, in order.
+    diagnostics : list of str
+        Messages of every ``/diagnostics`` status received.
+    """
+
+    def __init__(self, process, domain_id, kicks, window_s):
+        from msg_defs.topics import DIAGNOSTICS, SURFACE_NORMAL
+
+        super().__init__(domain_id, (SURFACE_NORMAL, DIAGNOSTICS), process)
+        self.kicks = kicks
+        self.window_s = window_s
+        self._normals = self.messages[SURFACE_NORMAL.name]
+        self._diagnostics = self.messages[DIAGNOSTICS.name]
+
+    @property
+    def samples(self):
+        return [_sample_of(m) for m in self._normals]
+
+    def latest_sample(self):
+        """(time_s, normal) of the last sample received."""
+        return _sample_of(self._normals[-1])
+
+    @property
+    def diagnostics(self):
+        return [status.message for m in self._diagnostics for status in m.status]
 
     def wait_for_normal(self, timeout_s=DEFAULT_TIMEOUT_S):
         """The latest measured normal, waiting for the first one."""
-        self.spin_until(lambda: self.samples, timeout_s, 'surface normal')
-        return self.samples[-1][1]
-
-    def wait_for_subscribers(self, timeout_s=DEFAULT_TIMEOUT_S):
-        """Until the simulator subscribes to the command topics (discovery is asynchronous)."""
-        self.spin_until(lambda: self._programme_pub.get_subscription_count() > 0
-                        and self._voltage_pub.get_subscription_count() > 0,
-                        timeout_s, 'simulator subscription')
+        self.spin_until(lambda: self._normals, timeout_s, 'surface normal')
+        return self.latest_sample()[1]
 
     def send_programme(self, times_s, voltages_v):
         """Publish a pulse programme (segments from now)."""
         from msg_defs.conversions import programme_to_msg
+        from msg_defs.topics import PULSE_PROGRAM
 
-        self.wait_for_subscribers()
-        self._programme_pub.publish(programme_to_msg(times_s, voltages_v))
+        self.send_raw(PULSE_PROGRAM, programme_to_msg(times_s, voltages_v))
 
     def send_voltages(self, voltages_v):
         from msg_defs.conversions import voltages_to_msg
+        from msg_defs.topics import VOLTAGE_COMMAND
 
-        self.wait_for_subscribers()
-        self._voltage_pub.publish(voltages_to_msg(voltages_v))
+        self.send_raw(VOLTAGE_COMMAND, voltages_to_msg(voltages_v))
 
-    def send_raw(self, topic_name, msg):
-        """Publish any message on a command topic (for tests of bad input)."""
-        self.wait_for_subscribers()
-        publisher = {self._programme_pub.topic_name: self._programme_pub,
-                     self._voltage_pub.topic_name: self._voltage_pub}[topic_name]
-        publisher.publish(msg)
+    def send_raw(self, topic, msg):
+        """Publish any message on a topic of the contract (also for tests of bad input)."""
+        self.wait_for_subscribers(topic)
+        self.publisher(topic).publish(msg)
 
     def kick(self, action, intensity, timeout_s=DEFAULT_TIMEOUT_S):
         """Send the design's kick ``action`` at ``intensity``; returns the settled normal.
@@ -151,21 +178,19 @@ class TwinClient:
         The settled sample is the first one at or after the kick window's end; in lockstep
         nothing comes after it until the next command.
         """
-        from sphere_sim.plants import kick_programmes
-
         self.wait_for_normal()
-        start_s = self.samples[-1][0]
-        programme = kick_programmes(self.design, intensity)[action]
+        start_s = self.latest_sample()[0]
+        programme = self.kicks.programme(action, intensity)
         self.send_programme(*programme.segments())
         window_s = max(programme.duration_s, self.window_s)
-        self.spin_until(lambda: self.samples[-1][0] >= start_s + window_s - 1e-9, timeout_s,
-                        'settled sample after the kick')
-        return self.samples[-1][1]
+        self.spin_until(lambda: self.latest_sample()[0] >= start_s + window_s - 1e-9,
+                        timeout_s, 'settled sample after the kick')
+        return self.latest_sample()[1]
 
 
 @contextlib.contextmanager
 def lockstep_twin(plant='discrete', scene='rest', seed=0, noise_std_rad=0.0,
-                  publish_rate_hz=50.0, domain_id=None, extra_parameters=None):
+                  publish_rate_hz=50.0, tables=(), domain_id=None, extra_parameters=None):
     """Start a lockstep simulator on a private domain; yield a :class:`TwinClient`.
 
     Parameters
@@ -176,22 +201,25 @@ def lockstep_twin(plant='discrete', scene='rest', seed=0, noise_std_rad=0.0,
     seed : int
     noise_std_rad : float
     publish_rate_hz : float
+    tables : sequence of str
+        Kick tables of the discrete plant (and of :meth:`TwinClient.kick`); the shipped
+        default if empty.
     domain_id : int, optional
         A fresh one by default.
     extra_parameters : dict, optional
         More simulator parameters.
     """
-    from sphere_sim.lookup_table import LookupTable
+    from sphere_sim.twin_setup import load_kick_model
 
     ensure_localhost_discovery()
     domain_id = fresh_domain_id() if domain_id is None else domain_id
     params = dict(plant=plant, scene=scene, seed=seed, noise_std_rad=float(noise_std_rad),
                   publish_rate_hz=float(publish_rate_hz), lockstep=True,
-                  **(extra_parameters or {}))
-    table = LookupTable.load_current()
+                  tables=list(tables) or [''], **(extra_parameters or {}))
+    kicks = load_kick_model(tables)
     with running_nodes(domain_id=domain_id) as group:
         process = group.start('simulator', parameter_args(**params))
-        client = TwinClient(process, domain_id, table.spec.design, table.spec.window_s)
+        client = TwinClient(process, domain_id, kicks, kicks.spec.window_s)
         try:
             yield client
         finally:

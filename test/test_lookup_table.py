@@ -142,9 +142,31 @@ def test_shipped_table_drift_is_back_towards_level_and_removable(shipped):
                                    atol=1e-9)
 
 
-def test_shipped_table_kick_grows_with_intensity_above_the_pull_in_threshold(shipped):
-    """Below u_K ~ 0.17 the high pair stays under its 42.6 V threshold: hardly any rotation."""
+def test_shipped_table_kick_starts_above_the_pull_in_threshold(shipped):
+    """Below u_K ~ 0.17 the high pair stays under its 42.6 V threshold: hardly any rotation;
+    above it the width grows, and it is not monotone up to full intensity (Fig. 10)."""
     up = np.array([0.0, 0.0, 1.0])
-    widths = [np.hypot(*shipped.kick(up, 0, u).normal[:2]) for u in (0.0, 0.3, 0.5, 0.75, 1.0)]
-    assert widths[0] < 0.05 * widths[-1]
-    assert np.all(np.diff(widths) > 0.0)
+    intensities = np.linspace(0.0, 1.0, 11)
+    widths = np.array([np.hypot(*shipped.kick(up, 0, u).normal[:2]) for u in intensities])
+    assert np.all(widths[intensities <= 0.2] < 0.01 * widths.max())
+    assert np.all(np.diff(widths[(intensities >= 0.2) & (intensities <= 0.6)]) > 0.0)
+    assert 0.5 <= intensities[np.argmax(widths)] < 1.0
+
+
+def test_diagonal_and_axis_tables_combine_into_eight_directions(shipped):
+    from sphere_sim.discrete import EIGHT_DIRECTIONS_RAD
+    from sphere_sim.lookup_table import AXIS_TABLE_PATH, CombinedKickPlant
+    from sphere_sim.plants import decode_kick
+
+    axis = LookupTable.load_current(AXIS_TABLE_PATH)
+    eight = CombinedKickPlant([shipped, axis])
+    np.testing.assert_allclose(eight.directions_rad, EIGHT_DIRECTIONS_RAD, atol=1e-12)
+    start = normal_from_xy(0.05, -0.1)
+    for action, direction in enumerate(eight.directions_rad):
+        table = axis if action % 2 else shipped
+        local = table.directions_rad.index(next(d for d in table.directions_rad
+                                                if abs(math.remainder(d - direction,
+                                                                      2 * math.pi)) < 1e-9))
+        np.testing.assert_array_equal(eight.kick(start, action, 0.7).normal,
+                                      table.kick(start, local, 0.7).normal)
+        assert decode_kick(eight, eight.programme(action, 0.7)) == (action, pytest.approx(0.7))

@@ -44,7 +44,7 @@ def test_every_kick_decodes_to_its_action_and_intensity_after_a_message_round_tr
         for action, programme in enumerate(kick_programmes(design, intensity)):
             times, volts = programme_from_msg(programme_to_msg(*programme.segments()))
             received = PulseProgramme.from_segments(times, volts)
-            decoded_action, decoded_intensity = decode_kick(design, received)
+            decoded_action, decoded_intensity = decode_kick(table, received)
             assert decoded_action == action
             assert decoded_intensity == pytest.approx(intensity, abs=1e-12)
 
@@ -52,12 +52,12 @@ def test_every_kick_decodes_to_its_action_and_intensity_after_a_message_round_tr
 def test_a_programme_that_is_no_kick_of_the_design_is_refused(table):
     other = PulseProgramme((Pulse(1, 60.0, 0.0, 2e-3),))
     with pytest.raises(PlantError, match='none of them'):
-        decode_kick(table.spec.design, other)
+        decode_kick(table, other)
 
 
 def test_discrete_plant_jumps_to_the_tables_outcome_at_the_end_of_the_window(table):
     start = normal_from_xy(0.1, -0.05)
-    plant = DiscretePlant(table, table.spec.design, start, table.spec.window_s)
+    plant = DiscretePlant(table, start, table.spec.window_s)
     plant.run_programme(kick_programmes(table.spec.design, 0.8)[2])
     expected = table.kick(start, 2, 0.8).normal
     plant.advance(0.5 * table.spec.window_s)
@@ -87,7 +87,7 @@ def test_continuous_plant_reproduces_a_direct_simulation_of_the_kick():
 
 
 def test_lockstep_runner_answers_each_command_with_its_samples_then_idles(table):
-    plant = DiscretePlant(table, table.spec.design, window_s=table.spec.window_s)
+    plant = DiscretePlant(table, window_s=table.spec.window_s)
     runner = TwinRunner(plant, period_s=0.02, lockstep=True)
     first, _ = runner.tick()
     assert first.snapshot.time_s == 0.0
@@ -103,7 +103,7 @@ def test_lockstep_runner_answers_each_command_with_its_samples_then_idles(table)
 
 
 def test_rejected_programme_never_reaches_the_plant(table):
-    plant = DiscretePlant(table, table.spec.design)
+    plant = DiscretePlant(table)
     runner = TwinRunner(plant, period_s=0.02)
     with pytest.raises(CommandError, match='exceeds the limit'):
         runner.command_programme([0.0, 1e-3], [[90.0, 0, 0, 0], [0] * 4])

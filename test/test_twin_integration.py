@@ -25,9 +25,9 @@ def test_a_kick_over_dds_lands_where_the_table_says(twin):
 def test_no_bad_command_crashes_the_simulator_or_reaches_the_plant(twin):
     start = twin.wait_for_normal()
     for msg in BAD_VOLTAGES:
-        twin.send_raw(VOLTAGE_COMMAND.name, msg)
+        twin.send_raw(VOLTAGE_COMMAND, msg)
     for msg in BAD_PROGRAMMES:
-        twin.send_raw(PULSE_PROGRAM.name, msg)
+        twin.send_raw(PULSE_PROGRAM, msg)
     bad = len(BAD_VOLTAGES) + len(BAD_PROGRAMMES)
     twin.spin_until(lambda: len(twin.diagnostics) >= bad, what=f'{bad} rejections')
     assert all(message.startswith('rejected /beams/') for message in twin.diagnostics)

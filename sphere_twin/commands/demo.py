@@ -1,124 +1,243 @@
-"""``sphere-twin demo``: run the nodes as separate processes and show that messages cross.
+"""``sphere-twin demo``: the closed loop as separate processes, recorded to a bag.
 
-The nodes to run are :data:`DEMO_NODES` and the traffic that must arrive is
-:data:`REQUIRED_TOPICS`; the closed loop replaces those two and keeps the rest.
+Starts the recorder, the simulator (discrete plant, paced), the reference node and the
+extended controller on a fresh ROS domain; runs the default scenario (the Fig. 13 setpoint,
+then the trajectory of eq. (64)); stops every node by its PID; and reports what happened from
+a probe of its own: kicks, final and RMS error, real-time factor, the bag and a plot of the
+error against run time.
 """
 
 import argparse
+import datetime
+import math
 import os
 import sys
 import time
+from pathlib import Path
+
+import numpy as np
 
 from msg_defs.ros_env import DISCOVERY_RANGE_VAR
-from msg_defs.topics import SURFACE_NORMAL
-from sphere_twin.monitor_summary import parse_summaries
-from sphere_twin.processes import (
-    POLL_PERIOD_S,
-    NodeSpec,
-    fresh_domain_id,
-    running_nodes,
-)
+from sphere_twin.processes import NodeSpec, fresh_domain_id, parameter_args, running_nodes
 
-DEFAULT_DURATION_S = 5.0
-# Started in this order, stopped in reverse: the monitor goes first and so counts everything.
-DEMO_NODES = (NodeSpec('simulator'), NodeSpec('monitor'))
-# Topics the monitor must have received at least one message on.
-REQUIRED_TOPICS = (SURFACE_NORMAL.name,)
+SETPOINT_XY = (0.01, 0.02)  # Fig. 13
+DEFAULT_SETPOINT_S = 8.0  # simulated seconds on the setpoint before the trajectory starts
+DEFAULT_TRAJECTORY_S = 25.0  # half a period of eq. (64): out to A_max and back to the centre
+DEFAULT_REAL_TIME_FACTOR = 5.0
+# Eq. (64) entered where it passes the centre (t = 1/(4 f1)), so the trajectory takes over from
+# the setpoint without a jump to A_max.
+TRAJECTORY_OFFSET_S = 12.5
+START_TIMEOUT_S = 60.0
+WALL_MARGIN = 3.0
+# Subscribers of /sphere/surface_normal the simulator waits for: recorder, controller, and the
+# demo's own probe.
+DEMO_NORMAL_SUBSCRIBERS = 3  # the run may take this many times its paced duration before it is cut
 
 
-def _positive_seconds(text):
+def _positive(text):
     value = float(text)
     if not value > 0:
-        raise argparse.ArgumentTypeError(f'must be > 0 s, got {text}')
+        raise argparse.ArgumentTypeError(f'must be > 0, got {text}')
     return value
 
 
-def _run_for(group, duration_s):
-    """Let the nodes run for ``duration_s``; return early if one exits or on Ctrl-C."""
-    deadline = time.monotonic() + duration_s
-    try:
-        while time.monotonic() < deadline:
-            if not all(p.running() for p in group.processes):
-                return 'a node exited early'
-            time.sleep(POLL_PERIOD_S)
-    except KeyboardInterrupt:
-        return 'interrupted'
-    return None
+def demo_nodes(bag_dir, setpoint_s, real_time_factor, seed):
+    """What the demo starts, in start order (stopped in reverse: the recorder last).
 
-
-def run_demo(duration_s=DEFAULT_DURATION_S, nodes=DEMO_NODES, required_topics=REQUIRED_TOPICS,
-             out=None):
-    """Start ``nodes`` in a fresh domain, run them, stop them, report.
-
-    Parameters
-    ----------
-    duration_s : float
-        How long the nodes run (s), start-up included.
-    nodes : sequence of NodeSpec
-        What to start, in order.
-    required_topics : sequence of str
-        Topics whose monitor summary must show at least one message.
-    out : file-like, optional
-        Where to print; ``sys.stdout`` by default.
-
-    Returns
-    -------
-    int
-        0 if messages crossed on every required topic and every node exited with 0, else 1.
+    The simulator comes last, once the controller holds the reference: a paced simulator
+    runs whoever listens, so the scenario's clock (simulated time, which the reference
+    follows) starts when everyone is there.
     """
+    return (
+        NodeSpec('recorder', tuple(parameter_args(output_dir=str(bag_dir)))),
+        NodeSpec('controller', tuple(parameter_args(controller='extended'))),
+        NodeSpec('reference', tuple(parameter_args(setpoint_xy=list(SETPOINT_XY),
+                                                   trajectory_start_s=setpoint_s,
+                                                   trajectory_offset_s=TRAJECTORY_OFFSET_S,
+                                                   use_sim_time=True))),
+        NodeSpec('simulator', tuple(parameter_args(
+            plant='discrete', seed=seed, real_time_factor=real_time_factor,
+            wait_for_subscribers=DEMO_NORMAL_SUBSCRIBERS))),
+    )
+
+
+class RunLog:
+    """The demo's own record of the run: measured normals, references, controller status."""
+
+    def __init__(self, probe):
+        from msg_defs.topics import CONTROLLER_STATUS, SPHERE_REFERENCE, SURFACE_NORMAL
+
+        self.normals = probe.messages[SURFACE_NORMAL.name]
+        self.references = probe.messages[SPHERE_REFERENCE.name]
+        self.statuses = probe.messages[CONTROLLER_STATUS.name]
+
+    def simulated_s(self):
+        from msg_defs.conversions import ns_from_time
+
+        return ns_from_time(self.normals[-1].header.stamp) * 1e-9 if self.normals else 0.0
+
+    def errors(self):
+        """(times_s, error_rad, normals_xy, references_xy) at each measured sample."""
+        from msg_defs.conversions import ns_from_time, surface_normal_from_msg
+        from sphere_sim.discrete import angle_between
+
+        refs = sorted(((ns_from_time(m.header.stamp), surface_normal_from_msg(m))
+                       for m in self.references), key=lambda item: item[0])
+        ref_times = np.array([t for t, _ in refs])
+        times, errors, normals, targets = [], [], [], []
+        for msg in self.normals:
+            stamp = ns_from_time(msg.header.stamp)
+            i = int(np.searchsorted(ref_times, stamp, side='right')) - 1
+            if i < 0:
+                continue
+            normal = surface_normal_from_msg(msg)
+            times.append(stamp * 1e-9)
+            errors.append(angle_between(normal, refs[i][1]))
+            normals.append(normal[:2])
+            targets.append(refs[i][1][:2])
+        return np.array(times), np.array(errors), np.array(normals), np.array(targets)
+
+    def controller_ready(self):
+        """The controller has the reference and waits for the first sample."""
+        return any(m.status[0].message == 'no state' for m in self.statuses[-3:])
+
+    def kicks(self):
+        for msg in reversed(self.statuses):
+            values = {kv.key: kv.value for kv in msg.status[0].values}
+            if 'kicks' in values:
+                return int(values['kicks'])
+        return 0
+
+
+def plot_run(times_s, errors_rad, normals_xy, references_xy, setpoint_s, path):
+    """Error against run time and the x-y path beside the reference, as in Figs. 13 and 15."""
+    from sphere_twin.plots import plt
+
+    fig, (ax_err, ax_xy) = plt.subplots(1, 2, figsize=(11, 4.5))
+    ax_err.plot(times_s, np.degrees(errors_rad), lw=1)
+    ax_err.axvline(setpoint_s, color='k', ls=':', lw=1, label='trajectory starts')
+    ax_err.set_yscale('log')
+    ax_err.set_xlabel('simulated time (s)')
+    ax_err.set_ylabel('angle to reference (deg)')
+    ax_err.legend()
+    ax_err.grid(alpha=0.3)
+    ax_xy.plot(references_xy[:, 0], references_xy[:, 1], 'k--', lw=1, label='reference')
+    ax_xy.plot(normals_xy[:, 0], normals_xy[:, 1], lw=1, label='surface normal')
+    ax_xy.set_xlabel('$x_{sn}$')
+    ax_xy.set_ylabel('$y_{sn}$')
+    ax_xy.set_aspect('equal', adjustable='datalim')
+    ax_xy.legend()
+    ax_xy.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def run_demo(setpoint_s=DEFAULT_SETPOINT_S, trajectory_s=DEFAULT_TRAJECTORY_S,
+             real_time_factor=DEFAULT_REAL_TIME_FACTOR, bags_dir='bags', seed=0, out=None):
+    """Run the scenario; returns 0 if the loop ran and every node exited cleanly, else 1."""
+    from msg_defs.topics import CONTROLLER_STATUS, SPHERE_REFERENCE, SURFACE_NORMAL
+    from sphere_twin.testing import TopicProbe, TwinTimeoutError
+
     out = sys.stdout if out is None else out
 
     def say(line):
         print(line, file=out, flush=True)
 
     domain_id = fresh_domain_id()
+    stamp = datetime.datetime.now(datetime.UTC).strftime('%Y%m%dT%H%M%SZ')
+    bag_dir = Path(bags_dir) / f'demo_{stamp}'
+    duration_s = setpoint_s + trajectory_s
     say(f'demo: ROS_DOMAIN_ID={domain_id}, '
         f'{DISCOVERY_RANGE_VAR}={os.environ.get(DISCOVERY_RANGE_VAR, "LOCALHOST (default)")}')
-    with running_nodes(*nodes, domain_id=domain_id) as group:
+    say(f'demo: scenario: setpoint {SETPOINT_XY} for {setpoint_s:g} s, then eq. (64) '
+        f'(A_max 0.44, f1 0.02 Hz, from t = {TRAJECTORY_OFFSET_S:g} s, where it passes the '
+        f'centre) for {trajectory_s:g} s of simulated time, paced at '
+        f'{real_time_factor:g}x real time')
+    problems = []
+    *others, simulator = demo_nodes(bag_dir, setpoint_s, real_time_factor, seed)
+    with running_nodes(*others, domain_id=domain_id) as group:
         for process in group.processes:
             say(f'demo: started {process.name} (pid {process.pid})')
-        say(f'demo: running for {duration_s:g} s')
-        early = _run_for(group, duration_s)
-        if early:
-            say(f'demo: stopping early: {early}')
-        order = ' then '.join(p.name for p in reversed(group.processes))
-        say(f'demo: stopping {order} (SIGINT to each PID)')
+        probe = TopicProbe(domain_id, (SURFACE_NORMAL, SPHERE_REFERENCE, CONTROLLER_STATUS))
+        log = RunLog(probe)
+        try:
+            probe.spin_until(log.controller_ready, START_TIMEOUT_S,
+                             'controller holding the reference')
+            process = group.start(simulator.executable, simulator.args)
+            say(f'demo: started {process.name} (pid {process.pid})')
+        except TwinTimeoutError as error:
+            problems.append(str(error).splitlines()[0])
+        started = time.monotonic()
+        try:
+            probe.spin_until(lambda: log.kicks() > 0, START_TIMEOUT_S, 'first kick')
+            say(f'demo: the loop runs: first kick at {log.simulated_s():.2f} s simulated')
+            wall_limit = WALL_MARGIN * duration_s / real_time_factor + START_TIMEOUT_S
+            probe.spin_until(lambda: log.simulated_s() >= duration_s, wall_limit,
+                             f'{duration_s:g} s of simulated time')
+        except TwinTimeoutError as error:
+            problems.append(str(error).splitlines()[0])
+        except KeyboardInterrupt:
+            problems.append('interrupted')
+        wall_s = time.monotonic() - started
+        probe.close()
+        say(f'demo: stopping {" then ".join(p.name for p in reversed(group.processes))} '
+            f'(SIGINT to each PID)')
         group.stop_all()
-
-    received = {}
     for process in group.processes:
-        for line in (process.stderr_text() + process.stdout_text()).splitlines():
-            say(f'  {process.name:>9} | {line}')
-        received.update(parse_summaries(process.stdout_text()))
-    for process in reversed(group.processes):
+        for line in (process.stderr_text() + process.stdout_text()).splitlines()[-3:]:
+            say(f'  {process.name:>10} | {line}')
         say(f'demo: stopped {process.name} (pid {process.pid}), exit code {process.returncode}')
-
-    problems = [f'no messages crossed on {topic}' for topic in required_topics
-                if not received.get(topic)]
-    problems += [f'{p.name} exited with {p.returncode}' for p in group.processes
-                 if p.returncode != 0]
+        if process.returncode != 0:
+            problems.append(f'{process.name} exited with {process.returncode}')
+    times, errors, normals, targets = log.errors()
+    if times.size == 0:
+        problems.append('no surface normal crossed between the processes')
+    else:
+        bag_dir.parent.mkdir(parents=True, exist_ok=True)
+        plot = plot_run(times, errors, normals, targets, setpoint_s,
+                        bag_dir.parent / f'{bag_dir.name}_error.png')
+        on_setpoint = (times > 0.5 * setpoint_s) & (times < setpoint_s)
+        tracking = times >= setpoint_s
+        say(f'demo: {log.kicks()} kicks in {log.simulated_s():.1f} s simulated, '
+            f'{wall_s:.1f} s wall: real-time factor {log.simulated_s() / wall_s:.2f}')
+        if on_setpoint.any():
+            say(f'demo: setpoint: final error {math.degrees(errors[on_setpoint][-1]):.4f} deg')
+        if tracking.any():
+            rms = math.degrees(math.sqrt(float(np.mean(errors[tracking] ** 2))))
+            say(f'demo: trajectory: RMS error {rms:.3f} deg, final error '
+                f'{math.degrees(errors[-1]):.3f} deg')
+        say(f'demo: plot {plot}')
+    say(f'demo: bag {bag_dir}')
     if problems:
         say('demo: FAILED: ' + '; '.join(problems))
         return 1
-    counts = ', '.join(f'{received[topic]} messages on {topic}' for topic in required_topics)
-    names = ', '.join(p.name for p in group.processes)
-    say(f'demo: OK: {counts} crossed between separate processes ({names}) '
-        f'on domain {domain_id}; all exited with 0')
+    say('demo: OK: recorder, simulator, reference and controller ran as separate processes '
+        f'on domain {domain_id} and exited with 0')
     return 0
 
 
 def register(subparsers):
     """Add the ``demo`` subcommand to the ``sphere-twin`` parser."""
     parser = subparsers.add_parser(
-        'demo', help='run simulator and monitor as separate processes and count messages',
-        description='Start the simulator and the monitor as two processes on a fresh ROS '
-                    'domain (discovery limited to localhost), let them run, stop both by '
-                    'PID, and report. Exits non-zero if no messages crossed.')
-    parser.add_argument('--duration-s', type=_positive_seconds, default=DEFAULT_DURATION_S,
-                        help=f'how long the nodes run, s (default {DEFAULT_DURATION_S:g})')
+        'demo', help='the closed loop as separate processes, recorded to a bag',
+        description='Start recorder, simulator, reference and controller as processes on a '
+                    'fresh ROS domain (discovery limited to localhost), run the Fig. 13 '
+                    'setpoint and then the eq. (64) trajectory, stop every node by PID, '
+                    'and report kicks, errors, real-time factor, the bag and a plot.')
+    parser.add_argument('--setpoint-s', type=_positive, default=DEFAULT_SETPOINT_S,
+                        help='simulated seconds on the setpoint')
+    parser.add_argument('--trajectory-s', type=_positive, default=DEFAULT_TRAJECTORY_S,
+                        help='simulated seconds on the trajectory')
+    parser.add_argument('--real-time-factor', type=_positive, default=DEFAULT_REAL_TIME_FACTOR,
+                        help='simulated seconds per wall second')
+    parser.add_argument('--bags-dir', default='bags', help='where the bag directory goes')
+    parser.add_argument('--seed', type=int, default=0)
     parser.set_defaults(func=run)
 
 
 def run(args):
     """Entry point of the subcommand; returns the exit code."""
-    return run_demo(duration_s=args.duration_s)
+    return run_demo(args.setpoint_s, args.trajectory_s, args.real_time_factor, args.bags_dir,
+                    args.seed)

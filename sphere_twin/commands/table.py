@@ -4,6 +4,7 @@ import math
 import time
 from pathlib import Path
 
+import numpy as np
 from tqdm import tqdm
 
 from sphere_sim.kicks import KickDesign
@@ -76,7 +77,9 @@ def run_build(args):
 def run_check(args):
     table = LookupTable.load_current(args.table)
     with tqdm(total=args.points, desc='direct kicks', unit='kick') as bar:
-        worst, _ = check_table(table, args.points, args.seed,
-                               progress=lambda done, total: bar.update())
+        worst, errors = check_table(table, args.points, args.seed,
+                                    progress=lambda done, total: bar.update())
+    print(f'median interpolation error: {math.degrees(float(np.median(errors))):.4f} deg; '
+          f'95th percentile {math.degrees(float(np.percentile(errors, 95))):.4f} deg')
     print(f'max interpolation error: {math.degrees(worst):.4f} deg over {args.points} points')
     return 0

@@ -1,0 +1,222 @@
+"""Run a controller against a KickPlant, one decision per kick period, and keep the history.
+
+Each step the (noisy, optionally filtered) normal is measured, the reference sampled, and the
+controller either rests or kicks; the next measurement teaches it what the kick did. A run ends
+when a constant reference is reached and held (SETTLED), when no kick has brought the sphere
+closer for a while (STALLED), when the plant refuses a kick (PLANT_LIMIT), when a reference
+outside the reachable cone is refused (UNREACHABLE), or after its step budget (NOT_SETTLED for
+setpoints, COMPLETED for trajectories). The outcome never leaves a loop kicking forever.
+"""
+
+import dataclasses
+import enum
+import math
+
+import numpy as np
+
+from sphere_control import reference as ref
+from sphere_control.geometry import error_angle_rad
+from sphere_sim.discrete import CONE_HALF_ANGLE_RAD
+
+NO_ACTION = -1  # the action recorded for a step spent resting
+
+
+class Outcome(enum.Enum):
+    SETTLED = 'settled'  # constant reference: resting for settle_rest_steps in a row
+    NOT_SETTLED = 'not settled'  # constant reference: still kicking when the budget ran out
+    STALLED = 'stalled'  # no kick brought the normal closer for stall_kicks kicks
+    UNREACHABLE = 'unreachable'  # the reference lies outside the cone and the policy refuses it
+    PLANT_LIMIT = 'plant limit'  # the plant cannot kick from the state reached
+    COMPLETED = 'completed'  # time-varying reference followed for the whole budget
+
+
+class ConePolicy(enum.Enum):
+    """What to do with a reference outside the reachable cone."""
+
+    CLAMP = 'clamp'  # steer to the nearest normal on the cone's edge, flag the history
+    REFUSE = 'refuse'  # stop at once with Outcome.UNREACHABLE
+
+
+@dataclasses.dataclass(frozen=True)
+class LoopSettings:
+    """Budget and stopping rules of a run.
+
+    Attributes
+    ----------
+    max_steps : int
+        Decisions (kick or rest) at most.
+    kick_period_s : float
+        Time between decisions (s): the kick window, since a kick must settle before the next.
+    settle_rest_steps : int
+        A constant reference counts as reached after this many rests in a row.
+    stall_kicks : int
+        Stop as STALLED if this many consecutive kicks did not beat the best error so far by
+        ``stall_progress_rad`` (constant references only).
+    stall_progress_rad : float
+    cone_policy : ConePolicy
+    cone_half_angle_rad : float
+    """
+
+    max_steps: int = 400
+    kick_period_s: float = 0.06
+    settle_rest_steps: int = 3
+    stall_kicks: int = 60
+    stall_progress_rad: float = 1e-6
+    cone_policy: ConePolicy = ConePolicy.CLAMP
+    cone_half_angle_rad: float = CONE_HALF_ANGLE_RAD
+
+
+@dataclasses.dataclass(frozen=True)
+class LoopHistory:
+    """What happened, step by step.
+
+    Attributes
+    ----------
+    times_s : ndarray, shape (n + 1,)
+    normals : ndarray, shape (n + 1, 3)
+        True resting normals.
+    used_normals : ndarray, shape (n + 1, 3)
+        Normals the controller acted on (measured or estimated).
+    references : ndarray, shape (n + 1, 3)
+        Reference normals (after clamping).
+    actions : ndarray of int, shape (n,)
+        Action per step, NO_ACTION when resting.
+    intensities : ndarray, shape (n,)
+    clamped : ndarray of bool, shape (n + 1,)
+    outcome : Outcome
+    settle_step : int or None
+        Steps until the last rest streak began (SETTLED only).
+    """
+
+    times_s: np.ndarray
+    normals: np.ndarray
+    used_normals: np.ndarray
+    references: np.ndarray
+    actions: np.ndarray
+    intensities: np.ndarray
+    clamped: np.ndarray
+    outcome: Outcome
+    settle_step: int | None
+
+    @property
+    def errors_rad(self):
+        """True error angle Phi per step (rad), shape (n + 1,)."""
+        return np.array([error_angle_rad(n, r) for n, r in
+                         zip(self.normals, self.references, strict=True)])
+
+    @property
+    def squared_xy_errors(self):
+        """Quadratic x-y deviation from the reference (Fig. 15b), shape (n + 1,)."""
+        return np.sum((self.normals[:, :2] - self.references[:, :2]) ** 2, axis=1)
+
+    @property
+    def kicks(self):
+        return int(np.count_nonzero(self.actions != NO_ACTION))
+
+    @property
+    def kicks_to_settle(self):
+        """Kicks applied before settling, or None if the run did not settle."""
+        if self.outcome is not Outcome.SETTLED:
+            return None
+        return int(np.count_nonzero(self.actions[:self.settle_step] != NO_ACTION))
+
+    @property
+    def final_error_rad(self):
+        return float(self.errors_rad[-1])
+
+    @property
+    def reference_clamped(self):
+        return bool(self.clamped.any())
+
+
+def run_closed_loop(controller, plant, start_normal, reference, settings=LoopSettings(),
+                    sensor=None, estimator=None):
+    """Run ``controller`` on ``plant`` from ``start_normal`` towards ``reference``.
+
+    Parameters
+    ----------
+    controller : sphere_control.command.Controller
+    plant : KickPlant
+    start_normal : ndarray, shape (3,)
+    reference : Setpoint or CircleTrajectory
+        Anything with ``xy_at(time_s)`` and ``is_constant``.
+    settings : LoopSettings
+    sensor : NoisySensor, optional
+        Without one the controller sees the true normal.
+    estimator : NormalKalmanFilter, optional
+        Filters the measurements; the controller acts on (and learns from) its estimate.
+
+    Returns
+    -------
+    LoopHistory
+    """
+    true_normal = np.asarray(start_normal, dtype=float)
+    times, normals, used, refs, clamped = [], [], [], [], []
+    actions, intensities = [], []
+    outcome, settle_step = None, None
+    rest_streak, best_error, kicks_since_best = 0, math.inf, 0
+    pending = None  # (normal used before the kick, command) awaiting its outcome
+
+    def measure():
+        seen = true_normal if sensor is None else sensor.measure(true_normal)
+        return seen if estimator is None else estimator.update(seen)
+
+    for step in range(settings.max_steps + 1):
+        time_s = step * settings.kick_period_s
+        sample = ref.sample(reference, time_s, settings.cone_half_angle_rad)
+        seen = measure()
+        if pending is not None:
+            controller.observe(pending[0], pending[1], seen)
+        times.append(time_s)
+        normals.append(true_normal.copy())
+        used.append(seen)
+        refs.append(sample.normal)
+        clamped.append(sample.clamped)
+        if sample.clamped and settings.cone_policy is ConePolicy.REFUSE:
+            outcome = Outcome.UNREACHABLE
+            break
+        if reference.is_constant:
+            error = error_angle_rad(true_normal, sample.normal)
+            if error < best_error - settings.stall_progress_rad:
+                best_error, kicks_since_best = error, 0
+            elif kicks_since_best >= settings.stall_kicks:
+                outcome = Outcome.STALLED
+                break
+        if step == settings.max_steps:
+            break
+        command = controller.decide(seen, sample.normal)
+        if command is None:
+            pending = None
+            rest_streak += 1
+            actions.append(NO_ACTION)
+            intensities.append(0.0)
+            if reference.is_constant and rest_streak >= settings.settle_rest_steps:
+                outcome, settle_step = Outcome.SETTLED, step + 1 - rest_streak
+                # the state is the last one recorded; close the history there
+                times.append((step + 1) * settings.kick_period_s)
+                normals.append(true_normal.copy())
+                used.append(seen)
+                refs.append(sample.normal)
+                clamped.append(sample.clamped)
+                break
+            continue
+        rest_streak = 0
+        try:
+            result = plant.kick(true_normal, command.action, command.intensity)
+        except ValueError:  # the plant's model does not reach this far (e.g. TableError)
+            outcome = Outcome.PLANT_LIMIT
+            break
+        if estimator is not None:
+            estimator.predict(controller.expected_displacement_xy(seen, command))
+        true_normal = result.normal
+        actions.append(command.action)
+        intensities.append(command.intensity)
+        kicks_since_best += 1
+        pending = (seen, command)
+    if outcome is None:
+        outcome = Outcome.NOT_SETTLED if reference.is_constant else Outcome.COMPLETED
+    n = len(actions)
+    keep = n + 1
+    return LoopHistory(np.array(times[:keep]), np.array(normals[:keep]), np.array(used[:keep]),
+                       np.array(refs[:keep]), np.array(actions, dtype=int),
+                       np.array(intensities), np.array(clamped[:keep]), outcome, settle_step)

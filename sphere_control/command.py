@@ -1,0 +1,36 @@
+"""What a controller decides each step, and the interface every controller offers."""
+
+import dataclasses
+from typing import Protocol
+
+import numpy as np
+
+
+@dataclasses.dataclass(frozen=True)
+class Command:
+    """One kick: ``action`` indexes the plant's ``directions_rad``; intensity u_K in [0, 1]."""
+
+    action: int
+    intensity: float
+
+
+class Controller(Protocol):
+    """A feedback law on the resting surface normal.
+
+    ``decide`` returns a :class:`Command`, or ``None`` to rest (no kick this step). After a
+    kick, ``observe`` reports the normal measured before and after it, for learning.
+    """
+
+    def decide(self, normal, reference):
+        """Command or None, for normal and reference (unit vectors, shape (3,))."""
+
+    def observe(self, normal_before, command, normal_after):
+        """Learn from one executed kick (a no-op for non-adaptive controllers)."""
+
+    def expected_displacement_xy(self, normal, command):
+        """The controller's own prediction of the kick's x-y displacement, shape (2,)."""
+
+
+def unit_xy(direction_rad):
+    """Unit vector of a polar angle, shape (2,)."""
+    return np.array([np.cos(direction_rad), np.sin(direction_rad)])

@@ -1,0 +1,168 @@
+"""The controller node: kicks the sphere towards the reference, talking only over topics.
+
+Subscribes to the measured ``/sphere/surface_normal`` and ``/sphere/reference``; when the last
+kick has settled it runs the basic or the extended controller (§4.2) and publishes the chosen
+kick as a ``/beams/pulse_program`` — the same voltages a real device's drivers take. While
+resting it sends 0 V on ``/beams/voltage_command`` (which also lets a lockstep simulator's time
+run on). ``/controller/status`` says what it did and why: chosen action, Phi, Theta, learned
+directions and widths; when the state is stale it holds, sends nothing, and says so.
+"""
+
+import math
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rclpy.node import Node
+
+from msg_defs.conversions import (
+    ns_from_time,
+    programme_to_msg,
+    surface_normal_from_msg,
+    time_from_ns,
+    voltages_to_msg,
+)
+from msg_defs.ros_env import run_node
+from msg_defs.topics import (
+    CONTROLLER_STATUS,
+    PULSE_PROGRAM,
+    SPHERE_REFERENCE,
+    SURFACE_NORMAL,
+    VOLTAGE_COMMAND,
+)
+from sphere_control.kick_cycle import KickCycle, Phase
+
+STALE_CHECK_PERIOD_S = 0.25
+NS_PER_S = 1_000_000_000
+CONTROLLER_KINDS = ('basic', 'extended')  # also in sphere_control.controllers
+
+
+def _descriptor(description, float_range=None):
+    d = ParameterDescriptor(description=description, read_only=True)
+    if float_range is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=float(float_range[0]),
+                                                     to_value=float(float_range[1]), step=0.0)]
+    return d
+
+
+class ControllerNode(Node):
+    """Thin adapter of :class:`sphere_control.kick_cycle.KickCycle` onto the topics."""
+
+    def __init__(self, **node_kwargs):
+        # Physics and tables load here rather than at import, so main() installs its signal
+        # handlers first and a SIGINT during start-up is a clean shutdown.
+        from sphere_control.controllers import make_controller
+        from sphere_sim.twin_setup import load_kick_model
+
+        super().__init__('controller', **node_kwargs)
+        p = {name: self.declare_parameter(name, default, descriptor).value
+             for name, (default, descriptor) in {
+                 'controller': ('extended', _descriptor(
+                     f'Control law: {" or ".join(CONTROLLER_KINDS)} (§4.2).')),
+                 'phi_min_deg': (0.05, _descriptor(
+                     'Resting band Phi_min (deg): no kick while the error is below it.',
+                     (0.0, 10.0))),
+                 'tables': ([''], _descriptor(
+                     'Kick tables (.npz): the kicks it may send and its initial model of them; '
+                     '[""] for the shipped default (4 diagonal kicks).')),
+                 'stale_timeout_s': (1.0, _descriptor(
+                     'Wall time without a sample after which the state is stale (s).',
+                     (0.05, 60.0))),
+             }.items()}
+        table = load_kick_model([t for t in p['tables'] if t])
+        self.kicks = table
+        self.controller_kind = p['controller']
+        self.cycle = KickCycle(make_controller(p['controller'], table,
+                                               math.radians(p['phi_min_deg'])),
+                               window_s=table.spec.window_s,
+                               stale_timeout_s=p['stale_timeout_s'])
+        self._programme_pub = self.create_publisher(
+            PULSE_PROGRAM.msg_type, PULSE_PROGRAM.name, PULSE_PROGRAM.qos.to_profile())
+        self._voltage_pub = self.create_publisher(
+            VOLTAGE_COMMAND.msg_type, VOLTAGE_COMMAND.name, VOLTAGE_COMMAND.qos.to_profile())
+        self._status_pub = self.create_publisher(
+            CONTROLLER_STATUS.msg_type, CONTROLLER_STATUS.name,
+            CONTROLLER_STATUS.qos.to_profile())
+        self.create_subscription(SURFACE_NORMAL.msg_type, SURFACE_NORMAL.name, self.on_normal,
+                                 SURFACE_NORMAL.qos.to_profile())
+        self.create_subscription(SPHERE_REFERENCE.msg_type, SPHERE_REFERENCE.name,
+                                 self.on_reference, SPHERE_REFERENCE.qos.to_profile())
+        self.create_timer(STALE_CHECK_PERIOD_S, self.on_stale_check)
+        self._last_phase = None
+        self._hold_sent_at_s = -1.0
+        self.get_logger().info(f'{self.controller_kind} controller, Phi_min '
+                               f'{p["phi_min_deg"]:g} deg, {len(table.directions_rad)} actions')
+
+    def on_reference(self, msg):
+        try:
+            self.cycle.on_reference(surface_normal_from_msg(msg))
+        except ValueError as error:
+            self.get_logger().error(f'ignored {SPHERE_REFERENCE.name}: {error}')
+
+    def on_normal(self, msg):
+        try:
+            normal = surface_normal_from_msg(msg)
+        except ValueError as error:
+            self.get_logger().error(f'ignored {SURFACE_NORMAL.name}: {error}')
+            return
+        sample_s = ns_from_time(msg.header.stamp) / NS_PER_S
+        decision = self.cycle.on_sample(sample_s, normal, time.monotonic())
+        if decision.command is not None:
+            programme = self.kicks.programme(decision.command.action,
+                                             decision.command.intensity)
+            start = time_from_ns(round(decision.start_s * NS_PER_S))
+            self._programme_pub.publish(programme_to_msg(*programme.segments(), stamp=start))
+        elif decision.phase is Phase.RESTING and sample_s > self._hold_sent_at_s:
+            # One hold in flight at a time: a lockstep simulator advances one sample per
+            # command, and holds queued behind a later kick would delay it.
+            self._hold_sent_at_s = sample_s
+            self._voltage_pub.publish(voltages_to_msg([0.0] * 4))
+        self._publish_status(decision, msg.header.stamp)
+
+    def on_stale_check(self):
+        decision = self.cycle.check_stale(time.monotonic())
+        if decision is not None:
+            self._publish_status(decision, self.get_clock().now().to_msg())
+
+    def _publish_status(self, decision, stamp):
+        phase = decision.phase
+        level = DiagnosticStatus.OK
+        if phase in (Phase.STALE, Phase.NO_STATE, Phase.NO_REFERENCE):
+            level = DiagnosticStatus.WARN
+            if phase != self._last_phase:
+                self.get_logger().warning(f'holding: {phase.value}; sending nothing')
+        self._last_phase = phase
+        values = [('phase', phase.value), ('kicks', self.cycle.kicks),
+                  ('phi_deg', f'{math.degrees(decision.phi_rad):.5f}'),
+                  ('theta_deg', f'{math.degrees(decision.theta_rad):.3f}')]
+        if decision.command is not None:
+            values += [('action', decision.command.action),
+                       ('intensity', f'{decision.command.intensity:.4f}')]
+        learned = getattr(self.cycle.controller, 'directions_rad', None)
+        if learned is not None:
+            values.append(('directions_deg', ' '.join(f'{math.degrees(d):.2f}'
+                                                      for d in learned)))
+        networks = getattr(self.cycle.controller, 'networks', None)
+        if networks is not None:
+            values.append(('full_widths_deg', ' '.join(f'{math.degrees(net(1.0)):.5f}'
+                                                       for net in networks)))
+        message = (f'kick action {decision.command.action} at u_K '
+                   f'{decision.command.intensity:.3f}' if decision.command is not None
+                   else phase.value)
+        status = DiagnosticStatus(level=level, name=f'controller: {self.controller_kind}',
+                                  hardware_id='sphere_twin', message=message,
+                                  values=[KeyValue(key=k, value=str(v)) for k, v in values])
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = stamp
+        self._status_pub.publish(array)
+
+    def summary(self):
+        return f'controller: {self.cycle.kicks} kicks'
+
+
+def main(args=None):
+    run_node(ControllerNode, args, farewell=ControllerNode.summary)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,90 @@
+"""References for the surface normal: setpoints and the trajectory of eq. (64).
+
+A reference gives the wanted x-y point of the normal at a time. Points outside the reachable
+cone (the paper's state space, 40 deg about z) are clamped to its edge along their own
+direction, and the sample says so, so a closed loop can refuse them or report that it steered
+to the nearest reachable normal instead.
+"""
+
+import dataclasses
+import math
+
+import numpy as np
+
+from sphere_sim.discrete import CONE_HALF_ANGLE_RAD, normal_from_xy
+
+
+@dataclasses.dataclass(frozen=True)
+class ReferenceSample:
+    """A reference at one time.
+
+    Attributes
+    ----------
+    normal : ndarray, shape (3,)
+        The unit normal to steer to (clamped into the cone).
+    requested_xy : ndarray, shape (2,)
+        What the reference asked for.
+    clamped : bool
+        True if the request lay outside the cone (or was not a unit vector's x-y part).
+    """
+
+    normal: np.ndarray
+    requested_xy: np.ndarray
+    clamped: bool
+
+
+def clamp_to_cone(xy, cone_half_angle_rad=CONE_HALF_ANGLE_RAD):
+    """The x-y point moved onto the cone's edge if it lies beyond; (xy (2,), clamped)."""
+    xy = np.asarray(xy, dtype=float)
+    limit = math.sin(cone_half_angle_rad)
+    radius = math.hypot(*xy)
+    if radius <= limit:
+        return xy.copy(), False
+    return xy * (limit / radius), True
+
+
+@dataclasses.dataclass(frozen=True)
+class Setpoint:
+    """A constant reference, given by the x-y part of the wanted normal."""
+
+    xy: tuple
+    is_constant = True
+
+    @classmethod
+    def from_normal(cls, normal):
+        n = np.asarray(normal, dtype=float)
+        n = n / np.linalg.norm(n)
+        return cls((float(n[0]), float(n[1])))
+
+    def xy_at(self, time_s):
+        return np.array(self.xy, dtype=float)
+
+
+@dataclasses.dataclass(frozen=True)
+class CircleTrajectory:
+    """Eq. (64): [x, y] = A_max cos(2 pi f1 t) [cos(2 pi f1 t), sin(2 pi f1 t)].
+
+    A circle of diameter A_max through the origin, run twice per period 1/f1.
+
+    Attributes
+    ----------
+    amplitude : float
+        A_max (x-y units of the normal; 0.44 is 26 deg of tilt).
+    frequency_hz : float
+        f1 (Hz).
+    """
+
+    amplitude: float = 0.44
+    frequency_hz: float = 0.02
+    is_constant = False
+
+    def xy_at(self, time_s):
+        phase = 2.0 * math.pi * self.frequency_hz * time_s
+        return self.amplitude * math.cos(phase) * np.array([math.cos(phase), math.sin(phase)])
+
+
+def sample(reference, time_s, cone_half_angle_rad=CONE_HALF_ANGLE_RAD):
+    """The :class:`ReferenceSample` of ``reference`` at ``time_s``."""
+    requested = reference.xy_at(time_s)
+    xy, clamped = clamp_to_cone(requested, cone_half_angle_rad)
+    return ReferenceSample(normal_from_xy(*xy), requested, clamped)

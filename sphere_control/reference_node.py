@@ -1,0 +1,95 @@
+"""The reference node: a setpoint, then optionally the trajectory of eq. (64), on /sphere/reference.
+
+Time is the node's clock, so with ``use_sim_time`` it follows the simulator's ``/clock``. A
+reference beyond the reachable cone is clamped to its edge with a warning.
+"""
+
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rclpy.node import Node
+
+from msg_defs.conversions import surface_normal_to_msg
+from msg_defs.ros_env import run_node
+from msg_defs.topics import SPHERE_REFERENCE
+from sphere_control.reference import CircleTrajectory, Setpoint, sample
+
+DEFAULT_PUBLISH_RATE_HZ = 10.0
+NEVER = -1.0
+
+
+def _descriptor(description, float_range=None, read_only=True):
+    d = ParameterDescriptor(description=description, read_only=read_only)
+    if float_range is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=float(float_range[0]),
+                                                     to_value=float(float_range[1]), step=0.0)]
+    return d
+
+
+class ReferenceNode(Node):
+    """Publishes the reference normal at a fixed rate."""
+
+    def __init__(self, **node_kwargs):
+        super().__init__('reference', **node_kwargs)
+        p = {name: self.declare_parameter(name, default, descriptor).value
+             for name, (default, descriptor) in {
+                 'setpoint_xy': ([0.01, 0.02], _descriptor(
+                     'x and y of the setpoint normal (Fig. 13: [0.01, 0.02]).')),
+                 'trajectory_start_s': (NEVER, _descriptor(
+                     'Time (s) from which eq. (64) replaces the setpoint; -1 never.',
+                     (NEVER, 1e6))),
+                 'trajectory_offset_s': (0.0, _descriptor(
+                     'Time (s) into eq. (64) at which it is entered: 0 starts at [A_max, 0], '
+                     '1/(4 f1) at the centre.', (0.0, 1e6))),
+                 'amplitude': (0.44, _descriptor('A_max of eq. (64).', (0.0, 1.0))),
+                 'frequency_hz': (0.02, _descriptor('f1 of eq. (64) (Hz).', (0.0, 10.0))),
+                 'publish_rate_hz': (DEFAULT_PUBLISH_RATE_HZ, _descriptor(
+                     'Publications per second of the node clock (Hz).', (0.1, 1000.0))),
+             }.items()}
+        if len(p['setpoint_xy']) != 2:
+            raise ValueError(f'setpoint_xy needs 2 values, got {list(p["setpoint_xy"])}')
+        self.setpoint = Setpoint(tuple(float(v) for v in p['setpoint_xy']))
+        self.trajectory = CircleTrajectory(p['amplitude'], p['frequency_hz'])
+        self.trajectory_start_s = p['trajectory_start_s']
+        self.trajectory_offset_s = p['trajectory_offset_s']
+        self._publisher = self.create_publisher(
+            SPHERE_REFERENCE.msg_type, SPHERE_REFERENCE.name, SPHERE_REFERENCE.qos.to_profile())
+        self._start_ns = None
+        self._warned_clamp = False
+        self.create_timer(1.0 / p['publish_rate_hz'], self.on_timer)
+        # Latched at once: with use_sim_time the timer waits for /clock, and a controller
+        # should hold the reference before the simulator starts.
+        self.on_timer()
+
+    def reference_at(self, elapsed_s):
+        """(sample, phase name) at ``elapsed_s`` since the first publication."""
+        start = self.trajectory_start_s
+        if start >= 0.0 and elapsed_s >= start:
+            return sample(self.trajectory, elapsed_s - start + self.trajectory_offset_s), \
+                'trajectory'
+        return sample(self.setpoint, elapsed_s), 'setpoint'
+
+    def on_timer(self):
+        now = self.get_clock().now()
+        if self._start_ns is None:
+            self._start_ns = now.nanoseconds
+        elapsed_s = (now.nanoseconds - self._start_ns) * 1e-9
+        reference, _ = self.reference_at(elapsed_s)
+        if reference.clamped and not self._warned_clamp:
+            requested = reference.requested_xy
+            self.get_logger().warning(
+                f'reference ({requested[0]:.4f}, {requested[1]:.4f}) lies outside the '
+                f'reachable cone; clamped to its edge')
+        self._warned_clamp = reference.clamped
+        self._publisher.publish(surface_normal_to_msg(reference.normal, now.to_msg()))
+
+    def summary(self):
+        return f'reference: setpoint {self.setpoint.xy}, trajectory from ' + (
+            f'{self.trajectory_start_s:g} s' if self.trajectory_start_s >= 0 else 'never')
+
+
+def main(args=None):
+    run_node(ReferenceNode, args, farewell=ReferenceNode.summary)
+
+
+if __name__ == '__main__':
+    main()
+

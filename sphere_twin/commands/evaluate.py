@@ -1,0 +1,210 @@
+"""``sphere-twin evaluate``: the closed-loop results of §5 beside the paper's.
+
+Runs :func:`sphere_control.evaluation.evaluate` on the discrete model (the shipped lookup
+table with the unkicked creep removed, or ``--plant analytic``: kicks of the paper's 0.54 deg),
+prints the comparison table, writes ``evaluation.json`` and the figures like the paper's
+Figs. 13-15 to ``--out`` (``bench/results``), and ends with the line
+``trajectory MSE extended/basic: <ratio>``.
+"""
+
+import enum
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from sphere_control.evaluation import (
+    LEVEL_NORMAL,
+    PAPER_FULL_KICK_RAD,
+    PAPER_PHI_MIN_RAD,
+    ControllerKind,
+    EvaluationConfig,
+    PhiMinScaling,
+    PlantUnderTest,
+    evaluate,
+)
+from sphere_control.plants import AnalyticKickPlant
+from sphere_sim.lookup_table import AXIS_TABLE_PATH
+
+RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
+# The analytic stand-in for the paper's plant: the 0.54 deg kick with a convex intensity
+# characteristic like Fig. 10 and widths shrinking by a tenth towards the cone's edge.
+ANALYTIC_EXPONENT = 1.7
+ANALYTIC_SOFTENING = 0.1
+COLORS = {ControllerKind.BASIC: 'tab:red', ControllerKind.EXTENDED: 'tab:blue',
+          ControllerKind.PRELEARNED: 'black'}
+
+
+class PlantChoice(enum.Enum):
+    TABLE = 'table'
+    ANALYTIC = 'analytic'
+
+
+def register(subparsers):
+    parser = subparsers.add_parser(
+        'evaluate', help='closed-loop studies of §5 (Figs. 13-15) beside the paper\'s findings',
+        description='Basic, extended and pre-learned extended controllers on the discrete '
+                    'model: setpoint (Figs. 13, 14), trajectory under 33 deg mismatch (Fig. 15), '
+                    'eight against four directions, a Kalman filter under measurement noise, '
+                    'and a few kicks on the continuous model.')
+    parser.add_argument('--quick', action='store_true',
+                        help='shorter trajectory runs and two continuous kicks')
+    parser.add_argument('--table', type=Path, default=None,
+                        help='lookup table (default: the shipped one)')
+    parser.add_argument('--axis-table', type=Path, default=AXIS_TABLE_PATH,
+                        help='axis-parallel kick table for the eight-direction study')
+    parser.add_argument('--plant', type=PlantChoice, choices=list(PlantChoice),
+                        default=PlantChoice.TABLE, help='discrete model to evaluate on')
+    parser.add_argument('--out', type=Path, default=RESULTS_DIR, help='output directory')
+    parser.set_defaults(func=run)
+
+
+def load_table(path):
+    """(table with drift removed, note); TableError for a missing or stale table."""
+    from sphere_sim.lookup_table import DEFAULT_TABLE_PATH, Drift, LookupTable
+
+    path = DEFAULT_TABLE_PATH if path is None else path
+    return LookupTable.load_current(path, drift=Drift.REMOVE), f'table {path}'
+
+
+def load_eight_directions(table, axis_path):
+    """The diagonal table with the axis-parallel one (both drift removed), and a note."""
+    from sphere_sim.lookup_table import CombinedKickPlant, Drift, LookupTable
+
+    axis = LookupTable.load_current(axis_path, drift=Drift.REMOVE)
+    return CombinedKickPlant([table, axis]), f'eight directions: {axis_path} added'
+
+
+def run(args):
+    config = EvaluationConfig.quick() if args.quick else EvaluationConfig()
+    table = None
+    if args.plant is PlantChoice.TABLE:
+        from sphere_sim.lookup_table import TableError
+
+        try:
+            table, note = load_table(args.table)
+            eight, eight_note = load_eight_directions(table, args.axis_table)
+        except TableError as exc:
+            print(f'error: {exc}', file=sys.stderr)
+            return 1
+        note = f'{note}; {eight_note}'
+        put = PlantUnderTest.measure('lookup table (creep removed)', table)
+    else:
+        eight = None
+        note = 'analytic plant with the paper\'s 0.54 deg kick'
+        put = PlantUnderTest.measure(note, AnalyticKickPlant(
+            PAPER_FULL_KICK_RAD, exponent=ANALYTIC_EXPONENT, softening=ANALYTIC_SOFTENING))
+    print(note)
+    print(f'full kick {math.degrees(put.full_width_rad):.4f} deg (paper 0.54 deg; scale '
+          f'{put.kick_scale:.4f})')
+    report = evaluate(put, config, table=table, progress=lambda m: print(m, flush=True),
+                      eight_plant=eight)
+    args.out.mkdir(parents=True, exist_ok=True)
+    print_table(report.rows)
+    data = {'note': note, 'quick': args.quick, 'figures': report.figures, 'rows': report.rows,
+            'trajectory_mse_ratio': report.final_ratio}
+    json_path = args.out / 'evaluation.json'
+    json_path.write_text(json.dumps(data, indent=2, default=_jsonable))
+    paths = write_figures(report, put, args.out)
+    print(f'wrote {json_path} and {", ".join(str(p) for p in paths)}')
+    print(f'trajectory MSE extended/basic: {report.final_ratio:.3f}')
+    return 0
+
+
+def _jsonable(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f'{type(value)} is not JSON-able')
+
+
+def print_table(rows):
+    widths = [max(len(str(r[k])) for r in rows) for k in ('quantity', 'paper', 'ours')]
+    widths[0] = max(widths[0], len('quantity'))
+    widths[1] = min(max(widths[1], len('paper')), 80)
+    scenario = None
+    header = f'{"quantity":<{widths[0]}}  {"paper":<{widths[1]}}  ours'
+    print(header)
+    print('-' * len(header))
+    for r in rows:
+        if r['scenario'] != scenario:
+            scenario = r['scenario']
+            print(f'[{scenario}]')
+        print(f'{r["quantity"]:<{widths[0]}}  {r["paper"]:<{widths[1]}}  {r["ours"]}')
+
+
+def write_figures(report, put, out):
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    paths = []
+    for fig_key, title in (('fig13', 'Fig. 13: setpoint'),
+                           ('fig14', 'Fig. 14: setpoint, 12 deg direction mismatch')):
+        fig, axes = plt.subplots(2, 2, figsize=(11, 8.5))
+        for row, index in enumerate((0, 1)):
+            runs = report.histories[(fig_key, PhiMinScaling.KICK_SCALED, index)]
+            phi = math.degrees(PAPER_PHI_MIN_RAD[index] * put.kick_scale)
+            ax_xy, ax_err = axes[row]
+            for kind, h in runs.items():
+                ax_xy.plot(np.degrees(h.normals[:, 0]), np.degrees(h.normals[:, 1]), '.-',
+                           color=COLORS[kind], label=kind.value, lw=0.8, ms=3)
+                ax_err.semilogy(np.maximum(np.degrees(h.errors_rad) ** 2, 1e-12), '.-',
+                                color=COLORS[kind], label=kind.value, lw=0.8, ms=3)
+            target = runs[ControllerKind.BASIC].references[0]
+            ax_xy.plot(0.0, 0.0, 'ko', mfc='none', ms=9)
+            ax_xy.plot(*np.degrees(target[:2]), 'o', color='gray', ms=9, alpha=0.6)
+            ax_xy.set_xlabel('x_sn (x 180/pi, ~deg)')
+            ax_xy.set_ylabel('y_sn (x 180/pi, ~deg)')
+            paper_phi = math.degrees(PAPER_PHI_MIN_RAD[index])
+            ax_xy.set_title(f'Phi_min = {phi:.4f} deg (paper {paper_phi:.2f} deg, kick-scaled)')
+            ax_xy.axis('equal')
+            ax_err.axhline(phi ** 2, color='gray', ls=':', lw=0.8)
+            ax_err.set_xlabel('step (kick period)')
+            ax_err.set_ylabel('Phi^2 (deg^2)')
+            for ax in (ax_xy, ax_err):
+                ax.grid(alpha=0.3)
+                ax.legend(fontsize=8)
+        fig.suptitle(f'{title} on the {put.label}')
+        fig.tight_layout()
+        path = out / f'evaluation_{fig_key}.png'
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        paths.append(path)
+
+    result = report.histories['fig15']
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.8))
+    best = f'basic (best Phi_min {math.degrees(result.basic_phi_min_rad):.4f} deg)'
+    for ax, h, name in ((axes[0], result.basic, best), (axes[1], result.extended, 'extended')):
+        ax.plot(h.references[:, 0], h.references[:, 1], color='gray', lw=2, alpha=0.5,
+                label='reference')
+        ax.plot(h.normals[:, 0], h.normals[:, 1], lw=0.6,
+                color='tab:red' if h is result.basic else 'tab:blue', label=name)
+        ax.plot(*LEVEL_NORMAL[:2], 'ko', mfc='none')
+        ax.set_xlabel('x_sn')
+        ax.set_ylabel('y_sn')
+        ax.axis('equal')
+        ax.legend(fontsize=8)
+        ax.grid(alpha=0.3)
+    for h, color, name in ((result.basic, 'tab:red', 'basic'),
+                           (result.extended, 'tab:blue', 'extended')):
+        axes[2].semilogy(h.times_s, np.maximum(h.squared_xy_errors, 1e-14), color=color,
+                         lw=0.5, label=name)
+    axes[2].axvline(result.basic.times_s[result.catch_up_step], color='gray', ls=':',
+                    label='tracking phase starts')
+    axes[2].set_xlabel('time (s)')
+    axes[2].set_ylabel('squared x-y error')
+    axes[2].legend(fontsize=8)
+    axes[2].grid(alpha=0.3)
+    fig.suptitle(f'Fig. 15: eq. (64) under 33 deg mismatch (f1 scaled to '
+                 f'{report.figures["fig15"]["frequency_hz"]:.5f} Hz); MSE extended/basic '
+                 f'{result.ratio:.3f}')
+    fig.tight_layout()
+    path = out / 'evaluation_fig15.png'
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    paths.append(path)
+    return paths
+

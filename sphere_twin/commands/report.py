@@ -1,0 +1,49 @@
+"""``sphere-twin report BAG``: error against run time, kicks and statistics of a recorded run."""
+
+import json
+import math
+from pathlib import Path
+
+from sphere_twin.bag.reader import BagError
+
+
+def register(subparsers):
+    parser = subparsers.add_parser(
+        'report', help='error against run time and statistics of a recorded bag',
+        description='Surface-normal error against time with the kicks marked, the path in the '
+                    'x-y plane beside the reference (PNG), and kicks, settle times, final, RMS '
+                    'and max error (text and JSON). Works on any bag of the topic contract.')
+    parser.add_argument('bag', type=Path, help='bag directory (with metadata.yaml)')
+    parser.add_argument('--out', type=Path, default=None,
+                        help='output directory (default: beside the bag)')
+    parser.add_argument('--band-deg', type=float, default=0.05,
+                        help='settling band around a setpoint (deg)')
+    parser.set_defaults(func=run)
+
+
+def run(args):
+    from sphere_twin.run_analysis import load_run, plot_report, statistics
+
+    try:
+        recorded = load_run(args.bag)
+        stats = statistics(recorded, math.radians(args.band_deg))
+    except BagError as error:
+        print(f'error: {error}')
+        return 1
+    out = args.out or args.bag.parent
+    out.mkdir(parents=True, exist_ok=True)
+    stem = out / f'{args.bag.name}_report'
+    png = plot_report(recorded, stem.with_suffix('.png'), title=args.bag.name)
+    data = {'bag': str(args.bag), **stats.to_dict()}
+    stem.with_suffix('.json').write_text(json.dumps(data, indent=2) + '\n')
+    settle = ', '.join('never' if s is None else f'{s:.2f} s' for s in stats.settle_times_s)
+    lines = [f'bag: {args.bag}',
+             f'duration: {stats.duration_s:.2f} s, kicks: {stats.kicks}',
+             f'settle times (band {args.band_deg:g} deg): {settle or "no setpoint"}',
+             f'error: final {math.degrees(stats.final_error_rad):.4f} deg, RMS '
+             f'{math.degrees(stats.rms_error_rad):.4f} deg, max '
+             f'{math.degrees(stats.max_error_rad):.4f} deg',
+             f'wrote {png} and {stem.with_suffix(".json")}']
+    stem.with_suffix('.txt').write_text('\n'.join(lines[:-1]) + '\n')
+    print('\n'.join(lines))
+    return 0

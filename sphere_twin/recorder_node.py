@@ -1,0 +1,295 @@
+"""The recorder node: the contract's topics to a rosbag2-compatible bag, as rosbag2 records.
+
+Subscribes to every topic of :data:`msg_defs.topics.ALL_TOPICS` (or the ``topics``
+parameter) without deserializing (``raw=True``), so the CDR bytes go to the bag exactly as
+they came off the wire, and writes them with :class:`sphere_twin.bag.writer.BagWriter`:
+``<output_dir>/metadata.yaml`` (rosbag2 version 9) and ``<output_dir>/<name>_0.mcap``.
+
+As ``ros2 bag record`` does, a topic enters the bag with its first message, described by the
+QoS profiles its publishers offer and the type hash they announce (both from the ROS graph);
+the log time of a message is when it was received (node clock), its publish time the
+sender's source timestamp. On SIGINT or SIGTERM the node takes the messages already
+delivered to it, finishes the MCAP file and metadata.yaml, and prints
+``recorded N messages on K topics to <dir>``. Chunks are completed every ``flush_period_s``,
+so a recorder killed outright loses at most that much.
+"""
+
+import datetime
+import functools
+import signal
+import time
+from pathlib import Path
+
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.signals import SignalHandlerOptions
+
+from msg_defs.ros_env import ensure_localhost_discovery
+from msg_defs.topics import ALL_TOPICS, topic_by_name
+from sphere_twin.bag import format as bag_format
+from sphere_twin.bag.writer import COMPRESSIONS, DEFAULT_CHUNK_SIZE_BYTES, BagWriter
+
+DEFAULT_BAG_PARENT = 'bags'
+# Depth of the recorder's subscriptions. History does not affect QoS compatibility; a
+# deeper one than the contract's keeps a message that arrives while a chunk is being
+# compressed from being overwritten before it is taken.
+RECORDER_HISTORY_DEPTH = 1000
+DEFAULT_FLUSH_PERIOD_S = 1.0
+MAX_FLUSH_PERIOD_S = 3600.0
+# On shutdown, messages already delivered are taken until none has come for this long.
+DRAIN_QUIET_S = 0.1
+DRAIN_MAX_S = 2.0
+# Longest time between two looks at the stop flag.
+SPIN_POLL_S = 0.1
+
+
+def default_output_dir(now=None):
+    """``bags/run_<UTC time>``, e.g. ``bags/run_20250101T120000Z``."""
+    now = now or datetime.datetime.now(datetime.UTC)
+    return str(Path(DEFAULT_BAG_PARENT) / f'run_{now.strftime("%Y%m%dT%H%M%SZ")}')
+
+
+def summary_line(message_count, topic_count, path):
+    """The recorder's last line of output."""
+    return f'recorded {message_count} messages on {topic_count} topics to {path}'
+
+
+def _descriptor(description, float_range=None, int_range=None):
+    d = ParameterDescriptor(description=description, read_only=True)
+    if float_range is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=float(float_range[0]),
+                                                     to_value=float(float_range[1]), step=0.0)]
+    if int_range is not None:
+        d.integer_range = [IntegerRange(from_value=int_range[0], to_value=int_range[1], step=1)]
+    return d
+
+
+class RecorderNode(Node):
+    """Records contract topics to a bag.
+
+    Parameters
+    ----------
+    **node_kwargs
+        Passed to ``rclpy.node.Node`` (e.g. ``context``, ``parameter_overrides``).
+
+    Attributes
+    ----------
+    writer : sphere_twin.bag.writer.BagWriter
+        The bag; closed by :meth:`finish` or :meth:`destroy_node`.
+    topics : tuple of msg_defs.topics.Topic
+        What is subscribed.
+
+    Raises
+    ------
+    ValueError
+        For a topic that is not in the contract or an unknown compression.
+    FileExistsError
+        If the output directory exists and is not empty.
+    """
+
+    def __init__(self, **node_kwargs):
+        super().__init__('recorder', **node_kwargs)
+        p = self._declare_parameters()
+        if p['compression'] not in COMPRESSIONS:
+            raise ValueError(f'compression {p["compression"]!r} is not one of '
+                             f'{", ".join(COMPRESSIONS)}')
+        try:
+            self.topics = tuple(topic_by_name(name) for name in p['topics'] if name)
+        except KeyError as error:
+            raise ValueError(error.args[0]) from None
+        output_dir = p['output_dir'] or default_output_dir()
+        self.writer = BagWriter(output_dir, compression=p['compression'],
+                                chunk_size_bytes=p['chunk_size_bytes'])
+        for topic in self.topics:
+            profile = topic.qos.to_profile()
+            profile.depth = max(profile.depth, RECORDER_HISTORY_DEPTH)
+            self.create_subscription(topic.msg_type, topic.name,
+                                     functools.partial(self.on_message, topic), profile,
+                                     raw=True)
+        if p['flush_period_s'] > 0:
+            self.create_timer(p['flush_period_s'], self.on_flush_timer)
+        self.get_logger().info(
+            f'domain id {self.context.get_domain_id()}; recording {len(self.topics)} topics '
+            f'to {self.writer.path} ({p["compression"]} chunks)')
+
+    def _declare_parameters(self):
+        specs = {
+            'output_dir': ('', _descriptor(
+                'Bag directory to create (must not exist or be empty); "" for '
+                f'{DEFAULT_BAG_PARENT}/run_<UTC time>.')),
+            'topics': ([t.name for t in ALL_TOPICS], _descriptor(
+                'Topics to record, by name; each must be in the topic contract. All of them '
+                'by default.')),
+            'compression': ('zstd', _descriptor(
+                f'Compression of the MCAP chunks: {", ".join(COMPRESSIONS)}.')),
+            'chunk_size_bytes': (DEFAULT_CHUNK_SIZE_BYTES, _descriptor(
+                'Uncompressed size (bytes) at which an MCAP chunk is completed.',
+                int_range=(1024, 2**31 - 1))),
+            'flush_period_s': (DEFAULT_FLUSH_PERIOD_S, _descriptor(
+                'Complete the current chunk and write it to disk this often (s), bounding '
+                'what a crash can lose; 0 writes chunks only when full.',
+                float_range=(0.0, MAX_FLUSH_PERIOD_S))),
+        }
+        return {name: self.declare_parameter(name, default, descriptor).value
+                for name, (default, descriptor) in specs.items()}
+
+    # --- recording ----------------------------------------------------------------------
+
+    def on_message(self, topic, data, message_info):
+        """Write one serialized message; the first one on a topic adds the topic."""
+        if self.writer.closed:
+            return
+        log_time_ns = self.get_clock().now().nanoseconds
+        publish_time_ns = message_info.get('source_timestamp') or log_time_ns
+        if not self.writer.has_topic(topic.name):
+            self._add_topic(topic)
+        self.writer.write(topic.name, data, log_time_ns, publish_time_ns)
+
+    def offered_qos(self, topic):
+        """QoS profiles and type hash the publishers of ``topic`` offer, from the graph.
+
+        Returns
+        -------
+        (list of dict, str)
+            One :func:`~sphere_twin.bag.format.qos_to_dict` mapping per publisher of the
+            contract's type, and their type hash. Without such publishers (already gone),
+            the contract's profile and the hash our own subscription announces.
+        """
+        type_name = bag_format.type_name_of(topic.msg_type)
+        publishers = [info for info in self.get_publishers_info_by_topic(topic.name)
+                      if info.topic_type == type_name]
+        if publishers:
+            return ([bag_format.qos_to_dict(info.qos_profile) for info in publishers],
+                    str(publishers[0].topic_type_hash))
+        own = [info for info in self.get_subscriptions_info_by_topic(topic.name)
+               if info.node_name == self.get_name()
+               and info.node_namespace == self.get_namespace()]
+        type_hash = str(own[0].topic_type_hash) if own else ''
+        profile = topic.qos.to_profile()
+        return [bag_format.qos_to_dict(QoSProfile(
+            history=profile.history, depth=profile.depth, reliability=profile.reliability,
+            durability=profile.durability))], type_hash
+
+    def _add_topic(self, topic):
+        qos_dicts, type_hash = self.offered_qos(topic)
+        self.writer.add_topic(topic.name, bag_format.type_name_of(topic.msg_type), qos_dicts,
+                              type_hash)
+        self.get_logger().info(
+            f'recording {topic.name} ({bag_format.type_name_of(topic.msg_type)}) offered by '
+            f'{len(qos_dicts)} publisher(s)')
+
+    def on_flush_timer(self):
+        """Complete the current chunk, so that a crash loses at most one flush period."""
+        if not self.writer.closed:
+            self.writer.flush()
+
+    # --- shutdown -----------------------------------------------------------------------
+
+    def spin_until(self, stop):
+        """Record until ``stop`` is requested, then :meth:`drain`.
+
+        Parameters
+        ----------
+        stop : StopRequest
+            Polled between executor steps of at most :data:`SPIN_POLL_S`.
+        """
+        executor = SingleThreadedExecutor(context=self.context)
+        executor.add_node(self)
+        try:
+            while self.context.ok() and not stop.requested:
+                executor.spin_once(timeout_sec=SPIN_POLL_S)
+            self.drain(executor)
+        finally:
+            executor.remove_node(self)
+            executor.shutdown(timeout_sec=0)
+
+    def drain(self, executor, quiet_s=DRAIN_QUIET_S, max_s=DRAIN_MAX_S):
+        """Take the messages already delivered to this node, until none comes for ``quiet_s``
+        (at most ``max_s``); does nothing once the context is shut down."""
+        hard_deadline = time.monotonic() + max_s
+        quiet_deadline = time.monotonic() + quiet_s
+        while (self.context.ok() and not self.writer.closed
+               and time.monotonic() < min(quiet_deadline, hard_deadline)):
+            before = self.writer.message_count
+            executor.spin_once(timeout_sec=quiet_s)
+            if self.writer.message_count != before:
+                quiet_deadline = time.monotonic() + quiet_s
+
+    def finish(self):
+        """Close the bag and return :func:`summary_line`."""
+        self.writer.close()
+        return summary_line(self.writer.message_count, self.writer.topic_count,
+                            self.writer.path)
+
+    def destroy_node(self):
+        """Close the bag, then destroy the node."""
+        self.writer.close()
+        super().destroy_node()
+
+
+class StopRequest:
+    """SIGINT and SIGTERM as a flag rather than an exception.
+
+    rclpy's own handlers shut the context down at once, dropping messages already delivered
+    but not yet taken, and ``KeyboardInterrupt`` could strike in the middle of writing a
+    chunk. The recorder therefore starts rclpy without its signal handlers and installs these
+    instead; :meth:`RecorderNode.spin_until` polls the flag, so the node stops within
+    :data:`SPIN_POLL_S` and every write completes.
+
+    Attributes
+    ----------
+    signal_name : str or None
+        The first stop signal received.
+    """
+
+    def __init__(self):
+        self.signal_name = None
+
+    @property
+    def requested(self):
+        """Whether a stop signal has arrived."""
+        return self.signal_name is not None
+
+    def install(self):
+        """Handle SIGINT and SIGTERM with :meth:`request`; returns ``self``."""
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, self.request)
+        return self
+
+    def request(self, signum=signal.SIGINT, _frame=None):
+        """Ask the recorder to stop (the signal handler)."""
+        if self.signal_name is None:
+            self.signal_name = signal.Signals(signum).name
+
+
+def main(args=None):
+    """Run the recorder until SIGINT or SIGTERM; exit status 1 if it could not record."""
+    ensure_localhost_discovery()
+    stop = StopRequest().install()
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    status = 0
+    try:
+        node = RecorderNode()
+        node.spin_until(stop)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (ValueError, OSError) as error:
+        # A bad parameter, an existing bag directory, a missing message definition, a full
+        # disk: one clear line rather than a traceback.
+        rclpy.logging.get_logger('recorder').error(str(error))
+        status = 1
+    finally:
+        if node is not None:
+            # Printed, not logged: the summary must appear even if logging is shut down.
+            print(node.finish(), flush=True)
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return status
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,255 @@
+"""What a recorded run says: surface-normal error against time, kicks, settle times, and the
+open-loop replay of its commands through the twin.
+
+Works on any bag of the contract's topics (ours or one made by ``ros2 bag record``). Times are
+the surface-normal samples' header stamps (simulated time in a twin's bag, wall time on the
+device). A programme starts at its own stamp, or on receipt if it has none; references and
+voltage commands are placed by their receive time, mapped onto the stamps of the samples
+received around it, since the node that sent them may stamp with another clock.
+"""
+
+import dataclasses
+import math
+
+import numpy as np
+
+from msg_defs.conversions import (
+    ns_from_time,
+    programme_from_msg,
+    surface_normal_from_msg,
+    voltages_from_msg,
+)
+from msg_defs.topics import PULSE_PROGRAM, SPHERE_REFERENCE, SURFACE_NORMAL, VOLTAGE_COMMAND
+from sphere_sim.discrete import angle_between
+from sphere_sim.plants import TIME_TOL_S
+from sphere_twin.bag.reader import BagError, deserialize, read_messages
+
+NS_PER_S = 1_000_000_000
+DEFAULT_BAND_RAD = math.radians(0.05)  # Fig. 13's tighter resting band
+# A reference held at least this long counts as a setpoint whose settling time is reported.
+MIN_SETPOINT_S = 0.5
+
+
+@dataclasses.dataclass(frozen=True)
+class RecordedRun:
+    """The contract's signals of one bag, on the stamp time base.
+
+    Attributes
+    ----------
+    normal_t_s : ndarray, shape (n,)
+    normals : ndarray, shape (n, 3)
+        Measured surface normals.
+    reference_t_s : ndarray, shape (m,)
+    references : ndarray, shape (m, 3)
+    kicks : list of (time_s, times_s (k,), voltages_v (k, 4))
+        Pulse programmes: start time and zero-order-hold segments.
+    holds : list of (time_s, voltages_v (4,))
+        Voltage commands.
+    """
+
+    normal_t_s: np.ndarray
+    normals: np.ndarray
+    reference_t_s: np.ndarray
+    references: np.ndarray
+    kicks: list
+    holds: list
+
+
+def load_run(bag_dir):
+    """Read the contract's signals from a bag; BagError if it has no surface normal."""
+    normals, references, programmes, holds = [], [], [], []
+    receive_map = []  # (log_time_ns, stamp_s) of the normal samples
+    topics = [SURFACE_NORMAL.name, SPHERE_REFERENCE.name, PULSE_PROGRAM.name,
+              VOLTAGE_COMMAND.name]
+    for raw in read_messages(bag_dir, topics):
+        msg = deserialize(raw)
+        try:
+            if raw.topic == SURFACE_NORMAL.name:
+                t = ns_from_time(msg.header.stamp) / NS_PER_S
+                normals.append((t, surface_normal_from_msg(msg)))
+                receive_map.append((raw.log_time_ns, t))
+            elif raw.topic == SPHERE_REFERENCE.name:
+                references.append((raw.log_time_ns, surface_normal_from_msg(msg)))
+            elif raw.topic == PULSE_PROGRAM.name:
+                programmes.append((raw.log_time_ns, ns_from_time(msg.header.stamp),
+                                   *programme_from_msg(msg)))
+            else:
+                holds.append((raw.log_time_ns, voltages_from_msg(msg)))
+        except ValueError:
+            continue  # a message that breaks the contract was rejected by the twin too
+    if not normals:
+        raise BagError(f'{bag_dir}: no {SURFACE_NORMAL.name} messages to analyse')
+    log_ns = np.array([m[0] for m in receive_map], dtype=float)
+    stamps = np.array([m[1] for m in receive_map])
+
+    def on_stamps(log_time_ns):
+        return float(np.interp(log_time_ns, log_ns, stamps))
+
+    normals.sort(key=lambda item: item[0])
+    # A reference is in force from when it arrives (its node may stamp with another clock).
+    references = sorted(((on_stamps(log), n) for log, n in references), key=lambda r: r[0])
+    kicks = sorted(((stamp_ns / NS_PER_S if stamp_ns else on_stamps(log_ns_), times, volts)
+                    for log_ns_, stamp_ns, times, volts in programmes), key=lambda k: k[0])
+    return RecordedRun(
+        np.array([t for t, _ in normals]), np.array([n for _, n in normals]),
+        np.array([t for t, _ in references]), np.array([n for _, n in references]).reshape(-1, 3),
+        kicks, sorted(((on_stamps(log), volts) for log, volts in holds), key=lambda h: h[0]))
+
+
+def reference_at(run, times_s):
+    """The reference in force at each time (NaN before the first), shape (len(times_s), 3)."""
+    out = np.full((len(times_s), 3), np.nan)
+    if run.reference_t_s.size == 0:
+        return out
+    index = np.searchsorted(run.reference_t_s, times_s, side='right') - 1
+    valid = index >= 0
+    out[valid] = run.references[index[valid]]
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class RunStatistics:
+    kicks: int
+    duration_s: float
+    final_error_rad: float
+    rms_error_rad: float
+    max_error_rad: float
+    settle_times_s: list  # per setpoint: time until the error stays within the band (or None)
+    band_rad: float
+
+    def to_dict(self):
+        return {'kicks': self.kicks, 'duration_s': self.duration_s,
+                'final_error_deg': math.degrees(self.final_error_rad),
+                'rms_error_deg': math.degrees(self.rms_error_rad),
+                'max_error_deg': math.degrees(self.max_error_rad),
+                'settle_times_s': self.settle_times_s, 'band_deg': math.degrees(self.band_rad)}
+
+
+def errors_rad(run):
+    """(times_s, error_rad) of the samples that have a reference."""
+    refs = reference_at(run, run.normal_t_s)
+    valid = ~np.isnan(refs[:, 0])
+    errors = np.array([angle_between(n, r) for n, r in zip(run.normals[valid], refs[valid],
+                                                             strict=True)])
+    return run.normal_t_s[valid], errors
+
+
+def setpoint_segments(run, min_duration_s=MIN_SETPOINT_S):
+    """(start_s, end_s) of the stretches over which the reference stays the same."""
+    if run.reference_t_s.size == 0:
+        return []
+    segments, start = [], 0
+    for i in range(1, run.reference_t_s.size + 1):
+        if i == run.reference_t_s.size or angle_between(run.references[i],
+                                                        run.references[start]) > 1e-12:
+            end_s = run.reference_t_s[i] if i < run.reference_t_s.size else run.normal_t_s[-1]
+            if end_s - run.reference_t_s[start] >= min_duration_s:
+                segments.append((float(run.reference_t_s[start]), float(end_s)))
+            start = i
+    return segments
+
+
+def statistics(run, band_rad=DEFAULT_BAND_RAD):
+    times, errors = errors_rad(run)
+    if errors.size == 0:
+        raise BagError('no surface normal was recorded while a reference was in force')
+    settle = []
+    for start_s, end_s in setpoint_segments(run):
+        inside = (times >= start_s) & (times <= end_s)
+        seg_t, seg_e = times[inside], errors[inside]
+        outside = np.flatnonzero(seg_e > band_rad)
+        if outside.size == 0:
+            settle.append(0.0)
+        elif outside[-1] + 1 < seg_t.size:
+            settle.append(float(seg_t[outside[-1] + 1] - start_s))
+        else:
+            settle.append(None)  # never settled within the segment
+    return RunStatistics(len(run.kicks), float(run.normal_t_s[-1] - run.normal_t_s[0]),
+                         float(errors[-1]), float(np.sqrt(np.mean(errors ** 2))),
+                         float(errors.max()), settle, band_rad)
+
+
+def plot_report(run, path, title=''):
+    """Error against time with the kicks marked, and the x-y path beside the reference."""
+    from sphere_twin.plots import plt
+
+    times, errors = errors_rad(run)
+    fig, (ax_err, ax_xy) = plt.subplots(1, 2, figsize=(11.5, 4.6))
+    ax_err.semilogy(times, np.maximum(np.degrees(errors), 1e-6), lw=1, label='error')
+    if run.kicks:
+        ax_err.plot([k[0] for k in run.kicks], np.full(len(run.kicks), ax_err.get_ylim()[0]),
+                    '|', color='tab:red', ms=8, label='kicks')
+    ax_err.set_xlabel('time (s)')
+    ax_err.set_ylabel('angle to reference (deg)')
+    ax_err.grid(alpha=0.3, which='both')
+    ax_err.legend()
+    if run.references.size:
+        ax_xy.plot(run.references[:, 0], run.references[:, 1], 'k--', lw=1, label='reference')
+    ax_xy.plot(run.normals[:, 0], run.normals[:, 1], lw=1, label='surface normal')
+    ax_xy.set_xlabel('$x_{sn}$')
+    ax_xy.set_ylabel('$y_{sn}$')
+    ax_xy.set_aspect('equal', adjustable='datalim')
+    ax_xy.grid(alpha=0.3)
+    ax_xy.legend()
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+@dataclasses.dataclass(frozen=True)
+class ReplayResult:
+    times_s: np.ndarray
+    error_rad: np.ndarray  # simulated against recorded normal at each recorded sample
+
+    @property
+    def max_error_rad(self):
+        return float(self.error_rad.max()) if self.error_rad.size else 0.0
+
+    @property
+    def rms_error_rad(self):
+        return float(np.sqrt(np.mean(self.error_rad ** 2))) if self.error_rad.size else 0.0
+
+
+def replay_start_index(run, window_s):
+    """First sample from which a replay can start: no kick recorded before it still acting."""
+    t0 = run.normal_t_s[0]
+    earlier = [t for t, _, _ in run.kicks if t < t0]
+    if not earlier:
+        return 0
+    return int(np.searchsorted(run.normal_t_s, max(earlier) + window_s - TIME_TOL_S))
+
+
+def replay(run, plant, start_index=0):
+    """Feed the recorded commands open loop into ``plant``, sampled at the recorded times.
+
+    The plant starts from the recorded normal at ``start_index`` (the caller builds it so;
+    see :func:`replay_start_index` for a bag whose recording began mid-kick); each programme
+    starts at its stamp, each voltage command at its mapped receive time.
+    """
+    from sphere_sim.plants import PlantError
+    from sphere_sim.programme import PulseProgramme
+
+    t0 = run.normal_t_s[start_index]
+    events = sorted([(t, 0, ('programme', times, volts)) for t, times, volts in run.kicks
+                     if t >= t0 - TIME_TOL_S]
+                    + [(t, 1, ('hold', volts)) for t, volts in run.holds if t >= t0],
+                    key=lambda e: (e[0], e[1]))
+    errors, k = [], 0
+    for t, recorded in zip(run.normal_t_s[start_index:], run.normals[start_index:],
+                           strict=True):
+        while k < len(events) and events[k][0] <= t + TIME_TOL_S:
+            at, _, event = events[k]
+            plant.advance(max(at, plant.time_s))
+            try:
+                if event[0] == 'programme':
+                    plant.run_programme(PulseProgramme.from_segments(event[1], event[2]))
+                else:
+                    plant.hold(event[1])
+            except PlantError:
+                pass  # refused on the device's twin as well
+            k += 1
+        plant.advance(max(t, plant.time_s))
+        errors.append(angle_between(plant.snapshot().normal, recorded))
+    return ReplayResult(run.normal_t_s[start_index:].copy(), np.array(errors))

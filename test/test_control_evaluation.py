@@ -1,0 +1,70 @@
+"""The §5 studies on an analytic plant with the paper's kick: the paper's findings hold."""
+
+import math
+
+import pytest
+
+from sphere_control.closed_loop import Outcome
+from sphere_control.evaluation import (
+    PAPER_FULL_KICK_RAD,
+    PAPER_PHI_MIN_RAD,
+    PAPER_SETPOINT_NORMAL,
+    ControllerKind,
+    EvaluationConfig,
+    PlantUnderTest,
+    oscillates,
+    scaled_trajectory,
+    setpoint_study,
+    tracking_study,
+)
+from sphere_control.perturbations import Mismatch, PerturbedPlant
+from sphere_control.plants import AnalyticKickPlant
+
+
+@pytest.fixture(scope='module')
+def put():
+    return PlantUnderTest.measure('analytic', AnalyticKickPlant(PAPER_FULL_KICK_RAD,
+                                                                exponent=1.7, softening=0.1))
+
+
+def test_measured_full_kick_and_scale(put):
+    # the plant moves the x-y point by 0.54 deg; the rotation angle is a little larger
+    assert math.degrees(put.full_width_rad) == pytest.approx(0.54, rel=1e-4)
+    assert put.kick_scale == pytest.approx(1.0, rel=1e-4)
+    assert scaled_trajectory(put).frequency_hz == pytest.approx(0.02, rel=1e-4)
+
+
+@pytest.mark.parametrize('mismatch_deg', [0.0, 12.0])
+def test_fig13_14_small_band_basic_oscillates_extended_settle(put, mismatch_deg):
+    plant = PerturbedPlant(put.plant, Mismatch(math.radians(mismatch_deg)))
+    runs = setpoint_study(put, plant, PAPER_SETPOINT_NORMAL, PAPER_PHI_MIN_RAD[0],
+                          EvaluationConfig())
+    basic = runs[ControllerKind.BASIC]
+    assert basic.outcome is not Outcome.SETTLED
+    assert oscillates(basic, put.full_width_rad)
+    for kind in (ControllerKind.EXTENDED, ControllerKind.PRELEARNED):
+        h = runs[kind]
+        assert h.outcome is Outcome.SETTLED
+        assert h.final_error_rad < PAPER_PHI_MIN_RAD[0]
+        assert h.kicks_to_settle <= 12
+    assert (runs[ControllerKind.PRELEARNED].kicks_to_settle
+            <= runs[ControllerKind.EXTENDED].kicks_to_settle)
+
+
+def test_fig13_wide_band_all_settle_with_larger_errors(put):
+    runs = setpoint_study(put, put.plant, PAPER_SETPOINT_NORMAL, PAPER_PHI_MIN_RAD[1],
+                          EvaluationConfig())
+    for h in runs.values():
+        assert h.outcome is Outcome.SETTLED
+        assert not oscillates(h, put.full_width_rad)
+        assert math.radians(0.05) < h.final_error_rad < PAPER_PHI_MIN_RAD[1]
+
+
+def test_fig15_extended_tracks_better_than_the_best_basic(put):
+    """A short run (a quarter period) at a fast kick rate, where the paper's factor shows."""
+    plant = PerturbedPlant(put.plant, Mismatch(math.radians(33.0)))
+    config = EvaluationConfig(trajectory_periods=0.25, basic_phi_min_widths=(0.5, 1.0))
+    result = tracking_study(put, plant, config, kick_period_s=0.03)
+    assert result.basic.outcome is Outcome.COMPLETED
+    assert 0 < result.catch_up_step < len(result.basic.actions) // 2
+    assert result.ratio < 0.5

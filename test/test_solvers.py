@@ -1,0 +1,246 @@
+"""The solver layer: Jacobian, compiled Radau IIA, edges, contact onsets, budgets, interface."""
+
+import itertools
+
+import numpy as np
+import pytest
+
+from sphere_sim import dynamics as dyn
+from sphere_sim import radau_compiled as rc
+from sphere_sim.initial_state import rest_state
+from sphere_sim.model import assemble
+from sphere_sim.programme import Pulse, PulseProgramme
+from sphere_sim.scene import load_scene
+from sphere_sim.solve import (
+    METHODS,
+    SolverError,
+    SolverStatus,
+    contact_gaps,
+    default_onset_depth_m,
+    segment_times,
+    simulate,
+    solve,
+    state_scale,
+)
+
+ASYMMETRIC = PulseProgramme((Pulse(1, 35.0, 0.5e-3, 1.0e-3), Pulse(2, 35.0, 0.5e-3, 1.0e-3),
+                             Pulse(3, 80.0, 0.0, 0.8e-3), Pulse(4, 80.0, 0.0, 0.8e-3)))
+
+
+@pytest.fixture(scope='module')
+def model():
+    return assemble(load_scene('rest'))
+
+
+@pytest.fixture(scope='module')
+def x_rest(model):
+    return rest_state(model)
+
+
+def scaled(model, jac):
+    """The Jacobian in the state_scale units: entries comparable across states."""
+    s = state_scale(model)
+    return jac * s[None, :] / s[:, None]
+
+
+def central_jacobian(model, x, u):
+    jac = np.empty((model.n_states, model.n_states))
+    dyn.jacobian_kernel_central(0.0, x, u, model.p, model.flags, model.beam_angles, model.rbf_cz,
+                                model.rbf_cphi, model.rbf_w, state_scale(model), jac)
+    return jac
+
+
+def relative_jacobian_error(model, x, u):
+    forward = scaled(model, model.jacobian(0.0, x, u))
+    central = scaled(model, central_jacobian(model, x, u))
+    return np.linalg.norm(forward - central) / np.linalg.norm(central)
+
+
+def test_jacobian_matches_central_differences_at_random_states(model, x_rest):
+    rng = np.random.default_rng(4)
+    u = np.array([35.0, 35.0, 80.0, 80.0])
+    errors = []
+    for _ in range(8):
+        x = x_rest + 0.3 * state_scale(model) * rng.standard_normal(model.n_states)
+        errors.append(relative_jacobian_error(model, x, u))
+    # Forward differences with steps of 1e-7 of each state's scale: measured ~1e-6.
+    assert max(errors) < 1e-4
+
+
+def test_jacobian_at_contact_onset(model, x_rest):
+    """Sphere touching the tips by 0.5 nm and a beam's rear end 0.5 nm into the ground plate."""
+    o = model.sphere_offset
+    x = x_rest.copy()
+    x[o + 2] += np.min(-model.sphere_gaps(x)) - 0.5e-9  # lift until the deepest tip is at -0.5 nm
+    assert -1e-9 < np.min(model.sphere_gaps(x)) < 0.0
+    p = model.params.beam
+    x[0] = p.ground_z_m + p.insulation_virtual_m - 0.5e-9
+    assert -1e-9 < model.ground_gaps(x)[0, 0] < 0.0
+    u = np.array([0.0, 0.0, 80.0, 80.0])
+    # Measured 9e-7; steps relative to |x| (0.8 mm for the sphere's height) gave 1e-2 here.
+    assert relative_jacobian_error(model, x, u) < 1e-4
+    # The contact terms are in: the sphere's vertical acceleration depends on its height.
+    jac = model.jacobian(0.0, x, u)
+    assert jac[o + 9, o + 2] < 0.0
+
+
+@pytest.mark.parametrize('dtype', [float, complex])
+def test_compiled_lu_solves_like_numpy(dtype):
+    rng = np.random.default_rng(1)
+    a = rng.standard_normal((9, 9)).astype(dtype)
+    if dtype is complex:
+        a = a + 1j * rng.standard_normal((9, 9))
+    b = rng.standard_normal(9).astype(dtype)
+    lu = a.copy()
+    piv = np.empty(9, dtype=np.int64)
+    assert rc.lu_factor(lu, piv)
+    x = b.copy()
+    rc.lu_solve(lu, piv, x)
+    np.testing.assert_allclose(x, np.linalg.solve(a, b), rtol=1e-10)
+
+
+def test_contact_gaps_match_the_model(model, x_rest):
+    gaps = contact_gaps(model, x_rest)
+    rear, front = model.ground_gaps(x_rest)
+    np.testing.assert_allclose(gaps, np.concatenate([rear, front, model.sphere_gaps(x_rest)]),
+                               rtol=0, atol=1e-15)
+
+
+def test_fast_radau_agrees_with_scipy_radau(model, x_rest):
+    """Same method, same tolerance: the compiled port and scipy's agree far below the tolerance
+    scale, and both take about the same number of steps."""
+    fast = simulate(model, x_rest, 2e-3, ASYMMETRIC, rtol=1e-8, method='fast')
+    ref = simulate(model, x_rest, 2e-3, ASYMMETRIC, rtol=1e-8, method='Radau')
+    diff = np.max(np.abs(fast.x - ref.x) / state_scale(model)[:, None])
+    assert diff < 1e-5
+    assert 0.7 < fast.stats.n_steps / ref.stats.n_steps < 1.3
+
+
+def test_converges_with_tolerance(model, x_rest):
+    """The error against a tight run shrinks by at least 10x per two decades of rtol."""
+    ref = simulate(model, x_rest, 2e-3, ASYMMETRIC, rtol=1e-11, method='fast').final_state
+    errs = [np.max(np.abs(simulate(model, x_rest, 2e-3, ASYMMETRIC, rtol=r,
+                                   method='fast').final_state - ref) / state_scale(model))
+            for r in (1e-4, 1e-6, 1e-8)]
+    assert errs[0] > 10 * errs[1] > 100 * errs[2]
+    assert errs[2] < 1e-5
+
+
+def test_integration_stops_at_every_edge(model, x_rest):
+    traj = simulate(model, x_rest, 2e-3, ASYMMETRIC, rtol=1e-6, method='fast',
+                    sample_period_s=1e-3)
+    edges = [t for t in ASYMMETRIC.edges() if 0 < t < 2e-3]
+    assert traj.stats.n_segments == len(edges) + 1
+    for t in edges:
+        i = int(np.flatnonzero(traj.t == t)[0])
+        # The sample at an edge belongs to the segment before it; the next to the one after.
+        np.testing.assert_array_equal(traj.u[:, i], ASYMMETRIC.voltages_at(t - 1e-9))
+        np.testing.assert_array_equal(traj.u[:, i + 1], ASYMMETRIC.voltages_at(t))
+
+
+@pytest.mark.parametrize('method', ['fast', 'LSODA'])
+def test_split_at_edges_matches_unsplit(model, x_rest, method):
+    """One run through the programme equals one run per constant-voltage segment, chained."""
+    t_end = 2e-3
+    whole = simulate(model, x_rest, t_end, ASYMMETRIC, rtol=1e-10, method=method)
+    x = x_rest
+    bounds = segment_times(ASYMMETRIC, 0.0, t_end)
+    for t0, t1 in itertools.pairwise(bounds):
+        u = ASYMMETRIC.voltages_at(t0)
+        constant = PulseProgramme(tuple(Pulse(b, v, 0.0, 1.0) for b, v in
+                                        zip((1, 2, 3, 4), u, strict=True) if v))
+        x = simulate(model, x, t1, constant, rtol=1e-10, method=method, t_start_s=t0).final_state
+    diff = np.max(np.abs(x - whole.final_state) / state_scale(model))
+    assert diff < 1e-6
+
+
+@pytest.fixture(scope='module')
+def dropped(model, x_rest):
+    """The sphere released 50 um above its rest height; it lands after sqrt(2 h/g) = 3.2 ms."""
+    x0 = x_rest.copy()
+    x0[model.sphere_offset + 2] += 50e-6
+    return x0
+
+
+def impact(model, traj):
+    """(first contact time s, deepest sphere gap m, rebound speed m/s) of a drop."""
+    gaps = np.array([model.sphere_gaps(traj.x[:, i]).min() for i in range(traj.t.size)])
+    first = int(np.argmax(gaps < 0.0))
+    return traj.t[first], gaps.min(), traj.x[model.sphere_offset + 9, first:].max()
+
+
+def test_drop_at_loose_tolerance_resolves_the_impact(model, dropped):
+    kwargs = {'sample_period_s': 1e-5}
+    loose = simulate(model, dropped, 4.5e-3, PulseProgramme(), rtol=1e-2, method='fast',
+                     **kwargs)
+    tight = simulate(model, dropped, 4.5e-3, PulseProgramme(), rtol=1e-8, method='fast',
+                     **kwargs)
+    t_loose, depth_loose, rebound_loose = impact(model, loose)
+    t_tight, depth_tight, rebound_tight = impact(model, tight)
+    assert loose.stats.n_onset_restarts >= 1  # the onset check did cut a step
+    assert abs(t_loose - t_tight) <= 1e-5  # lands in the same 10 us sample
+    assert depth_loose == pytest.approx(depth_tight, rel=0.05)  # ~20 nm deep, not stepped over
+    assert rebound_loose == pytest.approx(rebound_tight, rel=0.02)
+    assert loose.stats.n_steps < tight.stats.n_steps / 5
+
+
+def test_onset_check_bounds_the_closure_within_a_step(model, dropped):
+    """No sample shows an open contact closing deeper than the allowed depth before the step
+    that lands on it: the first sample in contact is within a few onset depths of zero."""
+    traj = simulate(model, dropped, 3.4e-3, PulseProgramme(), rtol=1e-2, method='fast',
+                    sample_period_s=1e-6)
+    gaps = np.array([model.sphere_gaps(traj.x[:, i]).min() for i in range(traj.t.size)])
+    first = int(np.argmax(gaps < 0.0))
+    assert gaps[first] > -5 * default_onset_depth_m(model)
+
+
+def test_step_budget_raises_a_typed_error_with_context(model, x_rest):
+    with pytest.raises(SolverError) as info:
+        simulate(model, x_rest, 2e-3, ASYMMETRIC, rtol=1e-8, method='fast', max_steps=50)
+    assert info.value.status is SolverStatus.BUDGET_EXCEEDED
+    assert 0.0 < info.value.t_s < 2e-3
+    assert info.value.state.shape == (model.n_states,)
+    assert np.all(np.isfinite(info.value.state))
+
+
+def test_wall_clock_budget_raises_a_typed_error(model, x_rest):
+    with pytest.raises(SolverError) as info:
+        simulate(model, x_rest, 5e-3, ASYMMETRIC, rtol=1e-8, method='LSODA', max_wall_s=0.05)
+    assert info.value.status is SolverStatus.BUDGET_EXCEEDED
+    assert 'wall-clock' in str(info.value)
+
+
+@pytest.fixture(scope='module')
+def beams_only():
+    return assemble(load_scene('beams_only'))
+
+
+@pytest.mark.parametrize('method', METHODS)
+def test_every_method_through_the_interface(beams_only, method):
+    """solve() with a model and each method: the same final state, and counters filled in."""
+    programme = PulseProgramme(tuple(Pulse(b, 60.0, 0.0, 2e-4) for b in (1, 2, 3, 4)))
+    x0 = rest_state(beams_only)
+    kwargs = {'x0': x0, 'programme': programme, 'rtol': 1e-8}
+    ref = solve(beams_only, (0.0, 4e-4), method='fast', **kwargs)
+    traj = solve(beams_only, (0.0, 4e-4), method=method, **kwargs)
+    diff = np.max(np.abs(traj.final_state - ref.final_state) / state_scale(beams_only))
+    assert diff < 1e-4
+    assert traj.stats.method == method
+    assert traj.stats.nfev > 0
+    assert traj.stats.wall_time_s > 0.0
+    assert traj.stats.n_segments == 2
+    if method != 'CVODE':
+        assert traj.stats.n_steps > 0
+    if method == 'fast':
+        assert traj.stats.n_rejected >= 0
+        assert traj.stats.nlu > 0
+    # The beams moved: the pulse pulls them down by more than a micrometre.
+    assert np.min(traj.x[0]) < x0[0] - 1e-6
+
+
+def test_solve_accepts_a_scene_and_starts_from_its_initial_state():
+    scene = load_scene('beams_only')
+    traj = solve(scene, (0.0, 1e-4), rtol=1e-6)
+    model = traj.model
+    np.testing.assert_allclose(traj.x[:, 0], rest_state(model), atol=1e-15)
+    assert traj.status is SolverStatus.SUCCESS
