@@ -37,14 +37,16 @@ def cycle():
 
 def test_no_kick_before_the_window_is_over_and_the_normal_stops(cycle):
     start = normal_from_xy(0.0, 0.0)
-    assert cycle.on_sample(0.0, start, wall_s=0.0).phase is Phase.KICKING
+    first = cycle.on_sample(0.0, start, wall_s=0.0)
+    assert first.phase is Phase.KICKING
+    assert first.start_s == pytest.approx(0.04)  # two periods ahead, before the period is known
     moved = normal_from_xy(0.0, 1e-3)
-    phases = [cycle.on_sample(k * PERIOD_S, moved if k >= 2 else start, wall_s=0.0).phase
-              for k in range(1, 6)]
-    # Samples at 0.02 and 0.04 s are inside the window; at 0.06 s the last three samples
-    # still contain the jump (1 mrad in 20 ms = 2.9 deg/s); from 0.08 s on they are at rest.
-    assert phases == [Phase.SETTLING, Phase.SETTLING, Phase.SETTLING, Phase.KICKING,
-                      Phase.SETTLING]
+    phases = [cycle.on_sample(k * PERIOD_S, moved if k >= 5 else start, wall_s=0.0).phase
+              for k in range(1, 9)]
+    # The kick runs from 0.04 s to 0.10 s. At 0.10 and 0.12 s the last three samples still
+    # contain the jump (1 mrad in 20 ms = 2.9 deg/s); at 0.14 s they are at rest: kick again.
+    assert phases == [Phase.SETTLING] * 6 + [Phase.KICKING, Phase.SETTLING]
+    assert cycle.pending[0] == pytest.approx(0.14 + 2 * PERIOD_S)  # the period is known now
     before, command, after = cycle.controller.observed[0]
     np.testing.assert_array_equal(before, start)
     np.testing.assert_array_equal(after, moved)
@@ -53,9 +55,9 @@ def test_no_kick_before_the_window_is_over_and_the_normal_stops(cycle):
 
 def test_repeats_of_the_settled_sample_count_as_rest(cycle):
     """In lockstep the simulator repeats its last sample while idle."""
-    cycle.on_sample(0.0, normal_from_xy(0.0, 0.0), wall_s=0.0)
+    cycle.on_sample(0.0, normal_from_xy(0.0, 0.0), wall_s=0.0)  # kick from 0.04 s to 0.10 s
     settled = normal_from_xy(0.0, 1e-3)
-    phases = [cycle.on_sample(WINDOW_S, settled, wall_s=0.0).phase for _ in range(3)]
+    phases = [cycle.on_sample(0.04 + WINDOW_S, settled, wall_s=0.0).phase for _ in range(3)]
     # Two samples are too few to judge; with the repeat the window is over and at rest. The
     # next repeat belongs to the new kick's window.
     assert phases == [Phase.SETTLING, Phase.KICKING, Phase.SETTLING]
