@@ -28,6 +28,7 @@ setup(
             'simulator = sphere_sim.simulator_node:main',
             'monitor = sphere_twin.monitor_node:main',
             'recorder = sphere_twin.recorder_node:main',
+            'player = sphere_twin.player_node:main',
             'controller = sphere_control.controller_node:main',
             'reference = sphere_control.reference_node:main',
         ],

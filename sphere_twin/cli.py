@@ -27,6 +27,7 @@ COMMAND_MODULES = (
     'report',
     'replay_check',
     'evaluate',
+    'bag',
 )
 
 

@@ -13,5 +13,9 @@ writer
     :class:`~sphere_twin.bag.writer.BagWriter`, which writes serialized messages to a bag.
 reader
     :func:`~sphere_twin.bag.reader.read_metadata` and
-    :func:`~sphere_twin.bag.reader.read_messages`.
+    :func:`~sphere_twin.bag.reader.read_messages`, which also read the completed chunks of a
+    file whose recorder was killed (:func:`~sphere_twin.bag.reader.scan_mcap`).
+repair
+    :func:`~sphere_twin.bag.repair.repair_bag`: such a bag rewritten into a complete one
+    (``sphere-twin bag repair``).
 """

@@ -67,6 +67,10 @@ class BagWriter:
         Uncompressed size at which a chunk is completed and written.
     ros_distro : str, optional
         For metadata.yaml; ``ROS_DISTRO`` or ``jazzy`` by default.
+    file_name : str, optional
+        Name of the MCAP file; :func:`mcap_file_name` by default.
+    custom_data : dict of str to str, optional
+        metadata.yaml's ``custom_data``.
 
     Raises
     ------
@@ -77,7 +81,8 @@ class BagWriter:
     """
 
     def __init__(self, path, compression=DEFAULT_COMPRESSION,
-                 chunk_size_bytes=DEFAULT_CHUNK_SIZE_BYTES, ros_distro=None):
+                 chunk_size_bytes=DEFAULT_CHUNK_SIZE_BYTES, ros_distro=None, file_name=None,
+                 custom_data=None):
         if compression not in COMPRESSIONS:
             raise ValueError(f'unknown compression {compression!r}; '
                              f'choose one of {", ".join(COMPRESSIONS)}')
@@ -87,9 +92,10 @@ class BagWriter:
         if self.path.exists() and (not self.path.is_dir() or any(self.path.iterdir())):
             raise FileExistsError(f'bag directory {self.path} already exists and is not empty')
         self.path.mkdir(parents=True, exist_ok=True)
-        self.file_name = mcap_file_name(self.path)
+        self.file_name = file_name or mcap_file_name(self.path)
         self.compression = compression
         self.ros_distro = ros_distro
+        self.custom_data = dict(custom_data or {})
         self._topics = {}
         self._schema_ids = {}
         self._start_ns = None
@@ -100,6 +106,9 @@ class BagWriter:
         self._mcap = Writer(self._stream, chunk_size=chunk_size_bytes,
                             compression=COMPRESSIONS[compression])
         self._mcap.start(profile=bag_format.MCAP_PROFILE, library=_library_string())
+        # The header on disk at once: a recorder killed before its first chunk leaves an
+        # MCAP file that is recognisably one, not an empty file.
+        self._stream.flush()
         self._write_metadata_file()
 
     # --- state ------------------------------------------------------------------------
@@ -128,11 +137,12 @@ class BagWriter:
         topics = [(t.metadata, t.message_count) for t in self._topics.values()]
         duration = 0 if self._start_ns is None else self._end_ns - self._start_ns
         return bag_format.bag_metadata(topics, self.file_name, self._start_ns, duration,
-                                       self.ros_distro)
+                                       self.ros_distro, self.custom_data)
 
     # --- writing ----------------------------------------------------------------------
 
-    def add_topic(self, name, type_name, qos_dicts, type_description_hash=''):
+    def add_topic(self, name, type_name, qos_dicts, type_description_hash='',
+                  message_definition=None):
         """Add a topic: its schema (once per type), its channel and its metadata.yaml entry.
 
         Parameters
@@ -146,6 +156,10 @@ class BagWriter:
             channel and to metadata.yaml.
         type_description_hash : str
             ``RIHS01_...``, or '' if unknown.
+        message_definition : str, optional
+            The schema text to write (e.g. copied from another bag); by default
+            :func:`format.message_definition` builds it from the installed ``.msg`` files.
+            Used by the first topic of each type only.
 
         Raises
         ------
@@ -158,7 +172,8 @@ class BagWriter:
         if name in self._topics:
             raise ValueError(f'topic {name} was already added to {self.path}')
         if type_name not in self._schema_ids:
-            definition = bag_format.message_definition(type_name)
+            definition = (bag_format.message_definition(type_name)
+                          if message_definition is None else message_definition)
             self._schema_ids[type_name] = self._mcap.register_schema(
                 type_name, bag_format.SCHEMA_ENCODING, definition.encode())
         channel_id = self._mcap.register_channel(
@@ -169,7 +184,7 @@ class BagWriter:
             channel_id)
         self._write_metadata_file()
 
-    def write(self, topic, data, log_time_ns, publish_time_ns=None):
+    def write(self, topic, data, log_time_ns, publish_time_ns=None, sequence=None):
         """Write one serialized message.
 
         Parameters
@@ -182,6 +197,8 @@ class BagWriter:
             Receive time (ns); metadata.yaml's times are taken from these.
         publish_time_ns : int, optional
             Send time (ns); ``log_time_ns`` if omitted.
+        sequence : int, optional
+            The MCAP sequence number; by default the topic's message count so far plus one.
         """
         self._check_open()
         record = self._topics.get(topic)
@@ -191,7 +208,7 @@ class BagWriter:
         self._mcap.add_message(
             record.channel_id, log_time=int(log_time_ns), data=bytes(data),
             publish_time=int(log_time_ns if publish_time_ns is None else publish_time_ns),
-            sequence=record.sequence)
+            sequence=record.sequence if sequence is None else int(sequence))
         record.message_count += 1
         if self._start_ns is None:
             self._start_ns = self._end_ns = int(log_time_ns)
