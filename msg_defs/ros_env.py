@@ -90,3 +90,25 @@ def run_node(build, args=None, spin=None, farewell=None):
                 print(farewell(node), flush=True)
             node.destroy_node()
         rclpy.try_shutdown()
+
+
+def parameter_descriptor(description, float_range=None, int_range=None, read_only=True):
+    """A ``ParameterDescriptor`` with a description, an optional range, read-only by default.
+
+    Parameters
+    ----------
+    description : str
+    float_range, int_range : (low, high), optional
+        Inclusive bounds that ROS enforces when the parameter is set.
+    read_only : bool
+    """
+    from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+
+    d = ParameterDescriptor(description=description, read_only=read_only)
+    if float_range is not None:
+        d.floating_point_range = [FloatingPointRange(from_value=float(float_range[0]),
+                                                     to_value=float(float_range[1]), step=0.0)]
+    if int_range is not None:
+        d.integer_range = [IntegerRange(from_value=int(int_range[0]),
+                                        to_value=int(int_range[1]), step=1)]
+    return d

@@ -12,7 +12,6 @@ import math
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.node import Node
 
 from msg_defs.conversions import (
@@ -22,7 +21,7 @@ from msg_defs.conversions import (
     time_from_ns,
     voltages_to_msg,
 )
-from msg_defs.ros_env import run_node
+from msg_defs.ros_env import parameter_descriptor, run_node
 from msg_defs.topics import (
     CONTROLLER_STATUS,
     PULSE_PROGRAM,
@@ -37,13 +36,6 @@ NS_PER_S = 1_000_000_000
 CONTROLLER_KINDS = ('basic', 'extended')  # also in sphere_control.controllers
 
 
-def _descriptor(description, float_range=None):
-    d = ParameterDescriptor(description=description, read_only=True)
-    if float_range is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=float(float_range[0]),
-                                                     to_value=float(float_range[1]), step=0.0)]
-    return d
-
 
 class ControllerNode(Node):
     """Thin adapter of :class:`sphere_control.kick_cycle.KickCycle` onto the topics."""
@@ -57,15 +49,15 @@ class ControllerNode(Node):
         super().__init__('controller', **node_kwargs)
         p = {name: self.declare_parameter(name, default, descriptor).value
              for name, (default, descriptor) in {
-                 'controller': ('extended', _descriptor(
+                 'controller': ('extended', parameter_descriptor(
                      f'Control law: {" or ".join(CONTROLLER_KINDS)} (§4.2).')),
-                 'phi_min_deg': (0.05, _descriptor(
+                 'phi_min_deg': (0.05, parameter_descriptor(
                      'Resting band Phi_min (deg): no kick while the error is below it.',
                      (0.0, 10.0))),
-                 'tables': ([''], _descriptor(
+                 'tables': ([''], parameter_descriptor(
                      'Kick tables (.npz): the kicks it may send and its initial model of them; '
                      '[""] for the shipped default (4 diagonal kicks).')),
-                 'stale_timeout_s': (1.0, _descriptor(
+                 'stale_timeout_s': (1.0, parameter_descriptor(
                      'Wall time without a sample after which the state is stale (s).',
                      (0.05, 60.0))),
              }.items()}

@@ -4,24 +4,16 @@ Time is the node's clock, so with ``use_sim_time`` it follows the simulator's ``
 reference beyond the reachable cone is clamped to its edge with a warning.
 """
 
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.node import Node
 
 from msg_defs.conversions import surface_normal_to_msg
-from msg_defs.ros_env import run_node
+from msg_defs.ros_env import parameter_descriptor, run_node
 from msg_defs.topics import SPHERE_REFERENCE
 from sphere_control.reference import CircleTrajectory, Setpoint, sample
 
 DEFAULT_PUBLISH_RATE_HZ = 10.0
 NEVER = -1.0
 
-
-def _descriptor(description, float_range=None, read_only=True):
-    d = ParameterDescriptor(description=description, read_only=read_only)
-    if float_range is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=float(float_range[0]),
-                                                     to_value=float(float_range[1]), step=0.0)]
-    return d
 
 
 class ReferenceNode(Node):
@@ -31,17 +23,17 @@ class ReferenceNode(Node):
         super().__init__('reference', **node_kwargs)
         p = {name: self.declare_parameter(name, default, descriptor).value
              for name, (default, descriptor) in {
-                 'setpoint_xy': ([0.01, 0.02], _descriptor(
+                 'setpoint_xy': ([0.01, 0.02], parameter_descriptor(
                      'x and y of the setpoint normal (Fig. 13: [0.01, 0.02]).')),
-                 'trajectory_start_s': (NEVER, _descriptor(
+                 'trajectory_start_s': (NEVER, parameter_descriptor(
                      'Time (s) from which eq. (64) replaces the setpoint; -1 never.',
                      (NEVER, 1e6))),
-                 'trajectory_offset_s': (0.0, _descriptor(
+                 'trajectory_offset_s': (0.0, parameter_descriptor(
                      'Time (s) into eq. (64) at which it is entered: 0 starts at [A_max, 0], '
                      '1/(4 f1) at the centre.', (0.0, 1e6))),
-                 'amplitude': (0.44, _descriptor('A_max of eq. (64).', (0.0, 1.0))),
-                 'frequency_hz': (0.02, _descriptor('f1 of eq. (64) (Hz).', (0.0, 10.0))),
-                 'publish_rate_hz': (DEFAULT_PUBLISH_RATE_HZ, _descriptor(
+                 'amplitude': (0.44, parameter_descriptor('A_max of eq. (64).', (0.0, 1.0))),
+                 'frequency_hz': (0.02, parameter_descriptor('f1 of eq. (64) (Hz).', (0.0, 10.0))),
+                 'publish_rate_hz': (DEFAULT_PUBLISH_RATE_HZ, parameter_descriptor(
                      'Publications per second of the node clock (Hz).', (0.1, 1000.0))),
              }.items()}
         if len(p['setpoint_xy']) != 2:

@@ -11,7 +11,6 @@ import os
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
@@ -26,7 +25,7 @@ from msg_defs.conversions import (
     voltages_to_msg,
 )
 from msg_defs.markers import twin_markers
-from msg_defs.ros_env import DISCOVERY_RANGE_VAR, run_node
+from msg_defs.ros_env import DISCOVERY_RANGE_VAR, parameter_descriptor, run_node
 from msg_defs.topics import (
     BEAM_STATE,
     BEAM_VOLTAGE,
@@ -55,15 +54,6 @@ FAST_TIMER_PERIOD_S = 1e-4
 IDLE_REPEAT_PERIOD_S = 0.2
 NS_PER_S = 1_000_000_000
 
-
-def _descriptor(description, read_only=True, float_range=None, int_range=None):
-    d = ParameterDescriptor(description=description, read_only=read_only)
-    if float_range is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=float(float_range[0]),
-                                                     to_value=float(float_range[1]), step=0.0)]
-    if int_range is not None:
-        d.integer_range = [IntegerRange(from_value=int_range[0], to_value=int_range[1], step=1)]
-    return d
 
 
 class SimulatorNode(Node):
@@ -113,29 +103,30 @@ class SimulatorNode(Node):
 
     def _declare_parameters(self):
         specs = {
-            'plant': ('discrete', _descriptor(
+            'plant': ('discrete', parameter_descriptor(
                 f'Plant to run: {" or ".join(PLANT_KINDS)} (the lookup table of kicks).')),
-            'scene': ('rest', _descriptor('Scene (shipped name or YAML path): parameters, '
+            'scene': ('rest', parameter_descriptor('Scene (shipped name or YAML path): parameters, '
                                           'beams, sphere and initial state.')),
-            'tables': ([''], _descriptor(
+            'tables': ([''], parameter_descriptor(
                 'Kick tables (.npz) of the discrete plant, their actions combined (the '
                 'diagonal and the axis-parallel tables give 8 directions); [""] for the '
                 'shipped default.')),
-            'publish_rate_hz': (DEFAULT_PUBLISH_RATE_HZ, _descriptor(
+            'publish_rate_hz': (DEFAULT_PUBLISH_RATE_HZ, parameter_descriptor(
                 'Samples per simulated second (Hz).',
                 float_range=(1.0, MAX_PUBLISH_RATE_HZ))),
-            'real_time_factor': (1.0, _descriptor(
+            'real_time_factor': (1.0, parameter_descriptor(
                 'Simulated seconds per wall second; 0 runs as fast as possible.',
                 float_range=(0.0, 1000.0))),
-            'seed': (0, _descriptor('Seed of the measurement noise.', int_range=(0, 2**31 - 1))),
-            'noise_std_rad': (0.0, _descriptor(
+            'seed': (0, parameter_descriptor('Seed of the measurement noise.',
+                                             int_range=(0, 2**31 - 1))),
+            'noise_std_rad': (0.0, parameter_descriptor(
                 'Standard deviation of the measured normal per tangential axis (rad).',
                 float_range=(0.0, 0.1))),
-            'wait_for_subscribers': (0, _descriptor(
+            'wait_for_subscribers': (0, parameter_descriptor(
                 f'Hold simulated time at 0 until {SURFACE_NORMAL.name} has this many '
                 'subscribers (DDS discovery takes seconds; a scenario should not start before '
                 'its controller listens).', int_range=(0, 100))),
-            'lockstep': (False, _descriptor(
+            'lockstep': (False, parameter_descriptor(
                 'Advance simulated time only while a command is in effect: runs are then '
                 'identical whatever the wall-clock timing.')),
         }

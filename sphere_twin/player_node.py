@@ -17,13 +17,12 @@ memory when the node starts; a bag left by a killed recorder plays its completed
 import dataclasses
 import time
 
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from msg_defs.ros_env import run_node
+from msg_defs.ros_env import parameter_descriptor, run_node
 from msg_defs.topics import ALL_TOPICS, CLOCK
 from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.reader import BagError, message_class, read_messages, read_metadata
@@ -130,13 +129,6 @@ def played_line(count):
     return f'played {count} messages'
 
 
-def _descriptor(description, float_range=None):
-    d = ParameterDescriptor(description=description, read_only=True)
-    if float_range is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=float(float_range[0]),
-                                                     to_value=float(float_range[1]), step=0.0)]
-    return d
-
 
 class PlayerNode(Node):
     """Republishes a bag.
@@ -200,21 +192,21 @@ class PlayerNode(Node):
 
     def _declare_parameters(self):
         specs = {
-            'bag': ('', _descriptor('Bag directory to play (with metadata.yaml).')),
-            'rate': (1.0, _descriptor(
+            'bag': ('', parameter_descriptor('Bag directory to play (with metadata.yaml).')),
+            'rate': (1.0, parameter_descriptor(
                 'Playback speed: 2 plays twice as fast as recorded.', (MIN_RATE, MAX_RATE))),
-            'start_offset_s': (0.0, _descriptor(
+            'start_offset_s': (0.0, parameter_descriptor(
                 'Skip this much of the bag (s of recorded time from its first message).',
                 (0.0, 1e9))),
-            'topics': (Parameter.Type.STRING_ARRAY, _descriptor(
+            'topics': (Parameter.Type.STRING_ARRAY, parameter_descriptor(
                 'Topics to play, by name; every topic of the bag if unset.')),
-            'loop': (False, _descriptor('Start over at the end, until stopped.')),
-            'publish_clock': (True, _descriptor(
+            'loop': (False, parameter_descriptor('Start over at the end, until stopped.')),
+            'publish_clock': (True, parameter_descriptor(
                 'Publish /clock from the log times when the bag has no /clock messages.')),
-            'wait_for_subscribers_s': (0.0, _descriptor(
+            'wait_for_subscribers_s': (0.0, parameter_descriptor(
                 'Before playing, wait up to this long (s) until every topic played has a '
                 'subscriber; 0 starts at once.', (0.0, MAX_WAIT_S))),
-            'delay_s': (0.0, _descriptor(
+            'delay_s': (0.0, parameter_descriptor(
                 'Then wait this long (s) before the first message: a publisher sees a '
                 'subscriber slightly before that subscriber accepts its messages.',
                 (0.0, MAX_WAIT_S))),

@@ -21,13 +21,12 @@ import time
 from pathlib import Path
 
 import rclpy
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
-from msg_defs.ros_env import ensure_localhost_discovery
+from msg_defs.ros_env import ensure_localhost_discovery, parameter_descriptor
 from msg_defs.topics import ALL_TOPICS, topic_by_name
 from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.writer import COMPRESSIONS, DEFAULT_CHUNK_SIZE_BYTES, BagWriter
@@ -56,15 +55,6 @@ def summary_line(message_count, topic_count, path):
     """The recorder's last line of output."""
     return f'recorded {message_count} messages on {topic_count} topics to {path}'
 
-
-def _descriptor(description, float_range=None, int_range=None):
-    d = ParameterDescriptor(description=description, read_only=True)
-    if float_range is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=float(float_range[0]),
-                                                     to_value=float(float_range[1]), step=0.0)]
-    if int_range is not None:
-        d.integer_range = [IntegerRange(from_value=int_range[0], to_value=int_range[1], step=1)]
-    return d
 
 
 class RecorderNode(Node):
@@ -117,18 +107,18 @@ class RecorderNode(Node):
 
     def _declare_parameters(self):
         specs = {
-            'output_dir': ('', _descriptor(
+            'output_dir': ('', parameter_descriptor(
                 'Bag directory to create (must not exist or be empty); "" for '
                 f'{DEFAULT_BAG_PARENT}/run_<UTC time>.')),
-            'topics': ([t.name for t in ALL_TOPICS], _descriptor(
+            'topics': ([t.name for t in ALL_TOPICS], parameter_descriptor(
                 'Topics to record, by name; each must be in the topic contract. All of them '
                 'by default.')),
-            'compression': ('zstd', _descriptor(
+            'compression': ('zstd', parameter_descriptor(
                 f'Compression of the MCAP chunks: {", ".join(COMPRESSIONS)}.')),
-            'chunk_size_bytes': (DEFAULT_CHUNK_SIZE_BYTES, _descriptor(
+            'chunk_size_bytes': (DEFAULT_CHUNK_SIZE_BYTES, parameter_descriptor(
                 'Uncompressed size (bytes) at which an MCAP chunk is completed.',
                 int_range=(1024, 2**31 - 1))),
-            'flush_period_s': (DEFAULT_FLUSH_PERIOD_S, _descriptor(
+            'flush_period_s': (DEFAULT_FLUSH_PERIOD_S, parameter_descriptor(
                 'Complete the current chunk and write it to disk this often (s), bounding '
                 'what a crash can lose; 0 writes chunks only when full.',
                 float_range=(0.0, MAX_FLUSH_PERIOD_S))),
