@@ -35,3 +35,20 @@ def twin():
 
     with lockstep_twin(plant='discrete', seed=0) as client:
         yield client
+
+
+@pytest.fixture(scope='session')
+def model():
+    """The shipped rest scene's model (calibrated parameters, four beams and the sphere)."""
+    from sphere_sim.model import assemble
+    from sphere_sim.scene import load_scene
+
+    return assemble(load_scene('rest'))
+
+
+@pytest.fixture(scope='session')
+def x_rest(model):
+    """The sphere resting level on the four tips."""
+    from sphere_sim.initial_state import rest_state
+
+    return rest_state(model)

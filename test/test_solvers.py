@@ -27,16 +27,6 @@ ASYMMETRIC = PulseProgramme((Pulse(1, 35.0, 0.5e-3, 1.0e-3), Pulse(2, 35.0, 0.5e
                              Pulse(3, 80.0, 0.0, 0.8e-3), Pulse(4, 80.0, 0.0, 0.8e-3)))
 
 
-@pytest.fixture(scope='module')
-def model():
-    return assemble(load_scene('rest'))
-
-
-@pytest.fixture(scope='module')
-def x_rest(model):
-    return rest_state(model)
-
-
 def scaled(model, jac):
     """The Jacobian in the state_scale units: entries comparable across states."""
     s = state_scale(model)

@@ -39,16 +39,6 @@ def all_beams(amplitude_v, width_s, limit_v=80.0):
                           voltage_limit_v=limit_v)
 
 
-@pytest.fixture(scope='module')
-def model():
-    return assemble(load_scene('rest'))
-
-
-@pytest.fixture(scope='module')
-def x_rest(model):
-    return rest_state(model)
-
-
 def deepest_gap(traj):
     """Smallest gap (m) of any contact the model has, over the samples."""
     return min(float(np.min(contact_gaps(traj.model, traj.x[:, i]), initial=math.inf))
