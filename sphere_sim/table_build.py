@@ -105,23 +105,38 @@ def _read_partial(path, digest):
     return done
 
 
+def run_kick_jobs(spec_data, jobs):
+    """The entries of several jobs, in order (one task: the jobs of one resting state)."""
+    return [run_kick_job(spec_data, job) for job in jobs]
+
+
+def _by_state(jobs):
+    """Jobs grouped by grid node: one task per resting state, whose rest state (the costly
+    relaxation) is then computed once, in one process."""
+    groups = {}
+    for job in jobs:
+        groups.setdefault((job.i, job.j), []).append(job)
+    return list(groups.values())
+
+
 def _engine_map(jobs, spec_data, workers, scheduler):
     """Yield results as they complete, from Dask, a process pool or this process."""
+    groups = _by_state(jobs)
     if scheduler is not None:
         from distributed import Client, as_completed
 
         with Client(scheduler) as client:
-            futures = client.map(run_kick_job, [spec_data] * len(jobs), jobs, pure=False)
+            futures = client.map(run_kick_jobs, [spec_data] * len(groups), groups, pure=False)
             for future in as_completed(futures):
-                yield future.result()
+                yield from future.result()
     elif workers > 1:
         with concurrent.futures.ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = [pool.submit(run_kick_job, spec_data, job) for job in jobs]
+            futures = [pool.submit(run_kick_jobs, spec_data, group) for group in groups]
             for future in concurrent.futures.as_completed(futures):
-                yield future.result()
+                yield from future.result()
     else:
-        for job in jobs:
-            yield run_kick_job(spec_data, job)
+        for group in groups:
+            yield from run_kick_jobs(spec_data, group)
 
 
 def build_table(spec, workers=1, scheduler=None, partial_path=None, progress=None):
