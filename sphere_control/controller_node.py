@@ -29,11 +29,11 @@ from msg_defs.topics import (
     SURFACE_NORMAL,
     VOLTAGE_COMMAND,
 )
+from sphere_control.controllers import CONTROLLER_KINDS, make_controller
 from sphere_control.kick_cycle import KickCycle, Phase
 
 STALE_CHECK_PERIOD_S = 0.25
 NS_PER_S = 1_000_000_000
-CONTROLLER_KINDS = ('basic', 'extended')  # also in sphere_control.controllers
 
 
 
@@ -43,7 +43,6 @@ class ControllerNode(Node):
     def __init__(self, **node_kwargs):
         # Physics and tables load here rather than at import, so main() installs its signal
         # handlers first and a SIGINT during start-up is a clean shutdown.
-        from sphere_control.controllers import make_controller
         from sphere_sim.twin_setup import load_kick_model
 
         super().__init__('controller', **node_kwargs)

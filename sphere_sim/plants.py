@@ -16,7 +16,6 @@ from sphere_sim.initial_state import initial_state
 from sphere_sim.kicks import KICK_WINDOW_S
 from sphere_sim.programme import Pulse, PulseProgramme
 from sphere_sim.solve import simulate
-from sphere_sim.symmetry import Symmetry
 
 BEAM_COUNT = 4
 LIVE_RTOL = 1e-6  # the tolerance the kicks and the table were computed with
@@ -167,12 +166,6 @@ class ContinuousPlant:
         beams = tuple(np.array(c, dtype=float) for c in m.beam_coordinates(x))
         return PlantSnapshot(self.time_s, m.surface_normal(x), self.schedule.voltages_at(
             self.time_s), sphere, beams)
-
-
-def kick_programmes(design, intensity, n_actions=4):
-    """The pulse programme of each action (the design turned by quarter turns) at u_K."""
-    reference = design.programme(intensity)
-    return [Symmetry(a).apply_programme(reference) for a in range(n_actions)]
 
 
 def decode_kick(kick_plant, programme):

@@ -37,11 +37,11 @@ from msg_defs.topics import (
     SURFACE_NORMAL,
     VOLTAGE_COMMAND,
 )
+from sphere_sim.twin_setup import PLANT_KINDS
 
 # The physics (scipy, numba, the kick table) is imported when the node is built, not with this
 # module, so that main() installs its signal handlers first: a SIGINT during the seconds of
 # start-up is then a clean shutdown like any other.
-PLANT_KINDS = ('discrete', 'continuous')
 
 DEFAULT_PUBLISH_RATE_HZ = 50.0
 MAX_PUBLISH_RATE_HZ = 1000.0

@@ -1,12 +1,9 @@
 """Building the simulator's plant from a scene name and a plant kind (one place for both)."""
 
-from sphere_sim.discrete import normal_from_cardan
-from sphere_sim.lookup_table import DEFAULT_TABLE_PATH, CombinedKickPlant, LookupTable
-from sphere_sim.model import assemble
-from sphere_sim.plants import ContinuousPlant, DiscretePlant, PlantError
-from sphere_sim.scene import load_scene
+# The physics is imported inside the functions: the node modules import this one for
+# PLANT_KINDS and must start (and install their signal handlers) before numba and the tables load.
 
-PLANT_KINDS = ('discrete', 'continuous')  # also named in sphere_sim.simulator_node
+PLANT_KINDS = ('discrete', 'continuous')
 
 
 def load_kick_model(table_paths=(), params=None):
@@ -19,6 +16,8 @@ def load_kick_model(table_paths=(), params=None):
     params : ParameterSet, optional
         Refuse tables built for other parameters.
     """
+    from sphere_sim.lookup_table import DEFAULT_TABLE_PATH, CombinedKickPlant, LookupTable
+
     paths = list(table_paths) or [DEFAULT_TABLE_PATH]
     tables = [LookupTable.load(path, params=params) for path in paths]
     return tables[0] if len(tables) == 1 else CombinedKickPlant(tables)
@@ -35,11 +34,16 @@ def build_plant(kind, scene_name='rest', table_paths=()):
     PlantError
         For an unknown kind.
     """
+    from sphere_sim.discrete import normal_from_cardan
+    from sphere_sim.model import assemble
+    from sphere_sim.plants import ContinuousPlant, DiscretePlant, PlantError
+    from sphere_sim.scene import load_scene
+
+    if kind not in PLANT_KINDS:
+        raise PlantError(f'unknown plant {kind!r}; choose one of {", ".join(PLANT_KINDS)}')
     scene = load_scene(scene_name)
     if kind == 'continuous':
         return ContinuousPlant(assemble(scene))
-    if kind == 'discrete':
-        kicks = load_kick_model(table_paths, scene.parameters())
-        alpha, beta, _ = scene.initial.sphere_angles_deg
-        return DiscretePlant(kicks, normal_from_cardan(alpha, beta), kicks.spec.window_s)
-    raise PlantError(f'unknown plant {kind!r}; choose one of {", ".join(PLANT_KINDS)}')
+    kicks = load_kick_model(table_paths, scene.parameters())
+    alpha, beta, _ = scene.initial.sphere_angles_deg
+    return DiscretePlant(kicks, normal_from_cardan(alpha, beta), kicks.spec.window_s)

@@ -15,7 +15,6 @@ from sphere_sim.plants import (
     PlantError,
     VoltageSchedule,
     decode_kick,
-    kick_programmes,
 )
 from sphere_sim.programme import Pulse, PulseProgramme
 from sphere_sim.twin import CommandError, TwinRunner
@@ -39,9 +38,9 @@ def test_schedule_keeps_the_past_and_lets_the_latest_command_win():
 
 
 def test_every_kick_decodes_to_its_action_and_intensity_after_a_message_round_trip(table):
-    design = table.spec.design
     for intensity in (0.2, 0.55, 1.0):
-        for action, programme in enumerate(kick_programmes(design, intensity)):
+        for action in range(4):
+            programme = table.programme(action, intensity)
             times, volts = programme_from_msg(programme_to_msg(*programme.segments()))
             received = PulseProgramme.from_segments(times, volts)
             decoded_action, decoded_intensity = decode_kick(table, received)
@@ -58,12 +57,12 @@ def test_a_programme_that_is_no_kick_of_the_design_is_refused(table):
 def test_discrete_plant_jumps_to_the_tables_outcome_at_the_end_of_the_window(table):
     start = normal_from_xy(0.1, -0.05)
     plant = DiscretePlant(table, start, table.spec.window_s)
-    plant.run_programme(kick_programmes(table.spec.design, 0.8)[2])
+    plant.run_programme(table.programme(2, 0.8))
     expected = table.kick(start, 2, 0.8).normal
     plant.advance(0.5 * table.spec.window_s)
     np.testing.assert_array_equal(plant.snapshot().normal, start)
     with pytest.raises(PlantError, match='still running'):
-        plant.run_programme(kick_programmes(table.spec.design, 0.8)[0])
+        plant.run_programme(table.programme(0, 0.8))
     plant.advance(table.spec.window_s)
     np.testing.assert_array_equal(plant.snapshot().normal, expected)
     with pytest.raises(PlantError, match='kicks only'):
@@ -92,7 +91,7 @@ def test_lockstep_runner_answers_each_command_with_its_samples_then_idles(table)
     first, _ = runner.tick()
     assert first.snapshot.time_s == 0.0
     assert runner.tick() == (None, [])  # idle: nothing in effect
-    runner.command_programme(*kick_programmes(table.spec.design, 1.0)[0].segments())
+    runner.command_programme(*table.programme(0, 1.0).segments())
     times = []
     while (sample := runner.tick()[0]) is not None:
         times.append(sample.snapshot.time_s)
