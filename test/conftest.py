@@ -52,3 +52,18 @@ def x_rest(model):
     from sphere_sim.initial_state import rest_state
 
     return rest_state(model)
+
+
+@pytest.fixture
+def context(monkeypatch):
+    """An rclpy context of its own, on a fresh domain with localhost discovery, for nodes
+    built and driven inside the test's process."""
+    import rclpy
+
+    from msg_defs.ros_env import DISCOVERY_RANGE_VAR
+
+    monkeypatch.setenv(DISCOVERY_RANGE_VAR, 'LOCALHOST')
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=fresh_domain_id())
+    yield context
+    rclpy.try_shutdown(context=context)

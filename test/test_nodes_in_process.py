@@ -2,18 +2,15 @@
 
 import numpy as np
 import pytest
-import rclpy
 from builtin_interfaces.msg import Duration
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from msg_defs.conversions import programme_to_msg, surface_normal_to_msg, voltages_to_msg
-from msg_defs.ros_env import DISCOVERY_RANGE_VAR
 from sphere_sim.plants import PlantSnapshot
 from sphere_sim.simulator_node import SimulatorNode
 from sphere_twin.monitor_node import MonitorNode
-from sphere_twin.processes import fresh_domain_id
 
 pytestmark = pytest.mark.ros
 
@@ -42,16 +39,6 @@ class RecordingPlant:
 
     def snapshot(self):
         return PlantSnapshot(self.time_s, TILTED_NORMAL.copy(), self.voltages_v.copy())
-
-
-@pytest.fixture
-def context(monkeypatch):
-    """An rclpy context of its own, on a fresh domain with localhost discovery."""
-    monkeypatch.setenv(DISCOVERY_RANGE_VAR, 'LOCALHOST')
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=fresh_domain_id())
-    yield context
-    rclpy.try_shutdown(context=context)
 
 
 @pytest.fixture

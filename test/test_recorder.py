@@ -49,7 +49,7 @@ from msg_defs.topics import (
 from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.reader import deserialize, read_messages, read_metadata
 from sphere_twin.bag.writer import BagWriter
-from sphere_twin.processes import fresh_domain_id, parameter_args, stop
+from sphere_twin.processes import parameter_args, stop
 from sphere_twin.recorder_node import (
     RecorderNode,
     StopRequest,
@@ -500,15 +500,6 @@ def test_recorder_stopped_by_sigterm_leaves_an_empty_bag_rosbags_opens(ros_nodes
     with Reader(bag_dir) as reader:
         assert reader.message_count == 0
         assert reader.connections == []
-
-
-@pytest.fixture
-def context(monkeypatch):
-    monkeypatch.setenv(DISCOVERY_RANGE_VAR, 'LOCALHOST')
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=fresh_domain_id())
-    yield context
-    rclpy.try_shutdown(context=context)
 
 
 @pytest.mark.ros
