@@ -2,9 +2,9 @@
 
 Starts the recorder, the simulator (discrete plant, paced), the reference node and the
 extended controller on a fresh ROS domain; runs the default scenario (the Fig. 13 setpoint,
-then the trajectory of eq. (64)); stops every node by its PID; and reports what happened from
-a probe of its own: kicks, final and RMS error, real-time factor, the bag and a plot of the
-error against run time.
+then the trajectory of eq. (64)); stops every node by its PID; and reports what happened, read
+back from the bag it recorded as `sphere-twin report` reads it: kicks, final and RMS error,
+real-time factor, the bag and a plot of the error against run time.
 """
 
 import argparse
@@ -62,40 +62,18 @@ def demo_nodes(bag_dir, setpoint_s, real_time_factor, seed):
 
 
 class RunLog:
-    """The demo's own record of the run: measured normals, references, controller status."""
+    """What the demo watches while the run goes: measured normals and controller status."""
 
     def __init__(self, probe):
-        from msg_defs.topics import CONTROLLER_STATUS, SPHERE_REFERENCE, SURFACE_NORMAL
+        from msg_defs.topics import CONTROLLER_STATUS, SURFACE_NORMAL
 
         self.normals = probe.messages[SURFACE_NORMAL.name]
-        self.references = probe.messages[SPHERE_REFERENCE.name]
         self.statuses = probe.messages[CONTROLLER_STATUS.name]
 
     def simulated_s(self):
         from msg_defs.conversions import ns_from_time
 
         return ns_from_time(self.normals[-1].header.stamp) * 1e-9 if self.normals else 0.0
-
-    def errors(self):
-        """(times_s, error_rad, normals_xy, references_xy) at each measured sample."""
-        from msg_defs.conversions import ns_from_time, surface_normal_from_msg
-        from sphere_sim.discrete import angle_between
-
-        refs = sorted(((ns_from_time(m.header.stamp), surface_normal_from_msg(m))
-                       for m in self.references), key=lambda item: item[0])
-        ref_times = np.array([t for t, _ in refs])
-        times, errors, normals, targets = [], [], [], []
-        for msg in self.normals:
-            stamp = ns_from_time(msg.header.stamp)
-            i = int(np.searchsorted(ref_times, stamp, side='right')) - 1
-            if i < 0:
-                continue
-            normal = surface_normal_from_msg(msg)
-            times.append(stamp * 1e-9)
-            errors.append(angle_between(normal, refs[i][1]))
-            normals.append(normal[:2])
-            targets.append(refs[i][1][:2])
-        return np.array(times), np.array(errors), np.array(normals), np.array(targets)
 
     def controller_ready(self):
         """The controller has the reference and waits for the first sample."""
@@ -109,35 +87,12 @@ class RunLog:
         return 0
 
 
-def plot_run(times_s, errors_rad, normals_xy, references_xy, setpoint_s, path):
-    """Error against run time and the x-y path beside the reference, as in Figs. 13 and 15."""
-    from sphere_twin.plots import plt
-
-    fig, (ax_err, ax_xy) = plt.subplots(1, 2, figsize=(11, 4.5))
-    ax_err.plot(times_s, np.degrees(errors_rad), lw=1)
-    ax_err.axvline(setpoint_s, color='k', ls=':', lw=1, label='trajectory starts')
-    ax_err.set_yscale('log')
-    ax_err.set_xlabel('simulated time (s)')
-    ax_err.set_ylabel('angle to reference (deg)')
-    ax_err.legend()
-    ax_err.grid(alpha=0.3)
-    ax_xy.plot(references_xy[:, 0], references_xy[:, 1], 'k--', lw=1, label='reference')
-    ax_xy.plot(normals_xy[:, 0], normals_xy[:, 1], lw=1, label='surface normal')
-    ax_xy.set_xlabel('$x_{sn}$')
-    ax_xy.set_ylabel('$y_{sn}$')
-    ax_xy.set_aspect('equal', adjustable='datalim')
-    ax_xy.legend()
-    ax_xy.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
-
-
 def run_demo(setpoint_s=DEFAULT_SETPOINT_S, trajectory_s=DEFAULT_TRAJECTORY_S,
              real_time_factor=DEFAULT_REAL_TIME_FACTOR, bags_dir='bags', seed=0, out=None):
     """Run the scenario; returns 0 if the loop ran and every node exited cleanly, else 1."""
-    from msg_defs.topics import CONTROLLER_STATUS, SPHERE_REFERENCE, SURFACE_NORMAL
+    from msg_defs.topics import CONTROLLER_STATUS, SURFACE_NORMAL
+    from sphere_twin.bag.reader import BagError
+    from sphere_twin.run_analysis import errors_rad, load_run, plot_report
     from sphere_twin.testing import TopicProbe, TwinTimeoutError
 
     out = sys.stdout if out is None else out
@@ -160,7 +115,7 @@ def run_demo(setpoint_s=DEFAULT_SETPOINT_S, trajectory_s=DEFAULT_TRAJECTORY_S,
     with running_nodes(*others, domain_id=domain_id) as group:
         for process in group.processes:
             say(f'demo: started {process.name} (pid {process.pid})')
-        probe = TopicProbe(domain_id, (SURFACE_NORMAL, SPHERE_REFERENCE, CONTROLLER_STATUS))
+        probe = TopicProbe(domain_id, (SURFACE_NORMAL, CONTROLLER_STATUS))
         log = RunLog(probe)
         try:
             probe.spin_until(log.controller_ready, START_TIMEOUT_S,
@@ -191,13 +146,18 @@ def run_demo(setpoint_s=DEFAULT_SETPOINT_S, trajectory_s=DEFAULT_TRAJECTORY_S,
         say(f'demo: stopped {process.name} (pid {process.pid}), exit code {process.returncode}')
         if process.returncode != 0:
             problems.append(f'{process.name} exited with {process.returncode}')
-    times, errors, normals, targets = log.errors()
+    try:
+        # What the run did is read back from its own bag, as `sphere-twin report` reads it.
+        recorded = load_run(bag_dir)
+        times, errors = errors_rad(recorded)
+    except BagError as error:
+        problems.append(str(error))
+        times = np.empty(0)
     if times.size == 0:
         problems.append('no surface normal crossed between the processes')
     else:
-        bag_dir.parent.mkdir(parents=True, exist_ok=True)
-        plot = plot_run(times, errors, normals, targets, setpoint_s,
-                        bag_dir.parent / f'{bag_dir.name}_error.png')
+        plot = plot_report(recorded, bag_dir.parent / f'{bag_dir.name}_error.png',
+                           title=f'{bag_dir.name}: setpoint, then eq. (64) from {setpoint_s:g} s')
         on_setpoint = (times > 0.5 * setpoint_s) & (times < setpoint_s)
         tracking = times >= setpoint_s
         say(f'demo: {log.kicks()} kicks in {log.simulated_s():.1f} s simulated, '
