@@ -28,7 +28,7 @@ import numpy as np
 from sphere_sim.capacitance import closed_form, rbf_evaluate
 from sphere_sim.contact_law import contact_force
 from sphere_sim.friction import friction_magnitude, onset_gate
-from sphere_sim.rotations import quat_to_matrix
+from sphere_sim.rotations import quat_rows
 from sphere_sim.vec3 import add, cross, dot, mat_t_vec, matvec, scale, sub
 
 # Indices into the packed parameter vector ``p`` (see model.pack_parameters).
@@ -157,14 +157,14 @@ def rhs_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, dxdt, di
     r_sc = (0.0, 0.0, 0.0)
     centre = (0.0, 0.0, 0.0)
     centre_vel = (0.0, 0.0, 0.0)
-    R = np.eye(3)
+    R = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
     if has_sphere:
         pos = (x[o], x[o + 1], x[o + 2])
         vel = (x[o + 7], x[o + 8], x[o + 9])
         omega_b = (x[o + 10], x[o + 11], x[o + 12])
-        R = quat_to_matrix(x[o + 3:o + 7])
+        R = quat_rows(x[o + 3:o + 7])
         omega_i = matvec(R, omega_b)
-        r_sc = (R[0, 2] * p[P_COG_OFFSET], R[1, 2] * p[P_COG_OFFSET], R[2, 2] * p[P_COG_OFFSET])
+        r_sc = (R[0][2] * p[P_COG_OFFSET], R[1][2] * p[P_COG_OFFSET], R[2][2] * p[P_COG_OFFSET])
         centre = add(pos, r_sc)
         centre_vel = add(vel, cross(omega_i, r_sc))
 

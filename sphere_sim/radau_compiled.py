@@ -24,8 +24,9 @@ import math
 import numba
 import numpy as np
 
+from sphere_sim import block_lu
 from sphere_sim import dynamics as dyn
-from sphere_sim.rotations import quat_to_matrix
+from sphere_sim.rotations import quat_rows
 
 # --- Radau IIA (s = 3) coefficients, as in scipy's radau.py -----------------------------------
 S6 = 6.0**0.5
@@ -51,6 +52,7 @@ P = np.array([
     [1.0 / 3.0, -8.0 / 3.0, 10.0 / 3.0]])
 
 NEWTON_MAXITER = 6  # simplified Newton iterations before the step is retried (scipy's value)
+FACCON_RELAX = 0.8  # exponent that relaxes the last contraction factor towards 1 (RADAU5)
 MIN_FACTOR = 0.2  # smallest step shrink after a rejected step (scipy's value)
 MAX_FACTOR = 10.0  # largest step growth after an accepted step (scipy's value)
 EPS = np.finfo(float).eps
@@ -71,72 +73,9 @@ C_NFEV = 2
 C_NJEV = 3
 C_NLU = 4
 C_ONSET_REJECTED = 5
-N_COUNTERS = 6
-
-
-@numba.njit(cache=True)
-def lu_factor(A, piv):
-    """LU with partial pivoting of a square real or complex matrix, in place.
-
-    Parameters
-    ----------
-    A : ndarray, shape (n, n)
-        Overwritten with L (unit diagonal, below) and U (on and above the diagonal).
-    piv : ndarray of int64, shape (n,)
-        Row interchanges.
-
-    Returns
-    -------
-    bool
-        False if a zero pivot was met (the matrix is singular).
-    """
-    n = A.shape[0]
-    for k in range(n):
-        p = k
-        best = abs(A[k, k])
-        for i in range(k + 1, n):
-            v = abs(A[i, k])
-            if v > best:
-                best = v
-                p = i
-        piv[k] = p
-        if best == 0.0:
-            return False
-        if p != k:
-            for j in range(n):
-                tmp = A[k, j]
-                A[k, j] = A[p, j]
-                A[p, j] = tmp
-        inv = 1.0 / A[k, k]
-        for i in range(k + 1, n):
-            a = A[i, k] * inv
-            A[i, k] = a
-            if a != 0.0:
-                for j in range(k + 1, n):
-                    A[i, j] -= a * A[k, j]
-    return True
-
-
-@numba.njit(cache=True)
-def lu_solve(LU, piv, b):
-    """Solve A x = b in place in ``b`` from :func:`lu_factor`'s output."""
-    n = LU.shape[0]
-    for k in range(n):
-        p = piv[k]
-        if p != k:
-            tmp = b[k]
-            b[k] = b[p]
-            b[p] = tmp
-    for i in range(n):
-        acc = b[i]
-        for j in range(i):
-            acc -= LU[i, j] * b[j]
-        b[i] = acc
-    for i in range(n - 1, -1, -1):
-        acc = b[i]
-        for j in range(i + 1, n):
-            acc -= LU[i, j] * b[j]
-        b[i] = acc / LU[i, i]
+C_NEWTON_FAILED = 6
+C_ONSET_PREDICTED = 7
+N_COUNTERS = 8
 
 
 @numba.njit(cache=True)
@@ -168,11 +107,11 @@ def contact_gaps(x, p, flags, beam_angles, out):
         i += n
     if flags[dyn.F_SPHERE] and flags[dyn.F_SPHERE_CONTACT]:
         o = 4 * n
-        R = quat_to_matrix(x[o + 3:o + 7])
+        R = quat_rows(x[o + 3:o + 7])
         d = p[dyn.P_COG_OFFSET]
-        cx = x[o] + R[0, 2] * d
-        cy = x[o + 1] + R[1, 2] * d
-        cz = x[o + 2] + R[2, 2] * d
+        cx = x[o] + R[0][2] * d
+        cy = x[o + 1] + R[1][2] * d
+        cz = x[o + 2] + R[2][2] * d
         l_b = p[dyn.P_BEAM_LENGTH]
         for k in range(n):
             phi = x[2 * k + 1]
@@ -194,12 +133,62 @@ def _rms(v, scale):
 
 
 @numba.njit(cache=True)
-def _jacobian(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, scale, J, central):
+def _jacobian(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, scale, J, central,
+              perm, J_perm, block_end, tail):
+    """Jacobian into ``J`` (model order) and ``J_perm`` (order ``perm``).
+
+    Returns True if it has the block-arrow structure of :mod:`sphere_sim.block_lu`.
+    """
     if central:
         dyn.jacobian_kernel_central(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w,
                                     scale, J)
     else:
         dyn.jacobian_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, scale, J)
+    n = perm.size
+    for i in range(n):
+        for j in range(n):
+            J_perm[i, j] = J[perm[i], perm[j]]
+    return block_lu.is_arrow(J_perm, block_end, tail)
+
+
+@numba.njit(cache=True)
+def _onset_fraction(y, Z, gaps0, gaps_stage, stage, n_gaps, p, flags, beam_angles,
+                    onset_depth_m):
+    """Fraction of the step after which the stages ``y + Z[i]`` first close a contact that is
+    open at ``y`` (gaps ``gaps0``) to half ``onset_depth_m``; 1.0 if none closes deeper than
+    ``onset_depth_m``. Gaps are interpolated linearly between the step start and each stage."""
+    n = y.size
+    worst = 1.0
+    for i in range(3):
+        for j in range(n):
+            stage[j] = y[j] + Z[i, j]
+        contact_gaps(stage, p, flags, beam_angles, gaps_stage)
+        for c in range(n_gaps):
+            g0 = gaps0[c]
+            g1 = gaps_stage[c]
+            if g0 > 0.0 and g1 < -onset_depth_m:
+                worst = min(worst, C[i] * (g0 + 0.5 * onset_depth_m) / (g0 - g1))
+    return worst
+
+
+@numba.njit(cache=True)
+def _newton_matrix(J, mu_over_h, out):
+    """``out = mu_over_h I - J``."""
+    n = J.shape[0]
+    for i in range(n):
+        for j in range(n):
+            out[i, j] = -J[i, j]
+        out[i, i] += mu_over_h
+
+
+@numba.njit(cache=True)
+def _solve_model_order(LU, piv, b, work, perm, block_start, block_end, tail):
+    """:func:`block_lu.solve` for ``b`` in model order (``work``: scratch of b's size)."""
+    for i in range(perm.size):
+        work[i] = b[perm[i]]
+    block_lu.solve(LU, piv, work, block_start, block_end, tail)
+    for i in range(perm.size):
+        b[perm[i]] = work[i]
 
 
 @numba.njit(cache=True)
@@ -300,11 +289,18 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
         h1 = max(1e-6, h0 * 1e-3) if tiny else (0.01 / max(d1, d2)) ** 0.25
         h_abs = min(100.0 * h0, h1, interval, max_step)
 
+    # Newton matrices in block-arrow order (sphere_sim.block_lu), dense where that fails.
+    perm, arrow_start, arrow_end, arrow_tail = block_lu.arrow_order(flags[dyn.F_N_BEAMS], n)
+    dense_start, dense_end, dense_tail = block_lu.dense_structure(n)
     J = np.empty((n, n))
-    _jacobian(t, y, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, jac_scale, J,
-              jac_central)
+    J_perm = np.empty((n, n))
+    arrow = _jacobian(t, y, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, jac_scale, J,
+                      jac_central, perm, J_perm, arrow_end, arrow_tail)
     counters[C_NJEV] += 1
     current_jac = True
+    start_r, end_r, tail_r = arrow_start, arrow_end, arrow_tail
+    start_c, end_c, tail_c = arrow_start, arrow_end, arrow_tail
+    work = np.empty(n)
     LU_real = np.empty((n, n))
     LU_complex = np.empty((n, n), dtype=np.complex128)
     piv_real = np.empty(n, dtype=np.int64)
@@ -338,6 +334,7 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
     f_new = np.empty(n)
     mu_c = complex(MU_COMPLEX_RE, MU_COMPLEX_IM)
     steps_here = 0
+    faccon = 1.0
 
     while t < t_end:
         if steps_here >= max_steps:
@@ -383,6 +380,16 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                                    + Q[j, 2] * xs * xs * xs) - y[j]
                     else:
                         Z[i, j] = 0.0
+            # Bound the step by the predicted time to contact: Newton with a Jacobian taken
+            # while a contact is open diverges when the stages close it, and each divergence
+            # costs up to NEWTON_MAXITER stage sweeps and a fresh Jacobian before h is halved.
+            if check_onset and have_dense:
+                worst = _onset_fraction(y, Z, gaps0, gaps_stage, stage, n_gaps, p, flags,
+                                        beam_angles, onset_depth_m)
+                if worst < 1.0:
+                    h_abs *= min(ONSET_SHRINK_MAX, max(ONSET_SHRINK_MIN, worst))
+                    counters[C_ONSET_PREDICTED] += 1
+                    continue
             for j in range(n):
                 scale[j] = atol[j] + abs(y[j]) * rtol
             converged = False
@@ -390,14 +397,23 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                 if not have_lu:
                     mr = MU_REAL / h
                     mc = mu_c / h
-                    for i in range(n):
-                        for j in range(n):
-                            LU_real[i, j] = -J[i, j]
-                            LU_complex[i, j] = -J[i, j]
-                        LU_real[i, i] += mr
-                        LU_complex[i, i] += mc
-                    ok_r = lu_factor(LU_real, piv_real)
-                    ok_c = lu_factor(LU_complex, piv_complex)
+                    _newton_matrix(J_perm, mr, LU_real)
+                    start_r, end_r, tail_r = arrow_start, arrow_end, arrow_tail
+                    ok_r = arrow and block_lu.factor(LU_real, piv_real, start_r, end_r, tail_r,
+                                                     block_lu.PIVOT_THRESHOLD)
+                    if not ok_r:
+                        _newton_matrix(J_perm, mr, LU_real)
+                        start_r, end_r, tail_r = dense_start, dense_end, dense_tail
+                        ok_r = block_lu.factor(LU_real, piv_real, start_r, end_r, tail_r, 0.0)
+                    _newton_matrix(J_perm, mc, LU_complex)
+                    start_c, end_c, tail_c = arrow_start, arrow_end, arrow_tail
+                    ok_c = arrow and block_lu.factor(LU_complex, piv_complex, start_c, end_c,
+                                                     tail_c, block_lu.PIVOT_THRESHOLD)
+                    if not ok_c:
+                        _newton_matrix(J_perm, mc, LU_complex)
+                        start_c, end_c, tail_c = dense_start, dense_end, dense_tail
+                        ok_c = block_lu.factor(LU_complex, piv_complex, start_c, end_c, tail_c,
+                                               0.0)
                     counters[C_NLU] += 2
                     if not (ok_r and ok_c):
                         break
@@ -411,6 +427,9 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                         W[i, j] = TI[i, 0] * Z[0, j] + TI[i, 1] * Z[1, j] + TI[i, 2] * Z[2, j]
                 dW_norm_old = -1.0
                 rate = -1.0
+                # Hairer's RADAU5: the first iteration is judged by the contraction of the
+                # previous Newton solve, relaxed towards 1, instead of always taking a second.
+                faccon = max(faccon, EPS) ** FACCON_RELAX
                 converged = False
                 k = 0
                 for k in range(NEWTON_MAXITER):
@@ -426,19 +445,23 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                                 finite = False
                     if not finite:
                         break
-                    for j in range(n):
-                        f_real[j] = (TI[0, 0] * F[0, j] + TI[0, 1] * F[1, j]
+                    # f_real and f_cplx are in the Newton matrices' (permuted) order.
+                    for i in range(n):
+                        j = perm[i]
+                        f_real[i] = (TI[0, 0] * F[0, j] + TI[0, 1] * F[1, j]
                                      + TI[0, 2] * F[2, j] - mr * W[0, j])
                         fc_re = TI[1, 0] * F[0, j] + TI[1, 1] * F[1, j] + TI[1, 2] * F[2, j]
                         fc_im = TI[2, 0] * F[0, j] + TI[2, 1] * F[1, j] + TI[2, 2] * F[2, j]
-                        f_cplx[j] = complex(fc_re, fc_im) - mc * complex(W[1, j], W[2, j])
-                    lu_solve(LU_real, piv_real, f_real)
-                    lu_solve(LU_complex, piv_complex, f_cplx)
+                        f_cplx[i] = complex(fc_re, fc_im) - mc * complex(W[1, j], W[2, j])
+                    block_lu.solve(LU_real, piv_real, f_real, start_r, end_r, tail_r)
+                    block_lu.solve(LU_complex, piv_complex, f_cplx, start_c, end_c, tail_c)
+                    for i in range(n):
+                        j = perm[i]
+                        dW[0, j] = f_real[i]
+                        dW[1, j] = f_cplx[i].real
+                        dW[2, j] = f_cplx[i].imag
                     acc = 0.0
                     for j in range(n):
-                        dW[0, j] = f_real[j]
-                        dW[1, j] = f_cplx[j].real
-                        dW[2, j] = f_cplx[j].imag
                         for i in range(3):
                             r = dW[i, j] / scale[j]
                             acc += r * r
@@ -454,8 +477,9 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                     for i in range(3):
                         for j in range(n):
                             Z[i, j] = T[i, 0] * W[0, j] + T[i, 1] * W[1, j] + T[i, 2] * W[2, j]
-                    if dW_norm == 0.0 or (rate >= 0.0 and rate / (1.0 - rate) * dW_norm
-                                          < newton_tol):
+                    if rate >= 0.0:
+                        faccon = rate / (1.0 - rate)
+                    if dW_norm == 0.0 or faccon * dW_norm < newton_tol:
                         converged = True
                         break
                     dW_norm_old = dW_norm
@@ -463,8 +487,9 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                 if not converged:
                     if current_jac:
                         break
-                    _jacobian(t, y, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w,
-                              jac_scale, J, jac_central)
+                    arrow = _jacobian(t, y, u, p, flags, beam_angles, rbf_cz, rbf_cphi,
+                                      rbf_w, jac_scale, J, jac_central, perm, J_perm,
+                                      arrow_end, arrow_tail)
                     counters[C_NJEV] += 1
                     current_jac = True
                     have_lu = False
@@ -472,21 +497,13 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                 h_abs *= 0.5
                 have_lu = False
                 counters[C_REJECTED] += 1
+                counters[C_NEWTON_FAILED] += 1
                 continue
 
             # Contact onset: reject a step that closes an open contact too deeply.
             if check_onset:
-                worst = 1.0
-                for i in range(3):
-                    for j in range(n):
-                        stage[j] = y[j] + Z[i, j]
-                    contact_gaps(stage, p, flags, beam_angles, gaps_stage)
-                    for c in range(n_gaps):
-                        g0 = gaps0[c]
-                        g1 = gaps_stage[c]
-                        if g0 > 0.0 and g1 < -onset_depth_m:
-                            fraction = C[i] * (g0 + 0.5 * onset_depth_m) / (g0 - g1)
-                            worst = min(worst, fraction)
+                worst = _onset_fraction(y, Z, gaps0, gaps_stage, stage, n_gaps, p, flags,
+                                        beam_angles, onset_depth_m)
                 if worst < 1.0:
                     h_abs *= min(ONSET_SHRINK_MAX, max(ONSET_SHRINK_MIN, worst))
                     have_lu = False
@@ -501,7 +518,7 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                 ZE[j] = (Z[0, j] * E[0] + Z[1, j] * E[1] + Z[2, j] * E[2]) / h
                 err[j] = f[j] + ZE[j]
                 scale[j] = atol[j] + max(abs(y[j]), abs(y_new[j])) * rtol
-            lu_solve(LU_real, piv_real, err)
+            _solve_model_order(LU_real, piv_real, err, work, perm, start_r, end_r, tail_r)
             error_norm = _rms(err, scale)
             safety = 0.9 * (2 * NEWTON_MAXITER + 1) / (2 * NEWTON_MAXITER + n_iter)
             if rejected and error_norm > 1.0:
@@ -512,7 +529,7 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                 counters[C_NFEV] += 1
                 for j in range(n):
                     err[j] = f_new[j] + ZE[j]
-                lu_solve(LU_real, piv_real, err)
+                _solve_model_order(LU_real, piv_real, err, work, perm, start_r, end_r, tail_r)
                 error_norm = _rms(err, scale)
             if not math.isfinite(error_norm):
                 error_norm = 1e10
@@ -536,8 +553,9 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                        diag)
         counters[C_NFEV] += 1
         if recompute_jac:
-            _jacobian(t_new, y_new, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w,
-                      jac_scale, J, jac_central)
+            arrow = _jacobian(t_new, y_new, u, p, flags, beam_angles, rbf_cz, rbf_cphi,
+                              rbf_w, jac_scale, J, jac_central, perm, J_perm, arrow_end,
+                              arrow_tail)
             counters[C_NJEV] += 1
             current_jac = True
         else:

@@ -14,21 +14,27 @@ import numpy as np
 GIMBAL_LOCK_MARGIN_RAD = 1e-9
 
 
+@numba.njit(cache=True, inline='always')
+def quat_rows(q):
+    """Rows of the body-to-inertial rotation matrix of a quaternion (normalised here).
+
+    A tuple of three row tuples, so that the compiled kernels allocate nothing.
+    """
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    w, x, y, z = q[0] / n, q[1] / n, q[2] / n, q[3] / n
+    return ((1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)),
+            (2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)),
+            (2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)))
+
+
 @numba.njit(cache=True)
 def quat_to_matrix(q):
     """Body-to-inertial rotation matrix of a quaternion (normalised here), shape (3, 3)."""
-    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    w, x, y, z = q[0] / n, q[1] / n, q[2] / n, q[3] / n
+    rows = quat_rows(q)
     R = np.empty((3, 3))
-    R[0, 0] = 1.0 - 2.0 * (y * y + z * z)
-    R[0, 1] = 2.0 * (x * y - w * z)
-    R[0, 2] = 2.0 * (x * z + w * y)
-    R[1, 0] = 2.0 * (x * y + w * z)
-    R[1, 1] = 1.0 - 2.0 * (x * x + z * z)
-    R[1, 2] = 2.0 * (y * z - w * x)
-    R[2, 0] = 2.0 * (x * z - w * y)
-    R[2, 1] = 2.0 * (y * z + w * x)
-    R[2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    for i in range(3):
+        for j in range(3):
+            R[i, j] = rows[i][j]
     return R
 
 

@@ -116,6 +116,7 @@ class SolverStats:
     n_steps: int | None = 0
     n_rejected: int | None = 0
     n_onset_restarts: int = 0
+    n_newton_failed: int | None = 0
     method: str = ''
 
 
@@ -234,6 +235,7 @@ def _segment_fast(model, x, t0, t1, u, rtol, atol, t_eval, onset_depth_m, budget
     stats.n_steps += int(counters[rc.C_STEPS])
     stats.n_rejected += int(counters[rc.C_REJECTED])
     stats.n_onset_restarts += int(counters[rc.C_ONSET_REJECTED])
+    stats.n_newton_failed += int(counters[rc.C_NEWTON_FAILED])
     budget.check(t, x)
     if status == rc.STATUS_STEP_TOO_SMALL or not np.all(np.isfinite(x)):
         raise SolverError(f'fast: step size fell below 10 ulp of t at t = {t} s (h = {h:.3g} s)',

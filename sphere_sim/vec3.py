@@ -30,15 +30,15 @@ def scale(s, a):
 
 @numba.njit(cache=True, inline='always')
 def matvec(R, a):
-    """R a for a 3x3 array ``R``."""
-    return (R[0, 0] * a[0] + R[0, 1] * a[1] + R[0, 2] * a[2],
-            R[1, 0] * a[0] + R[1, 1] * a[1] + R[1, 2] * a[2],
-            R[2, 0] * a[0] + R[2, 1] * a[1] + R[2, 2] * a[2])
+    """R a for a matrix ``R`` given as a tuple of three row tuples."""
+    return (R[0][0] * a[0] + R[0][1] * a[1] + R[0][2] * a[2],
+            R[1][0] * a[0] + R[1][1] * a[1] + R[1][2] * a[2],
+            R[2][0] * a[0] + R[2][1] * a[1] + R[2][2] * a[2])
 
 
 @numba.njit(cache=True, inline='always')
 def mat_t_vec(R, a):
-    """R^T a for a 3x3 array ``R``."""
-    return (R[0, 0] * a[0] + R[1, 0] * a[1] + R[2, 0] * a[2],
-            R[0, 1] * a[0] + R[1, 1] * a[1] + R[2, 1] * a[2],
-            R[0, 2] * a[0] + R[1, 2] * a[1] + R[2, 2] * a[2])
+    """R^T a for a matrix ``R`` given as a tuple of three row tuples."""
+    return (R[0][0] * a[0] + R[1][0] * a[1] + R[2][0] * a[2],
+            R[0][1] * a[0] + R[1][1] * a[1] + R[2][1] * a[2],
+            R[0][2] * a[0] + R[1][2] * a[1] + R[2][2] * a[2])

@@ -37,7 +37,7 @@ def test_full_scene_has_sphere_states_and_all_parts():
                            'friction:stribeck')
 
 
-@pytest.mark.parametrize('patched', ['quat_to_matrix', 'friction_magnitude', 'onset_gate'])
+@pytest.mark.parametrize('patched', ['quat_rows', 'friction_magnitude', 'onset_gate'])
 def test_beams_only_scene_never_calls_sphere_or_friction_code(monkeypatch, patched):
     rng = np.random.default_rng(1)
     model = assemble(scene_with(sphere=False), jit=False)
@@ -53,7 +53,7 @@ def test_parts_switched_off_are_never_called(monkeypatch):
                      jit=False)
     x = _random_state(model, rng)
     x[0:8:2] = -9.5e-6  # deep in what would be ground contact
-    for name in ('contact_force', 'capacitance_of', 'quat_to_matrix', 'friction_magnitude'):
+    for name in ('contact_force', 'capacitance_of', 'quat_rows', 'friction_magnitude'):
         monkeypatch.setattr(dynamics, name, _raise)
     assert np.all(np.isfinite(model.rhs(0.0, x, np.full(4, 80.0))))
 
@@ -63,7 +63,7 @@ def test_patched_part_is_detected_when_the_scene_needs_it(monkeypatch):
     model = assemble(scene_with(), jit=False)
     x = np.zeros(model.n_states)
     x[model.sphere_offset + 3] = 1.0
-    monkeypatch.setattr(dynamics, 'quat_to_matrix', _raise)
+    monkeypatch.setattr(dynamics, 'quat_rows', _raise)
     with pytest.raises(AssertionError, match='left out'):
         model.rhs(0.0, x, np.zeros(4))
 

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from sphere_sim import dynamics as dyn
-from sphere_sim import radau_compiled as rc
 from sphere_sim.initial_state import rest_state
 from sphere_sim.model import assemble
 from sphere_sim.programme import Pulse, PulseProgramme
@@ -72,21 +71,6 @@ def test_jacobian_at_contact_onset(model, x_rest):
     # The contact terms are in: the sphere's vertical acceleration depends on its height.
     jac = model.jacobian(0.0, x, u)
     assert jac[o + 9, o + 2] < 0.0
-
-
-@pytest.mark.parametrize('dtype', [float, complex])
-def test_compiled_lu_solves_like_numpy(dtype):
-    rng = np.random.default_rng(1)
-    a = rng.standard_normal((9, 9)).astype(dtype)
-    if dtype is complex:
-        a = a + 1j * rng.standard_normal((9, 9))
-    b = rng.standard_normal(9).astype(dtype)
-    lu = a.copy()
-    piv = np.empty(9, dtype=np.int64)
-    assert rc.lu_factor(lu, piv)
-    x = b.copy()
-    rc.lu_solve(lu, piv, x)
-    np.testing.assert_allclose(x, np.linalg.solve(a, b), rtol=1e-10)
 
 
 def test_contact_gaps_match_the_model(model, x_rest):
