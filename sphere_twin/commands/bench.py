@@ -271,16 +271,18 @@ COLUMNS = ('scene', 'method', 'rtol', 'status', 'wall_s', 'angle_error_rad', 'st
 
 
 def write_results(rows, summary, scenes, out_dir):
+    # A quick run writes beside the full results, never over them.
+    stem = 'work_precision_quick' if summary['quick'] else 'work_precision'
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    with open(out_dir / 'work_precision.csv', 'w', newline='') as stream:
+    with open(out_dir / f'{stem}.csv', 'w', newline='') as stream:
         writer = csv.DictWriter(stream, fieldnames=COLUMNS)
         writer.writeheader()
         for row in rows:
             writer.writerow({k: (f'{v:.6g}' if isinstance(v, float) else v)
                              for k, v in row.items()})
-    (out_dir / 'work_precision.md').write_text(markdown(rows, summary, scenes))
-    plot(rows, scenes, out_dir / 'work_precision.png')
+    (out_dir / f'{stem}.md').write_text(markdown(rows, summary, scenes))
+    plot(rows, scenes, out_dir / f'{stem}.png')
 
 
 def markdown(rows, summary, scenes):

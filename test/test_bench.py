@@ -1,0 +1,63 @@
+"""The work-precision benchmark's bookkeeping (its timings are reported, never asserted)."""
+
+import io
+import math
+import re
+
+import pytest
+
+from sphere_twin.commands import bench
+
+
+def row(method, rtol, error, wall_s, scene='s'):
+    return {'scene': scene, 'method': method, 'rtol': rtol, 'status': 'ok',
+            'angle_error_rad': error, 'wall_s': wall_s}
+
+
+def test_time_at_error_interpolates_in_log_log():
+    rows = [row('fast', 1e-3, 1e-4, 1.0), row('fast', 1e-4, 1e-8, 100.0)]
+    # 1e-6 is halfway in log(error), so the time is halfway in log(time).
+    assert bench.time_at_error(rows, 's', 'fast', 1e-6) == pytest.approx(10.0)
+
+
+def test_time_at_error_takes_the_loosest_run_that_is_accurate_enough():
+    rows = [row('fast', 1e-3, 1e-7, 2.0), row('fast', 1e-4, 1e-9, 5.0)]
+    assert bench.time_at_error(rows, 's', 'fast', 1e-6) == 2.0
+
+
+def test_time_at_error_is_nan_when_no_run_is_accurate_enough():
+    rows = [row('LSODA', 1e-3, 1e-3, 1.0), row('LSODA', 1e-4, 1e-5, 2.0)]
+    assert math.isnan(bench.time_at_error(rows, 's', 'LSODA', 1e-6))
+
+
+@pytest.fixture(scope='module')
+def quick_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp('bench')
+    stream = io.StringIO()
+    rows, summary = bench.work_precision(quick=True, out_dir=out, stream=stream)
+    return out, stream.getvalue(), rows, summary
+
+
+def test_quick_run_writes_beside_the_full_results(quick_run):
+    out, _, _, _ = quick_run
+    assert sorted(p.name for p in out.iterdir()) == [
+        'work_precision_quick.csv', 'work_precision_quick.md', 'work_precision_quick.png']
+
+
+def test_quick_run_ends_with_the_summary_line(quick_run):
+    _, printed, _, summary = quick_run
+    last = printed.strip().splitlines()[-1]
+    match = re.fullmatch(r'speedup vs best scipy at 1e-6 rad: ([0-9.]+)x; '
+                         r'real-time factor: ([0-9.]+)', last)
+    assert match
+    assert float(match.group(1)) == pytest.approx(summary['speedup'], rel=0.05)
+
+
+def test_quick_run_errors_fall_with_the_tolerance(quick_run):
+    _, _, rows, summary = quick_run
+    # The two reference methods agree far below the errors being measured.
+    assert summary['agreement']['diagonal_kick'][0] < 1e-8
+    for method in bench.QUICK_METHODS:
+        errors = [r['angle_error_rad'] for r in sorted(rows, key=lambda r: -r['rtol'])
+                  if r['method'] == method]
+        assert errors[-1] < errors[0] / 100, method
