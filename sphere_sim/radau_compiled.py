@@ -65,6 +65,7 @@ STATUS_CHUNK = 0  # CHUNK_STEPS accepted, call again
 STATUS_DONE = 1  # reached t_end
 STATUS_STEP_TOO_SMALL = -1  # the step fell below 10 ulp of t
 STATUS_STEP_BUDGET = -2  # max_steps accepted steps taken without reaching t_end
+STATUS_LEFT_DOMAIN = -3  # an electrode gap closed to <= 0 from > 0 (electrode_gaps)
 
 # Indices into the int64 ``counters`` array.
 C_STEPS = 0
@@ -121,6 +122,32 @@ def contact_gaps(x, p, flags, beam_angles, out):
             rz = x[2 * k] + l_b * math.sin(phi) - cz
             out[i] = math.sqrt(rx * rx + ry * ry + rz * rz) - p[dyn.P_SPHERE_RADIUS]
             i += 1
+
+
+@numba.njit(cache=True)
+def electrode_gaps(x, p, flags, out):
+    """Smallest gap (m) between each beam's electrode and the ground electrode.
+
+    The lesser of the suspension-end gap z_S - z_G and the far-end gap z_S - z_G + L_ES sin
+    phi. The contact law keeps it above d_Iso minus the contact's penetration; at zero the
+    electrode touches the ground electrode, where the parallel-plate force is unbounded and
+    the model no longer describes the device.
+    """
+    for k in range(flags[dyn.F_N_BEAMS]):
+        gap = x[2 * k] - p[dyn.P_GROUND_Z]
+        out[k] = min(gap, gap + p[dyn.P_ES_LENGTH] * math.sin(x[2 * k + 1]))
+
+
+@numba.njit(cache=True)
+def crossed_electrode(x, gaps_start, p, flags):
+    """Index of the first beam whose electrode gap was > 0 in ``gaps_start`` and is <= 0 at
+    ``x``, or -1. Only a crossing counts: a run may start outside (the RBF grid's edges are
+    tested there)."""
+    for k in range(flags[dyn.F_N_BEAMS]):
+        gap = x[2 * k] - p[dyn.P_GROUND_Z]
+        if min(gap, gap + p[dyn.P_ES_LENGTH] * math.sin(x[2 * k + 1])) <= 0.0 < gaps_start[k]:
+            return k
+    return -1
 
 
 @numba.njit(cache=True)
@@ -317,6 +344,10 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
 
     n_gaps = n_contacts(flags)
     check_onset = onset_depth_m > 0.0 and n_gaps > 0
+    check_electrodes = flags[dyn.F_ELECTROSTATICS] != 0 and flags[dyn.F_N_BEAMS] > 0
+    electrode_gap0 = np.zeros(flags[dyn.F_N_BEAMS])
+    if check_electrodes:
+        electrode_gaps(y, p, flags, electrode_gap0)
     gaps0 = np.empty(max(n_gaps, 1))
     gaps_stage = np.empty(max(n_gaps, 1))
 
@@ -583,4 +614,6 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
             f[j] = f_new[j]
         counters[C_STEPS] += 1
         steps_here += 1
+        if check_electrodes and crossed_electrode(y, electrode_gap0, p, flags) >= 0:
+            return STATUS_LEFT_DOMAIN, t, y, h_abs, i_eval
     return STATUS_DONE, t, y, h_abs, i_eval

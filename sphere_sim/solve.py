@@ -86,6 +86,7 @@ class SolverStatus(enum.Enum):
     FAILED = 'failed'
     BUDGET_EXCEEDED = 'budget_exceeded'
     STEP_TOO_SMALL = 'step_too_small'
+    LEFT_MODEL_DOMAIN = 'left_model_domain'
 
 
 class SolverError(RuntimeError):
@@ -189,6 +190,35 @@ def contact_gaps(model, x):
     return out[:rc.n_contacts(model.flags)]
 
 
+def electrode_gaps(model, x):
+    """Smallest electrode gap (m) of each beam (``radau_compiled.electrode_gaps``)."""
+    from sphere_sim import radau_compiled as rc
+
+    out = np.empty(max(1, model.n_beams))
+    rc.electrode_gaps(np.ascontiguousarray(x, dtype=float), model.p, model.flags, out)
+    return out[:model.n_beams]
+
+
+def check_domain(model, t, x, u, gaps_start):
+    """Raise a LEFT_MODEL_DOMAIN error if an electrode has reached the ground electrode.
+
+    That happens when the contact law is too soft to hold a beam against its electrostatic
+    pull (e.g. k_c / 100 at 80 V); the parallel-plate force is then unbounded, and a solver
+    would otherwise stall in ever smaller steps. Only a crossing since the electrode gaps
+    ``gaps_start`` (:func:`electrode_gaps`) counts. One compiled call when nothing crossed.
+    """
+    from sphere_sim import radau_compiled as rc
+
+    k = rc.crossed_electrode(x, gaps_start, model.p, model.flags)
+    if k >= 0:
+        gap = electrode_gaps(model, x)[k]
+        raise SolverError(
+            f'beam {model.beams[k]} left the model at t = {t} s: its electrode reached the ground '
+            f'electrode (gap {gap * 1e6:.3g} um) at {u[k]:g} V; the contact law '
+            f'(k_c = {model.params.contact.stiffness_n_per_m:g} N/m) cannot hold it there',
+            t, np.array(x), SolverStatus.LEFT_MODEL_DOMAIN)
+
+
 class _Budget:
     """Wall-clock deadline and accepted-step allowance shared by all segments of a run."""
 
@@ -221,6 +251,7 @@ def _segment_fast(model, x, t0, t1, u, rtol, atol, t_eval, onset_depth_m, budget
     while status == rc.STATUS_CHUNK:
         budget.check(t, x)
         steps_before = int(counters[rc.C_STEPS])
+        x_chunk = x
         status, t, x, h, i_eval = rc.integrate(
             t, t1, x, u, model.p, model.flags, model.beam_angles, model.rbf_cz,
             model.rbf_cphi, model.rbf_w, float(rtol), atol, jac_scale, t_eval, x_eval, i_eval,
@@ -237,6 +268,8 @@ def _segment_fast(model, x, t0, t1, u, rtol, atol, t_eval, onset_depth_m, budget
     stats.n_onset_restarts += int(counters[rc.C_ONSET_REJECTED])
     stats.n_newton_failed += int(counters[rc.C_NEWTON_FAILED])
     budget.check(t, x)
+    if status == rc.STATUS_LEFT_DOMAIN:
+        check_domain(model, t, x, u, electrode_gaps(model, x_chunk))
     if status == rc.STATUS_STEP_TOO_SMALL or not np.all(np.isfinite(x)):
         raise SolverError(f'fast: step size fell below 10 ulp of t at t = {t} s (h = {h:.3g} s)',
                           t, x, SolverStatus.STEP_TOO_SMALL)
@@ -279,6 +312,7 @@ def _first_onset(model, dense, t_a, t_b, open_mask, onset_depth_m):
 def _segment_scipy(model, method, x, t0, t1, u, rtol, atol, t_eval, onset_depth_m, budget,
                    stats):
     """Integrate one segment with a scipy OdeSolver stepped from Python."""
+    from sphere_sim import dynamics as dyn
 
     def fun(t, y):
         return model.rhs(t, y, u)
@@ -290,6 +324,8 @@ def _segment_scipy(model, method, x, t0, t1, u, rtol, atol, t_eval, onset_depth_
     i_eval = 0
     stats.n_rejected = None
     solver = _scipy_solver(method, fun, jac, t0, x, t1, rtol, atol)
+    check_electrodes = bool(model.flags[dyn.F_ELECTROSTATICS]) and model.n_beams > 0
+    gaps_start = electrode_gaps(model, x)
     gaps = contact_gaps(model, x)
     check_onset = onset_depth_m > 0 and gaps.size > 0
     while True:
@@ -303,6 +339,8 @@ def _segment_scipy(model, method, x, t0, t1, u, rtol, atol, t_eval, onset_depth_
                               if 'step size' in str(message) else SolverStatus.FAILED)
         budget.steps += 1
         stats.n_steps += 1
+        if check_electrodes:
+            check_domain(model, solver.t, solver.y, u, gaps_start)
         t_b = solver.t
         dense = None
         restart = None
@@ -357,8 +395,13 @@ def _segment_cvode(model, x, t0, t1, u, rtol, atol, t_eval, onset_depth_m, budge
     def rhsfn(t, y, yp):
         yp[:] = model.rhs(t, y, u)
 
+    gaps_start = electrode_gaps(model, x)
+
     def jacfn(t, y, yp, JJ):
+        # CVODE asks for Jacobians often when it stalls: the budgets and the model's domain
+        # are checked there.
         budget.check(t, y)
+        check_domain(model, t, y, u, gaps_start)
         JJ[:, :] = model.jacobian(t, y, u)
 
     samples = []
