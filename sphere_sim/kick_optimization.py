@@ -16,6 +16,7 @@ from sphere_sim.discrete import angle_between
 from sphere_sim.initial_state import rest_state
 from sphere_sim.kicks import KickDesign, simulate_kick
 from sphere_sim.model import assemble
+from sphere_sim.parameters import ParameterSet
 from sphere_sim.scene import load_scene
 
 WIDTH_BOUNDS_S = (0.2e-3, 8e-3)
@@ -52,8 +53,11 @@ class _Objective:
 
     def _setup(self):
         if self._model is None:
-            scene = load_scene(self.scene_name).replace(parameter_set=self.parameter_set)
-            self._model = assemble(scene)
+            if isinstance(self.parameter_set, ParameterSet):
+                self._model = assemble(load_scene(self.scene_name), self.parameter_set)
+            else:
+                scene = load_scene(self.scene_name).replace(parameter_set=self.parameter_set)
+                self._model = assemble(scene)
             self._rest = rest_state(self._model)
 
     def design(self, v):
@@ -76,6 +80,11 @@ class _Objective:
 def optimise_kick(template=None, parameter_set='calibrated', seed=1, popsize=8,
                   maxiter=12, workers=1, progress=None):
     """Differential evolution over (width_low_s, width_high_s, delay_s).
+
+    Parameters
+    ----------
+    parameter_set : str or ParameterSet
+        A set's name or file, or the set itself (the calibration passes candidates).
 
     Returns
     -------

@@ -89,14 +89,38 @@ class FrictionParams:
     viscous_onset_m: float
 
 
+# What a declared-uncertain parameter is fitted to (sphere_sim.calibration).
+CALIBRATION_TARGETS = ('fig4_threshold', 'fig5_kick')
+
+
 @dataclasses.dataclass(frozen=True)
 class UncertainParameter:
-    """A parameter the calibration may move, within ``[low, high]``, and why."""
+    """A parameter the calibration may move, within ``[low, high]``, and why.
+
+    ``target`` names the observation it is fitted to (one of ``CALIBRATION_TARGETS``);
+    ``tied`` lists further paths that always take the same value (e.g. the Stribeck velocity
+    with the Coulomb velocity, both read from one unitless column of Table A1).
+    """
 
     path: str
     low: float
     high: float
     reason: str
+    target: str
+    tied: tuple = ()
+
+    def __post_init__(self):
+        if self.target not in CALIBRATION_TARGETS:
+            raise ParameterError(f'uncertain {self.path}: target must be one of '
+                                 f'{CALIBRATION_TARGETS}, got {self.target!r}')
+        if not self.low < self.high:
+            raise ParameterError(f'uncertain {self.path}: low must be below high')
+        object.__setattr__(self, 'tied', tuple(self.tied))
+
+    @property
+    def paths(self):
+        """The fitted path and every path tied to it."""
+        return (self.path, *self.tied)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -115,8 +139,10 @@ class ParameterSet:
         return dataclasses.asdict(self)
 
     def digest(self):
-        """Short content hash of the physical values (name and description excluded)."""
-        physical = {k: v for k, v in self.to_dict().items() if k not in ('name', 'description')}
+        """Short content hash of the physical values (name, description and the calibration's
+        declarations excluded: rewording a reason must not invalidate a table)."""
+        physical = {k: v for k, v in self.to_dict().items()
+                    if k not in ('name', 'description', 'uncertain')}
         text = json.dumps(physical, sort_keys=True, default=str)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -194,9 +220,7 @@ def _from_dict(data):
                     raise ParameterError(
                         f'{section}.{key} must be a number, got {value!r}') from exc
         kwargs[section] = cls(**converted)
-    uncertain = tuple(
-        item if isinstance(item, UncertainParameter) else UncertainParameter(**item)
-        for item in data.get('uncertain', ()) or ())
+    uncertain = tuple(_uncertain(item) for item in data.get('uncertain', ()) or ())
     return ParameterSet(
         name=str(data.get('name', 'unnamed')),
         description=str(data.get('description', '')),
@@ -204,6 +228,21 @@ def _from_dict(data):
         uncertain=uncertain,
         **kwargs,
     )
+
+
+def _uncertain(item):
+    if isinstance(item, UncertainParameter):
+        return item
+    fields = {f.name for f in dataclasses.fields(UncertainParameter)}
+    required = {f.name for f in dataclasses.fields(UncertainParameter)
+                if f.default is dataclasses.MISSING}
+    unknown = set(item) - fields
+    missing = required - set(item)
+    if unknown or missing:
+        raise ParameterError(f'uncertain entry {item.get("path", "?")!r}: unknown key(s) '
+                             f'{sorted(unknown)}, missing key(s) {sorted(missing)}; allowed: '
+                             f'{sorted(fields)}')
+    return UncertainParameter(**item)
 
 
 def _read_yaml(path):

@@ -124,6 +124,12 @@ def contact_gaps(x, p, flags, beam_angles, out):
             i += 1
 
 
+@numba.njit(cache=True, inline='always')
+def _electrode_gap(x, p, k):
+    gap = x[2 * k] - p[dyn.P_GROUND_Z]
+    return min(gap, gap + p[dyn.P_ES_LENGTH] * math.sin(x[2 * k + 1]))
+
+
 @numba.njit(cache=True)
 def electrode_gaps(x, p, flags, out):
     """Smallest gap (m) between each beam's electrode and the ground electrode.
@@ -134,8 +140,7 @@ def electrode_gaps(x, p, flags, out):
     the model no longer describes the device.
     """
     for k in range(flags[dyn.F_N_BEAMS]):
-        gap = x[2 * k] - p[dyn.P_GROUND_Z]
-        out[k] = min(gap, gap + p[dyn.P_ES_LENGTH] * math.sin(x[2 * k + 1]))
+        out[k] = _electrode_gap(x, p, k)
 
 
 @numba.njit(cache=True)
@@ -144,8 +149,7 @@ def crossed_electrode(x, gaps_start, p, flags):
     ``x``, or -1. Only a crossing counts: a run may start outside (the RBF grid's edges are
     tested there)."""
     for k in range(flags[dyn.F_N_BEAMS]):
-        gap = x[2 * k] - p[dyn.P_GROUND_Z]
-        if min(gap, gap + p[dyn.P_ES_LENGTH] * math.sin(x[2 * k + 1])) <= 0.0 < gaps_start[k]:
+        if _electrode_gap(x, p, k) <= 0.0 < gaps_start[k]:
             return k
     return -1
 

@@ -106,7 +106,10 @@ class SolverStats:
     ``nfev`` counts right-hand-side calls made by the method itself; each Jacobian (``njev``)
     costs another ``n_states + 1`` compiled calls on top. ``n_steps`` and ``n_rejected`` are
     None where the library does not expose them (scipy does not count rejections; CVODE
-    through scikit-sundae reports neither).
+    through scikit-sundae reports neither). Only the compiled method counts
+    ``n_newton_failed`` (attempts whose Newton iteration did not converge) and
+    ``n_onset_bounded`` (steps shortened beforehand to a predicted contact onset); they are
+    None for the others. ``n_onset_restarts`` counts steps rejected or restarted at an onset.
     """
 
     nfev: int = 0
@@ -118,6 +121,7 @@ class SolverStats:
     n_rejected: int | None = 0
     n_onset_restarts: int = 0
     n_newton_failed: int | None = 0
+    n_onset_bounded: int | None = 0
     method: str = ''
 
 
@@ -267,6 +271,7 @@ def _segment_fast(model, x, t0, t1, u, rtol, atol, t_eval, onset_depth_m, budget
     stats.n_rejected += int(counters[rc.C_REJECTED])
     stats.n_onset_restarts += int(counters[rc.C_ONSET_REJECTED])
     stats.n_newton_failed += int(counters[rc.C_NEWTON_FAILED])
+    stats.n_onset_bounded += int(counters[rc.C_ONSET_PREDICTED])
     budget.check(t, x)
     if status == rc.STATUS_LEFT_DOMAIN:
         check_domain(model, t, x, u, electrode_gaps(model, x_chunk))
@@ -322,7 +327,7 @@ def _segment_scipy(model, method, x, t0, t1, u, rtol, atol, t_eval, onset_depth_
 
     samples = []
     i_eval = 0
-    stats.n_rejected = None
+    stats.n_rejected = stats.n_newton_failed = stats.n_onset_bounded = None
     solver = _scipy_solver(method, fun, jac, t0, x, t1, rtol, atol)
     check_electrodes = bool(model.flags[dyn.F_ELECTROSTATICS]) and model.n_beams > 0
     gaps_start = electrode_gaps(model, x)
@@ -389,8 +394,8 @@ def _segment_cvode(model, x, t0, t1, u, rtol, atol, t_eval, onset_depth_m, budge
     """Integrate one segment with SUNDIALS CVODE (BDF, dense), restarting at contact onsets."""
     from sksundae.cvode import CVODE
 
-    stats.n_steps = None
-    stats.n_rejected = None
+    stats.n_steps = stats.n_rejected = None
+    stats.n_newton_failed = stats.n_onset_bounded = None
 
     def rhsfn(t, y, yp):
         yp[:] = model.rhs(t, y, u)

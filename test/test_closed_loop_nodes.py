@@ -38,11 +38,16 @@ def test_lockstep_closed_loop_reaches_the_setpoint_and_rests(ros_nodes, controll
         probe.spin_until(resting_after_kicks, CLOSED_LOOP_TIMEOUT_S, 'resting controller')
         values = _status_values(next(m for m in reversed(statuses)
                                      if _status_values(m)['phase'] == 'resting'))
+        # With full kicks of 0.55 deg the controller can rest before the probe's subscription
+        # to the normal has matched: wait for a sample taken after the rest.
+        seen = len(probe.messages[SURFACE_NORMAL.name])
+        probe.spin_until(lambda: len(probe.messages[SURFACE_NORMAL.name]) > seen,
+                         CLOSED_LOOP_TIMEOUT_S, 'a surface normal after the rest')
         normal = surface_normal_from_msg(probe.messages[SURFACE_NORMAL.name][-1])
     finally:
         probe.close()
     error_deg = math.degrees(angle_between(normal, normal_from_xy(*SETPOINT_XY)))
     assert error_deg < PHI_MIN_DEG
     assert float(values['phi_deg']) < PHI_MIN_DEG
-    # From level to 1.28 deg of tilt takes many small kicks, not one.
-    assert int(values['kicks']) >= 5
+    # From level to 1.28 deg of tilt takes several kicks of at most 0.55 deg, not one.
+    assert int(values['kicks']) >= 3

@@ -1,3 +1,4 @@
+import dataclasses
 import math
 
 import pytest
@@ -29,7 +30,7 @@ def test_bare_parallel_plate_pull_in_of_table_is_near_42_volts():
 def test_calibrated_moves_only_declared_uncertain_parameters():
     table = load_parameter_set('table_a1').to_dict()
     cal = load_parameter_set('calibrated')
-    declared = {u.path for u in cal.uncertain}
+    declared = {path for u in cal.uncertain for path in u.paths}
     assert declared
     changed = set()
     for section in ('beam', 'electrostatics', 'sphere', 'contact', 'friction'):
@@ -40,12 +41,30 @@ def test_calibrated_moves_only_declared_uncertain_parameters():
     for u in cal.uncertain:
         assert u.low <= cal.get(u.path) <= u.high, u.path
         assert u.reason.strip()
+        assert all(cal.get(tied) == cal.get(u.path) for tied in u.tied), u.path
+    # Each observation of the paper the calibration uses pins one parameter.
+    assert sorted(u.target for u in cal.uncertain) == ['fig4_threshold', 'fig5_kick']
+
+
+def test_an_uncertain_entry_must_name_its_target(tmp_path):
+    bad = tmp_path / 'bad.yaml'
+    entry = '- {path: beam.mass_kg, low: 1.0e-8, high: 1.0e-7, reason: test'
+    bad.write_text(f'base: table_a1\nuncertain:\n{entry}}}\n')
+    with pytest.raises(ParameterError, match=r"missing key\(s\) \['target'\]"):
+        load_parameter_set(str(bad))
+    bad.write_text(f'base: table_a1\nuncertain:\n{entry}, target: fig9}}\n')
+    with pytest.raises(ParameterError, match='fig4_threshold'):
+        load_parameter_set(str(bad))
 
 
 def test_digest_tracks_values_not_names():
     a = load_parameter_set('table_a1')
     assert a.digest() == a.replace(**{'beam.mass_kg': a.beam.mass_kg}).digest()
     assert a.digest() != a.replace(**{'beam.mass_kg': 1e-7}).digest()
+    # Rewording or dropping the calibration's declarations leaves the values, and the tables
+    # built from them, valid.
+    cal = load_parameter_set('calibrated')
+    assert cal.digest() == dataclasses.replace(cal, uncertain=(), name='x').digest()
 
 
 def test_unknown_parameter_set_and_key_are_named(tmp_path):

@@ -151,7 +151,8 @@ def test_drop_at_loose_tolerance_resolves_the_impact(model, dropped):
                      **kwargs)
     t_loose, depth_loose, rebound_loose = impact(model, loose)
     t_tight, depth_tight, rebound_tight = impact(model, tight)
-    assert loose.stats.n_onset_restarts >= 1  # the onset check did cut a step
+    # The onset check did cut a step: bounded beforehand by the predicted onset, or rejected.
+    assert loose.stats.n_onset_bounded + loose.stats.n_onset_restarts >= 1
     assert abs(t_loose - t_tight) <= 1e-5  # lands in the same 10 us sample
     assert depth_loose == pytest.approx(depth_tight, rel=0.05)  # ~20 nm deep, not stepped over
     assert rebound_loose == pytest.approx(rebound_tight, rel=0.02)

@@ -6,12 +6,13 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from sphere_sim.calibration import TARGET_KICK_DEG
 from sphere_sim.kick_optimization import optimise_kick
 from sphere_sim.kicks import KickDesign
+from sphere_sim.parameters import load_parameter_set
 
 DEFAULT_OUTPUT = 'bench/results/kick_optimization.json'
 AXIS_OUTPUT = 'bench/results/kick_optimization_axis.json'
-PAPER_ROTATION_DEG = 0.54
 # Templates: the paper's hind-left kick, and an axis-parallel one (§6's future work): the
 # right beam at the high voltage, the other three at the low one, mirror-symmetric about the
 # x axis, so that its rotation can only go along x.
@@ -50,6 +51,8 @@ def run(args):
                              progress=progress)
     data = best.to_dict()
     data['parameter_set'] = args.params
+    # Which values the design was optimised for: a later recalibration makes it stale.
+    data['parameter_digest'] = load_parameter_set(args.params).digest()
     path = Path(args.output or (AXIS_OUTPUT if args.kick == 'axis' else DEFAULT_OUTPUT))
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(data, indent=2) + '\n')
@@ -59,7 +62,7 @@ def run(args):
           f'delay {d.delay_s * 1e3:+.3f} ms ({best.evaluations} simulations)')
     print(f'rotation {best.rotation_deg:.4f} deg towards {best.direction_deg:+.1f} deg '
           f'({best.along_deg:+.4f} deg along {math.degrees(d.direction_rad):+.0f} deg; '
-          f'paper, diagonal: {PAPER_ROTATION_DEG} deg), '
+          f'paper, diagonal: {TARGET_KICK_DEG} deg), '
           f'settled after {best.settle_time_s * 1e3:.1f} ms')
     print(f'wrote {path}')
     return 0
