@@ -53,3 +53,33 @@ def test_calibrated_set_reproduces_the_papers_kick():
                                                              - design.direction_rad)
     assert along == pytest.approx(TARGET_KICK_DEG, abs=3 * KICK_TOLERANCE_DEG)
     assert math.degrees(math.atan2(d[1], d[0])) == pytest.approx(-45.0, abs=0.5)
+
+
+def test_calibrate_fits_each_parameter_to_its_own_target(monkeypatch):
+    """The whole procedure on stand-in observations: the threshold falls with k_phi and the
+    kick grows with the friction velocity, and each depends a little on the other parameter,
+    so the first pass is checked and, if it moved, repeated."""
+    from sphere_sim import calibration
+
+    def threshold_v(params):
+        k_phi = params.beam.stiffness_phi_nm_per_rad
+        v_c = params.friction.coulomb_velocity_m_per_s
+        return 44.0 - 0.8e6 * k_phi + 0.05 * v_c
+
+    def kick_deg(params, workers=1):
+        v_c = params.friction.coulomb_velocity_m_per_s
+        assert params.friction.stribeck_velocity_m_per_s == v_c  # tied
+        return 0.5 * math.log10(10.0 * v_c) + 1e4 * params.beam.stiffness_phi_nm_per_rad
+
+    monkeypatch.setattr(calibration, 'threshold_v', threshold_v)
+    monkeypatch.setattr(calibration, 'kick_deg', kick_deg)
+    cal = load_parameter_set('calibrated')
+    params, fits, checks = calibration.calibrate(cal, cal.uncertain)
+    assert [f.spec.target for f in fits] == ['fig4_threshold', 'fig5_kick']
+    for observed, target, tolerance in checks:
+        assert abs(observed - target) < tolerance
+    assert threshold_v(params) == pytest.approx(calibration.TARGET_THRESHOLD_V,
+                                                abs=calibration.FIT_TOLERANCE_V)
+    assert kick_deg(params) == pytest.approx(TARGET_KICK_DEG, abs=KICK_TOLERANCE_DEG)
+    for spec in cal.uncertain:
+        assert spec.low <= params.get(spec.path) <= spec.high
