@@ -2,6 +2,7 @@
 
 import math
 import os
+import textwrap
 
 import yaml
 from tqdm import tqdm
@@ -35,8 +36,9 @@ def run(args):
         raise SystemExit('the calibrated set declares no uncertain parameter for that target')
     for spec in specs:
         tied = f' (with {", ".join(spec.tied)})' if spec.tied else ''
-        print(f'{spec.target}: {spec.path}{tied} in [{spec.low:g}, {spec.high:g}]: '
-              f'{" ".join(spec.reason.split())}')
+        print(f'{spec.target}: {spec.path}{tied} in [{spec.low:g}, {spec.high:g}]')
+        print(textwrap.fill(' '.join(spec.reason.split()), width=96, initial_indent='  ',
+                            subsequent_indent='  '))
     with tqdm(desc='calibrate', unit='eval', leave=False) as bar:
         def progress(value, observed):
             bar.set_postfix_str(f'{value:.4g} -> {observed:.4g}')
