@@ -2,18 +2,26 @@
 
 The method, its simplified Newton iteration, error estimate, step-size control and Jacobian
 reuse follow scipy's ``scipy/integrate/_ivp/radau.py`` (Hairer & Wanner, *Solving Ordinary
-Differential Equations II*, §IV.8) line for line, so that the two can be compared step for
-step. The difference is where it runs: the whole step loop, the right-hand side
+Differential Equations II*, §IV.8), so that the two can be compared step for step. The main
+difference is where it runs: the whole step loop, the right-hand side
 (:func:`sphere_sim.dynamics.rhs_kernel`), the Jacobian and the LU factorisations are compiled
 together by numba, so a step costs a few right-hand-side calls and two small LU solves and no
 Python at all.
 
-One addition: **contact onset is never stepped over.** A contact that is open (gap > 0) at the
-start of a step must not be closed deeper than ``onset_depth_m`` at any stage of the step. If it
-is, the step is rejected and retried with the step that ends where the gap, interpolated
-linearly between the step start and the offending stage, reaches half that depth. Without
-this, an L-stable method at a loose tolerance can take one large step through an impact and
-damp the bounce away.
+Additions (docs/numerics.md measures each):
+
+* **Contact onset is never stepped over.** A contact that is open (gap > 0) at the start of a
+  step must not be closed deeper than ``onset_depth_m`` at any stage of the step. If it is, the
+  step is rejected and retried with the step that ends where the gap, interpolated linearly
+  between the step start and the offending stage, reaches half that depth. Without this, an
+  L-stable method at a loose tolerance can take one large step through an impact and damp the
+  bounce away. The same rule is applied beforehand to the stages predicted by the previous
+  step's collocation polynomial, so that Newton rarely starts across an impact.
+* **Block-arrow LU** of the Newton matrices (:mod:`sphere_sim.block_lu`).
+* **RADAU5's first-iterate test**: Newton may stop after one iteration when the previous
+  solve contracted fast enough (Hairer's FACCON); scipy always takes two.
+* **The model's domain**: a step after which an electrode has reached the ground electrode
+  ends the run (``STATUS_LEFT_DOMAIN``) instead of letting the step collapse there.
 
 The integrator returns to Python every ``CHUNK_STEPS`` accepted steps so that the caller can
 enforce a wall-clock budget (numba has no clock).
@@ -210,6 +218,24 @@ def _newton_matrix(J, mu_over_h, out):
         for j in range(n):
             out[i, j] = -J[i, j]
         out[i, i] += mu_over_h
+
+
+@numba.njit(cache=True)
+def _factor_newton(J_perm, mu_over_h, LU, piv, arrow, arrow_start, arrow_end, arrow_tail,
+                   dense_start, dense_end, dense_tail):
+    """LU of ``mu_over_h I - J_perm`` (real or complex) into ``LU``: block-arrow when the
+    Jacobian is one (``arrow``) and that succeeds, dense otherwise.
+
+    Returns ``(ok, block_start, block_end, tail)``, the structure to solve with.
+    """
+    if arrow:
+        _newton_matrix(J_perm, mu_over_h, LU)
+        if block_lu.factor(LU, piv, arrow_start, arrow_end, arrow_tail,
+                           block_lu.PIVOT_THRESHOLD):
+            return True, arrow_start, arrow_end, arrow_tail
+    _newton_matrix(J_perm, mu_over_h, LU)
+    ok = block_lu.factor(LU, piv, dense_start, dense_end, dense_tail, 0.0)
+    return ok, dense_start, dense_end, dense_tail
 
 
 @numba.njit(cache=True)
@@ -432,23 +458,12 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                 if not have_lu:
                     mr = MU_REAL / h
                     mc = mu_c / h
-                    _newton_matrix(J_perm, mr, LU_real)
-                    start_r, end_r, tail_r = arrow_start, arrow_end, arrow_tail
-                    ok_r = arrow and block_lu.factor(LU_real, piv_real, start_r, end_r, tail_r,
-                                                     block_lu.PIVOT_THRESHOLD)
-                    if not ok_r:
-                        _newton_matrix(J_perm, mr, LU_real)
-                        start_r, end_r, tail_r = dense_start, dense_end, dense_tail
-                        ok_r = block_lu.factor(LU_real, piv_real, start_r, end_r, tail_r, 0.0)
-                    _newton_matrix(J_perm, mc, LU_complex)
-                    start_c, end_c, tail_c = arrow_start, arrow_end, arrow_tail
-                    ok_c = arrow and block_lu.factor(LU_complex, piv_complex, start_c, end_c,
-                                                     tail_c, block_lu.PIVOT_THRESHOLD)
-                    if not ok_c:
-                        _newton_matrix(J_perm, mc, LU_complex)
-                        start_c, end_c, tail_c = dense_start, dense_end, dense_tail
-                        ok_c = block_lu.factor(LU_complex, piv_complex, start_c, end_c, tail_c,
-                                               0.0)
+                    ok_r, start_r, end_r, tail_r = _factor_newton(
+                        J_perm, mr, LU_real, piv_real, arrow, arrow_start, arrow_end,
+                        arrow_tail, dense_start, dense_end, dense_tail)
+                    ok_c, start_c, end_c, tail_c = _factor_newton(
+                        J_perm, mc, LU_complex, piv_complex, arrow, arrow_start, arrow_end,
+                        arrow_tail, dense_start, dense_end, dense_tail)
                     counters[C_NLU] += 2
                     if not (ok_r and ok_c):
                         break
