@@ -4,8 +4,9 @@ A beam's equations depend on its own state and the sphere's, never on another be
 each beam's four states grouped and the sphere's thirteen last, the Jacobian (and the Newton
 matrix ``mu / h I - J``) is a *block arrow*: 4x4 beam blocks on the diagonal, zero between
 beams, a dense border of sphere rows and columns. Eliminating a beam's columns then touches
-only that beam's rows and the sphere's, so the factorisation and each solve cost about half of
-the dense ones for four beams.
+only that beam's rows and the sphere's. For four beams and the sphere (29 states) that saves
+about a quarter of a factorisation and solve (1.7 against 2.2 µs real, 3.5 against 4.6 µs
+complex, measured along a kick); the dense routine already skipped zero rows.
 
 One routine serves both: a structure is ``(block_start, block_end, tail)`` with, for each row
 ``i``, its diagonal block ``[block_start[i], block_end[i])``, and the first border row
@@ -23,8 +24,9 @@ import numba
 import numpy as np
 
 # A beam-block pivot smaller than this fraction of the largest border entry of its column fails
-# the arrow factorisation (the dense one is used instead). Measured ratios go down to ~1e-7 with
-# accurate solutions; a ratio this small means the block is singular to working precision.
+# the arrow factorisation (the dense one is used instead). Along a kick the ratios reach 1e-8
+# with accurate solutions (a threshold of 1e-6 refused half of 2432 matrices, 1e-8 none); a
+# ratio of 1e-12 means the block is singular to working precision.
 PIVOT_THRESHOLD = 1e-12
 STATES_PER_BEAM = 4
 
