@@ -2,17 +2,17 @@
 
 Everything runs on a discrete KickPlant, normally the shipped lookup table with the unkicked
 creep removed (``Drift.REMOVE``: the paper's discrete model assumes the sphere rests stably
-between kicks; with the creep kept, a tilted sphere drifts back by more than a full kick per
-kick window and no controller can hold a setpoint).
+between kicks; with the creep kept, a tilted sphere drifts back by a sixth of a full kick per
+kick window at 20 deg of tilt).
 
-Kick size. The paper's full kick turns the normal by 0.54 deg; the plant here may kick much
-less (the calibrated table: about 0.058 deg). Distances in the setpoint scenario are used as
-the paper gives them (the reference is 1.28 deg away, so more kicks are needed); the resting
-band Phi_min is reported both as the paper's value and scaled by the kick-size ratio, since
-what decides whether the basic controller oscillates is Phi_min relative to the kick width. The
-trajectory of eq. (64) needs about 3.2 deg/s, more than a plant kicking 0.058 deg every 60 ms
-can deliver, so its frequency is scaled by the same ratio: the reference then advances the same
-fraction of a kick per kick as it would for the paper's plant at the same kick period.
+Kick size. The paper's full kick turns the normal by 0.54 deg; a plant may kick more or less
+(the calibrated table: 0.547 deg, fitted to it; other parameter sets or analytic plants
+differ). Distances in the setpoint scenario are used as the paper gives them (the reference is
+1.28 deg away); the resting band Phi_min is reported both as the paper's value and scaled by
+the kick-size ratio, since what decides whether the basic controller oscillates is Phi_min
+relative to the kick width. The frequency of eq. (64) is scaled by the same ratio, so that the
+reference advances the same fraction of a kick per kick as it would for the paper's plant at
+the same kick period.
 """
 
 import dataclasses
