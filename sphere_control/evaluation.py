@@ -34,10 +34,9 @@ from sphere_control.extended import (
 from sphere_control.perturbations import Mismatch, NoisySensor, PerturbedPlant
 from sphere_control.plants import EightDirectionPlant
 from sphere_control.reference import CircleTrajectory, Setpoint
-from sphere_sim.discrete import angle_between
+from sphere_sim.discrete import PAPER_FULL_KICK_RAD, angle_between
 
 # The paper's numbers (§4.1, §5).
-PAPER_FULL_KICK_RAD = math.radians(0.54)
 PAPER_SETPOINT_NORMAL = (0.01, 0.02, 0.9997)
 PAPER_PHI_MIN_RAD = (math.radians(0.05), math.radians(0.25))
 PAPER_SETPOINT_MISMATCH_RAD = math.radians(12.0)

@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 
+from sphere_sim.discrete import PAPER_FULL_KICK_RAD
 from sphere_sim.initial_state import rest_state
 from sphere_sim.model import assemble
 from sphere_sim.parameters import CALIBRATION_TARGETS
@@ -31,7 +32,7 @@ from sphere_sim.scene import load_scene
 
 TARGET_THRESHOLD_V = 42.5  # middle of the 40-45 V band where Fig. 4's kick rises sharply
 FIT_TOLERANCE_V = 0.2
-TARGET_KICK_DEG = 0.54  # Fig. 5 and Fig. 6a: sqrt(alpha^2 + beta^2) of the optimised kick
+TARGET_KICK_DEG = math.degrees(PAPER_FULL_KICK_RAD)
 KICK_TOLERANCE_DEG = 0.01
 MAX_FIT_STEPS = 12
 MAX_PASSES = 3

@@ -19,6 +19,8 @@ DIAGONAL_DIRECTIONS_RAD = tuple(math.radians(a) for a in (-45.0, 45.0, 135.0, -1
 EIGHT_DIRECTIONS_RAD = tuple(math.radians(a) for a in (-45.0, 0.0, 45.0, 90.0, 135.0, 180.0,
                                                       -135.0, -90.0))
 CONE_HALF_ANGLE_RAD = math.radians(40.0)  # the state space investigated in the paper
+# The paper's optimised hind-left kick, sqrt(alpha^2 + beta^2) (§4.1, Fig. 5 and Fig. 6a).
+PAPER_FULL_KICK_RAD = math.radians(0.54)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,13 +1,15 @@
 """The Newton matrices' LU: dense and block-arrow factorisations against LAPACK."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from sphere_sim import block_lu
 from sphere_sim import radau_compiled as rc
 from sphere_sim.initial_state import rest_state
+from sphere_sim.kicks import KickDesign
 from sphere_sim.model import assemble
-from sphere_sim.programme import Pulse, PulseProgramme
 from sphere_sim.scene import load_scene
 from sphere_sim.solve import simulate
 
@@ -15,8 +17,7 @@ from sphere_sim.solve import simulate
 # over the step sizes it takes (s).
 MU = (rc.MU_REAL, complex(rc.MU_COMPLEX_RE, rc.MU_COMPLEX_IM))
 STEPS_S = (1e-8, 1e-6, 1e-4)
-KICK = PulseProgramme((Pulse(1, 35.0, 0.0, 2.2e-3), Pulse(2, 35.0, 0.0, 2.2e-3),
-                       Pulse(3, 80.0, 5.7e-3, 2.4e-3), Pulse(4, 80.0, 5.7e-3, 2.4e-3)))
+OPTIMISED_KICK = Path(__file__).parents[1] / 'bench' / 'results' / 'kick_optimization.json'
 
 
 def factor_and_solve(a, b, structure, threshold=block_lu.PIVOT_THRESHOLD):
@@ -62,9 +63,10 @@ def test_is_arrow_detects_coupling_between_beams():
 
 @pytest.fixture(scope='module')
 def kick_jacobians():
-    """Jacobians (arrow order) along the asymmetric kick, through every contact phase."""
+    """Jacobians (arrow order) along the optimised kick, through every contact phase."""
     model = assemble(load_scene('rest'))
-    traj = simulate(model, rest_state(model), 40e-3, KICK, sample_period_s=0.5e-3)
+    programme = KickDesign.load(OPTIMISED_KICK).programme()
+    traj = simulate(model, rest_state(model), 40e-3, programme, sample_period_s=0.5e-3)
     perm, start, end, tail = block_lu.arrow_order(model.n_beams, model.n_states)
     out = []
     for k in range(traj.x.shape[1]):

@@ -6,7 +6,6 @@ import pytest
 
 from sphere_control.closed_loop import Outcome
 from sphere_control.evaluation import (
-    PAPER_FULL_KICK_RAD,
     PAPER_PHI_MIN_RAD,
     PAPER_SETPOINT_NORMAL,
     ControllerKind,
@@ -19,6 +18,7 @@ from sphere_control.evaluation import (
 )
 from sphere_control.perturbations import Mismatch, PerturbedPlant
 from sphere_control.plants import AnalyticKickPlant
+from sphere_sim.discrete import PAPER_FULL_KICK_RAD
 
 
 @pytest.fixture(scope='module')

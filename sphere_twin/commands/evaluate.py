@@ -17,7 +17,6 @@ import numpy as np
 
 from sphere_control.evaluation import (
     LEVEL_NORMAL,
-    PAPER_FULL_KICK_RAD,
     PAPER_PHI_MIN_RAD,
     ControllerKind,
     EvaluationConfig,
@@ -26,6 +25,7 @@ from sphere_control.evaluation import (
     evaluate,
 )
 from sphere_control.plants import AnalyticKickPlant
+from sphere_sim.discrete import PAPER_FULL_KICK_RAD
 from sphere_sim.lookup_table import AXIS_TABLE_PATH
 
 RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
