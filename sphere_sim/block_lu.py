@@ -74,16 +74,6 @@ def arrow_order(n_beams, n):
 
 
 @numba.njit(cache=True)
-def is_arrow(A, block_end, tail):
-    """True if ``A`` (in :func:`arrow_order`) is zero between different beam blocks."""
-    for i in range(tail):
-        for j in range(tail):
-            if (j < i - i % STATES_PER_BEAM or j >= block_end[i]) and A[i, j] != 0.0:
-                return False
-    return True
-
-
-@numba.njit(cache=True)
 def factor(A, piv, block_start, block_end, tail, pivot_threshold):
     """LU with partial pivoting within diagonal blocks, in place.
 

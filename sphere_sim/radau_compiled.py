@@ -17,7 +17,8 @@ Additions (docs/numerics.md measures each):
   L-stable method at a loose tolerance can take one large step through an impact and damp the
   bounce away. The same rule is applied beforehand to the stages predicted by the previous
   step's collocation polynomial, so that Newton rarely starts across an impact.
-* **Block-arrow LU** of the Newton matrices (:mod:`sphere_sim.block_lu`).
+* **The kinematic states are eliminated** from the Newton systems, which are then factored
+  in block-arrow form (:mod:`sphere_sim.newton_system`, :mod:`sphere_sim.block_lu`).
 * **RADAU5's first-iterate test**: Newton may stop after one iteration when the previous
   solve contracted fast enough (Hairer's FACCON); scipy always takes two.
 * **The model's domain**: a step after which an electrode has reached the ground electrode
@@ -32,7 +33,7 @@ import math
 import numba
 import numpy as np
 
-from sphere_sim import block_lu
+from sphere_sim import block_lu, newton_system
 from sphere_sim import dynamics as dyn
 from sphere_sim.rotations import quat_rows
 
@@ -173,21 +174,18 @@ def _rms(v, scale):
 
 @numba.njit(cache=True)
 def _jacobian(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, scale, J, central,
-              perm, J_perm, block_end, tail):
-    """Jacobian into ``J`` (model order) and ``J_perm`` (order ``perm``).
+              red, pos_of, block_start, block_end, tail):
+    """Jacobian into ``J`` (model order).
 
-    Returns True if it has the block-arrow structure of :mod:`sphere_sim.block_lu`.
+    Returns True if its reduced Newton matrix has the block-arrow structure
+    (:func:`sphere_sim.newton_system.is_arrow`).
     """
     if central:
         dyn.jacobian_kernel_central(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w,
                                     scale, J)
     else:
         dyn.jacobian_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, scale, J)
-    n = perm.size
-    for i in range(n):
-        for j in range(n):
-            J_perm[i, j] = J[perm[i], perm[j]]
-    return block_lu.is_arrow(J_perm, block_end, tail)
+    return newton_system.is_arrow(J, red, pos_of, block_start, block_end, tail)
 
 
 @numba.njit(cache=True)
@@ -208,44 +206,6 @@ def _onset_fraction(y, Z, gaps0, gaps_stage, stage, n_gaps, p, flags, beam_angle
             if g0 > 0.0 and g1 < -onset_depth_m:
                 worst = min(worst, C[i] * (g0 + 0.5 * onset_depth_m) / (g0 - g1))
     return worst
-
-
-@numba.njit(cache=True)
-def _newton_matrix(J, mu_over_h, out):
-    """``out = mu_over_h I - J``."""
-    n = J.shape[0]
-    for i in range(n):
-        for j in range(n):
-            out[i, j] = -J[i, j]
-        out[i, i] += mu_over_h
-
-
-@numba.njit(cache=True)
-def _factor_newton(J_perm, mu_over_h, LU, piv, arrow, arrow_start, arrow_end, arrow_tail,
-                   dense_start, dense_end, dense_tail):
-    """LU of ``mu_over_h I - J_perm`` (real or complex) into ``LU``: block-arrow when the
-    Jacobian is one (``arrow``) and that succeeds, dense otherwise.
-
-    Returns ``(ok, block_start, block_end, tail)``, the structure to solve with.
-    """
-    if arrow:
-        _newton_matrix(J_perm, mu_over_h, LU)
-        if block_lu.factor(LU, piv, arrow_start, arrow_end, arrow_tail,
-                           block_lu.PIVOT_THRESHOLD):
-            return True, arrow_start, arrow_end, arrow_tail
-    _newton_matrix(J_perm, mu_over_h, LU)
-    ok = block_lu.factor(LU, piv, dense_start, dense_end, dense_tail, 0.0)
-    return ok, dense_start, dense_end, dense_tail
-
-
-@numba.njit(cache=True)
-def _solve_model_order(LU, piv, b, work, perm, block_start, block_end, tail):
-    """:func:`block_lu.solve` for ``b`` in model order (``work``: scratch of b's size)."""
-    for i in range(perm.size):
-        work[i] = b[perm[i]]
-    block_lu.solve(LU, piv, work, block_start, block_end, tail)
-    for i in range(perm.size):
-        b[perm[i]] = work[i]
 
 
 @numba.njit(cache=True)
@@ -346,22 +306,27 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
         h1 = max(1e-6, h0 * 1e-3) if tiny else (0.01 / max(d1, d2)) ** 0.25
         h_abs = min(100.0 * h0, h1, interval, max_step)
 
-    # Newton matrices in block-arrow order (sphere_sim.block_lu), dense where that fails.
-    perm, arrow_start, arrow_end, arrow_tail = block_lu.arrow_order(flags[dyn.F_N_BEAMS], n)
-    dense_start, dense_end, dense_tail = block_lu.dense_structure(n)
+    # Newton systems without the kinematic states (sphere_sim.newton_system), block-arrow
+    # where that succeeds, dense otherwise.
+    pos, vel = dyn.kinematic_pairs(flags)
+    perm, full_start, full_end, full_tail = block_lu.arrow_order(flags[dyn.F_N_BEAMS], n)
+    red, pos_of, arrow_start, arrow_end, arrow_tail = newton_system.layout(
+        n, pos, vel, perm, full_start, full_end, full_tail)
+    m = red.size
+    dense_start, dense_end, dense_tail = block_lu.dense_structure(m)
     J = np.empty((n, n))
-    J_perm = np.empty((n, n))
     arrow = _jacobian(t, y, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, jac_scale, J,
-                      jac_central, perm, J_perm, arrow_end, arrow_tail)
+                      jac_central, red, pos_of, arrow_start, arrow_end, arrow_tail)
     counters[C_NJEV] += 1
     current_jac = True
     start_r, end_r, tail_r = arrow_start, arrow_end, arrow_tail
     start_c, end_c, tail_c = arrow_start, arrow_end, arrow_tail
-    work = np.empty(n)
-    LU_real = np.empty((n, n))
-    LU_complex = np.empty((n, n), dtype=np.complex128)
-    piv_real = np.empty(n, dtype=np.int64)
-    piv_complex = np.empty(n, dtype=np.int64)
+    work_real = np.empty(m)
+    work_complex = np.empty(m, dtype=np.complex128)
+    LU_real = np.empty((m, m))
+    LU_complex = np.empty((m, m), dtype=np.complex128)
+    piv_real = np.empty(m, dtype=np.int64)
+    piv_complex = np.empty(m, dtype=np.int64)
     have_lu = False
     h_lu = 0.0
     h_abs_old = -1.0
@@ -458,12 +423,12 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                 if not have_lu:
                     mr = MU_REAL / h
                     mc = mu_c / h
-                    ok_r, start_r, end_r, tail_r = _factor_newton(
-                        J_perm, mr, LU_real, piv_real, arrow, arrow_start, arrow_end,
-                        arrow_tail, dense_start, dense_end, dense_tail)
-                    ok_c, start_c, end_c, tail_c = _factor_newton(
-                        J_perm, mc, LU_complex, piv_complex, arrow, arrow_start, arrow_end,
-                        arrow_tail, dense_start, dense_end, dense_tail)
+                    ok_r, start_r, end_r, tail_r = newton_system.factor(
+                        J, mr, red, pos_of, LU_real, piv_real, arrow, arrow_start,
+                        arrow_end, arrow_tail, dense_start, dense_end, dense_tail)
+                    ok_c, start_c, end_c, tail_c = newton_system.factor(
+                        J, mc, red, pos_of, LU_complex, piv_complex, arrow, arrow_start,
+                        arrow_end, arrow_tail, dense_start, dense_end, dense_tail)
                     counters[C_NLU] += 2
                     if not (ok_r and ok_c):
                         break
@@ -495,21 +460,20 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                                 finite = False
                     if not finite:
                         break
-                    # f_real and f_cplx are in the Newton matrices' (permuted) order.
-                    for i in range(n):
-                        j = perm[i]
-                        f_real[i] = (TI[0, 0] * F[0, j] + TI[0, 1] * F[1, j]
+                    for j in range(n):
+                        f_real[j] = (TI[0, 0] * F[0, j] + TI[0, 1] * F[1, j]
                                      + TI[0, 2] * F[2, j] - mr * W[0, j])
                         fc_re = TI[1, 0] * F[0, j] + TI[1, 1] * F[1, j] + TI[1, 2] * F[2, j]
                         fc_im = TI[2, 0] * F[0, j] + TI[2, 1] * F[1, j] + TI[2, 2] * F[2, j]
-                        f_cplx[i] = complex(fc_re, fc_im) - mc * complex(W[1, j], W[2, j])
-                    block_lu.solve(LU_real, piv_real, f_real, start_r, end_r, tail_r)
-                    block_lu.solve(LU_complex, piv_complex, f_cplx, start_c, end_c, tail_c)
-                    for i in range(n):
-                        j = perm[i]
-                        dW[0, j] = f_real[i]
-                        dW[1, j] = f_cplx[i].real
-                        dW[2, j] = f_cplx[i].imag
+                        f_cplx[j] = complex(fc_re, fc_im) - mc * complex(W[1, j], W[2, j])
+                    newton_system.solve(LU_real, piv_real, J, mr, f_real, red, pos_of, pos,
+                                        vel, work_real, start_r, end_r, tail_r)
+                    newton_system.solve(LU_complex, piv_complex, J, mc, f_cplx, red, pos_of,
+                                        pos, vel, work_complex, start_c, end_c, tail_c)
+                    for j in range(n):
+                        dW[0, j] = f_real[j]
+                        dW[1, j] = f_cplx[j].real
+                        dW[2, j] = f_cplx[j].imag
                     acc = 0.0
                     for j in range(n):
                         for i in range(3):
@@ -538,8 +502,8 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                     if current_jac:
                         break
                     arrow = _jacobian(t, y, u, p, flags, beam_angles, rbf_cz, rbf_cphi,
-                                      rbf_w, jac_scale, J, jac_central, perm, J_perm,
-                                      arrow_end, arrow_tail)
+                                      rbf_w, jac_scale, J, jac_central, red, pos_of,
+                                      arrow_start, arrow_end, arrow_tail)
                     counters[C_NJEV] += 1
                     current_jac = True
                     have_lu = False
@@ -568,7 +532,8 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                 ZE[j] = (Z[0, j] * E[0] + Z[1, j] * E[1] + Z[2, j] * E[2]) / h
                 err[j] = f[j] + ZE[j]
                 scale[j] = atol[j] + max(abs(y[j]), abs(y_new[j])) * rtol
-            _solve_model_order(LU_real, piv_real, err, work, perm, start_r, end_r, tail_r)
+            newton_system.solve(LU_real, piv_real, J, MU_REAL / h_lu, err, red, pos_of, pos,
+                                vel, work_real, start_r, end_r, tail_r)
             error_norm = _rms(err, scale)
             safety = 0.9 * (2 * NEWTON_MAXITER + 1) / (2 * NEWTON_MAXITER + n_iter)
             if rejected and error_norm > 1.0:
@@ -579,7 +544,8 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                 counters[C_NFEV] += 1
                 for j in range(n):
                     err[j] = f_new[j] + ZE[j]
-                _solve_model_order(LU_real, piv_real, err, work, perm, start_r, end_r, tail_r)
+                newton_system.solve(LU_real, piv_real, J, MU_REAL / h_lu, err, red, pos_of, pos,
+                                vel, work_real, start_r, end_r, tail_r)
                 error_norm = _rms(err, scale)
             if not math.isfinite(error_norm):
                 error_norm = 1e10
@@ -604,8 +570,8 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
         counters[C_NFEV] += 1
         if recompute_jac:
             arrow = _jacobian(t_new, y_new, u, p, flags, beam_angles, rbf_cz, rbf_cphi,
-                              rbf_w, jac_scale, J, jac_central, perm, J_perm, arrow_end,
-                              arrow_tail)
+                              rbf_w, jac_scale, J, jac_central, red, pos_of, arrow_start,
+                              arrow_end, arrow_tail)
             counters[C_NJEV] += 1
             current_jac = True
         else:

@@ -1,0 +1,126 @@
+"""The Newton systems with the kinematic states eliminated, and the Jacobian's beam columns."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from physics_helpers import scene_with
+
+from sphere_sim import block_lu, newton_system
+from sphere_sim import dynamics as dyn
+from sphere_sim import radau_compiled as rc
+from sphere_sim.initial_state import rest_state
+from sphere_sim.kicks import KickDesign
+from sphere_sim.model import assemble
+from sphere_sim.scene import load_scene
+from sphere_sim.solve import simulate, state_scale
+
+MU = (rc.MU_REAL, complex(rc.MU_COMPLEX_RE, rc.MU_COMPLEX_IM))
+STEPS_S = (1e-8, 1e-6, 1e-4)  # the step sizes the compiled Radau takes
+OPTIMISED_KICK = Path(__file__).parents[1] / 'bench' / 'results' / 'kick_optimization.json'
+
+
+def reduced_layout(model):
+    pos, vel = dyn.kinematic_pairs(model.flags)
+    n = model.n_states
+    perm, start, end, tail = block_lu.arrow_order(model.n_beams, n)
+    return (pos, vel), newton_system.layout(n, pos, vel, perm, start, end, tail)
+
+
+@pytest.fixture(scope='module')
+def kick_states():
+    """(model, states, voltages) along the optimised kick, through every contact phase."""
+    model = assemble(load_scene('rest'))
+    programme = KickDesign.load(OPTIMISED_KICK).programme()
+    traj = simulate(model, rest_state(model), 40e-3, programme, sample_period_s=0.5e-3)
+    return model, traj.x.T, traj.u.T
+
+
+@pytest.mark.parametrize('sphere', [True, False])
+def test_kinematic_pairs_are_exact_in_the_kernel(sphere):
+    model = assemble(scene_with(sphere=sphere))
+    pos, vel = dyn.kinematic_pairs(model.flags)
+    assert pos.size == 2 * model.n_beams + (3 if sphere else 0)
+    rng = np.random.default_rng(5)
+    x0 = rest_state(model)
+    for _ in range(5):
+        x = x0 + 0.3 * state_scale(model) * rng.standard_normal(model.n_states)
+        f = model.rhs(0.0, x, np.array([35.0, 35.0, 80.0, 80.0]))
+        np.testing.assert_array_equal(f[pos], x[vel])
+
+
+def test_the_reduced_system_keeps_two_rates_per_beam_and_the_sphere_border():
+    model = assemble(load_scene('rest'))
+    (pos, vel), (red, pos_of, start, end, tail) = reduced_layout(model)
+    assert red.size == model.n_states - 11 == 18
+    assert not set(red) & set(pos)
+    assert tail == 8
+    np.testing.assert_array_equal(start[:8], [0, 0, 2, 2, 4, 4, 6, 6])
+    np.testing.assert_array_equal(end[:8], [2, 2, 4, 4, 6, 6, 8, 8])
+    # Each rate knows its position; the quaternion and the angular velocity have none.
+    for a, k in enumerate(red):
+        expected = pos[list(vel).index(k)] if k in vel else -1
+        assert pos_of[a] == expected
+
+
+def test_reduced_solve_equals_the_full_newton_system_along_a_kick(kick_states):
+    model, states, voltages = kick_states
+    (pos, vel), (red, pos_of, start, end, tail) = reduced_layout(model)
+    n, m = model.n_states, red.size
+    dense = block_lu.dense_structure(m)
+    rng = np.random.default_rng(6)
+    worst = 0.0
+    for x, u in zip(states, voltages, strict=True):
+        jac = model.jacobian(0.0, x, u)
+        assert newton_system.is_arrow(jac, red, pos_of, start, end, tail)
+        full = jac.copy()
+        full[pos] = np.eye(n)[vel]  # what the reduction assumes of the position rows
+        for mu in MU:
+            for h in STEPS_S:
+                gamma = mu / h
+                dtype = np.result_type(gamma, float)
+                lu = np.empty((m, m), dtype=dtype)
+                piv = np.empty(m, dtype=np.int64)
+                ok, *structure = newton_system.factor(jac, gamma, red, pos_of, lu, piv, True,
+                                                      start, end, tail, *dense)
+                assert ok and structure[2] == tail  # the block-arrow factorisation held
+                b = rng.standard_normal(n).astype(dtype)
+                d = b.copy()
+                newton_system.solve(lu, piv, jac, gamma, d, red, pos_of, pos, vel,
+                                    np.empty(m, dtype=dtype), *structure)
+                exact = np.linalg.solve(gamma * np.eye(n) - full, b)
+                worst = max(worst, np.max(np.abs(d - exact)) / np.max(np.abs(exact)))
+    # Measured 1.8e-12 (the block-arrow pivots, block_lu); the Newton iteration needs far less.
+    assert worst < 1e-10
+
+
+def test_is_arrow_sees_coupling_between_beams_through_rates_and_positions(kick_states):
+    model, states, voltages = kick_states
+    _, (red, pos_of, start, end, tail) = reduced_layout(model)
+    jac = model.jacobian(0.0, states[4], voltages[4])
+    assert newton_system.is_arrow(jac, red, pos_of, start, end, tail)
+    n = model.n_beams
+    for column in (2 * n + 2, 2):  # beam 1's z rate, then its z: both seen from beam 0's row
+        coupled = jac.copy()
+        coupled[2 * n, column] = 1e-30
+        assert not newton_system.is_arrow(coupled, red, pos_of, start, end, tail)
+
+
+def test_beam_columns_equal_differences_of_whole_kernel_calls(kick_states):
+    """The Jacobian evaluates a beam's columns with that beam alone (only_beam): they must be
+    the forward differences of the whole kernel, rounding aside."""
+    model, states, voltages = kick_states
+    scale = state_scale(model)
+    worst = 0.0
+    for x, u in zip(states[::8], voltages[::8], strict=True):
+        f0 = model.rhs(0.0, x, u)
+        whole = np.empty((model.n_states, model.n_states))
+        for j in range(model.n_states):
+            h = dyn._difference_step(x[j], scale[j], dyn.JACOBIAN_STEP)
+            xp = x.copy()
+            xp[j] += h
+            whole[:, j] = (model.rhs(0.0, xp, u) - f0) / h
+        jac = model.jacobian(0.0, x, u)
+        worst = max(worst, np.max(np.abs(jac - whole)) / np.max(np.abs(whole)))
+    # Measured 4e-16: the sphere's rows differ only in the order of the tips' sums.
+    assert worst < 1e-12
