@@ -80,8 +80,9 @@ def factor(A, piv, block_start, block_end, tail, pivot_threshold):
     Parameters
     ----------
     A : ndarray, shape (n, n), float64 or complex128
-        Overwritten with L (unit diagonal, below) and U (on and above the diagonal). Entries
-        outside the structure are taken as zero and left alone.
+        Overwritten with L (unit diagonal, below) and U (above the diagonal, with the
+        reciprocals of its diagonal on it). Entries outside the structure are taken as zero
+        and left alone.
     piv : ndarray of int64, shape (n,)
         Row interchanges.
     block_start, block_end, tail
@@ -119,6 +120,7 @@ def factor(A, piv, block_start, block_end, tail, pivot_threshold):
                 A[k, j] = A[p, j]
                 A[p, j] = tmp
         inv = 1.0 / A[k, k]
+        A[k, k] = inv  # solve multiplies by it: a complex division costs several products
         border_start = max(tail, end)
         for i in range(k + 1, n):
             if end <= i < border_start:
@@ -155,4 +157,4 @@ def solve(LU, piv, b, block_start, block_end, tail):
             acc -= LU[i, j] * b[j]
         for j in range(max(tail, end), n):
             acc -= LU[i, j] * b[j]
-        b[i] = acc / LU[i, i]
+        b[i] = acc * LU[i, i]

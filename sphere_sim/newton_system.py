@@ -129,10 +129,10 @@ def solve(LU, piv, J, mu_over_h, r, red, pos_of, pos, vel, work, block_start, bl
     inv = 1.0 / mu_over_h
     for a in range(red.size):
         k = red[a]
-        work[a] = 0.0
+        acc = 0.0 * r[k]  # r's dtype, in a register rather than in work[a]
         for i in range(pos.size):
-            work[a] += J[k, pos[i]] * r[pos[i]]
-        work[a] = r[k] + work[a] * inv
+            acc += J[k, pos[i]] * r[pos[i]]
+        work[a] = r[k] + acc * inv
     block_lu.solve(LU, piv, work, block_start, block_end, tail)
     for a in range(red.size):
         r[red[a]] = work[a]
