@@ -8,7 +8,7 @@ BIN     := $(VENV)/bin
 STAMP   := $(VENV)/.installed
 PYTEST_ARGS ?=
 
-.PHONY: setup demo test lint bench clean
+.PHONY: setup demo test lint bench clean clean-cache
 
 setup: $(STAMP)
 
@@ -33,5 +33,10 @@ test: lint
 bench: $(STAMP)
 	$(BIN)/sphere-twin bench work-precision --quick
 
-clean:
+# numba's on-disk cache (__pycache__/*.nbi, *.nbc) is keyed on each function's own source file:
+# a kernel that calls into an edited module keeps its old machine code until this runs.
+clean-cache:
+	find . -path ./$(VENV) -prune -o \( -name '*.nbi' -o -name '*.nbc' \) -print | xargs rm -f
+
+clean: clean-cache
 	rm -rf $(VENV) build install log .pytest_cache .ruff_cache

@@ -39,11 +39,15 @@ from sphere_sim.solve import (
 
 RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
 KICK_FILE = RESULTS_DIR / 'kick_optimization.json'
-TOLERANCES = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
+# Half decades where the final-angle error crosses TARGET_ANGLE_ERROR_RAD: at loose tolerances
+# that error scatters by 10x between runs differing only in rounding, and a single decade
+# point decides the interpolated time.
+TOLERANCES = (1e-3, 3e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
 QUICK_TOLERANCES = (1e-3, 1e-5, 1e-7)
 METHODS = ('fast', 'Radau', 'BDF', 'LSODA', 'DOP853', 'CVODE')
 QUICK_METHODS = ('fast', 'LSODA', 'Radau')
 REPEATS = 3  # timed runs per point; the median is reported (the issue asks for >= 3)
+RTF_REPEATS = 11  # real-time-factor runs take ~50 ms: a median of many is cheap and steadier
 QUICK_REPEATS = 1
 # Reference: two different methods at the tightest tolerance; their agreement is printed.
 REFERENCE_METHODS = ('fast', 'CVODE')
@@ -179,7 +183,7 @@ def work_precision(quick=False, out_dir=RESULTS_DIR, stream=sys.stdout):
     summary['agreement'] = agreements
     summary['reference'] = {'methods': ref_methods, 'rtol': ref_rtol}
     summary['real_time_factor'], summary['rtf_wall_s'] = real_time_factor(
-        QUICK_REPEATS if quick else REPEATS)
+        QUICK_REPEATS if quick else RTF_REPEATS)
     summary['quick'] = quick
     write_results(rows, summary, scenes, out_dir)
     line = (f"speedup vs best scipy at 1e-6 rad: {summary['speedup']:.1f}x; "
