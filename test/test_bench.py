@@ -30,12 +30,26 @@ def test_time_at_error_is_nan_when_no_run_is_accurate_enough():
     assert math.isnan(bench.time_at_error(rows, 's', 'LSODA', 1e-6))
 
 
+QUICK_RUN_REPEATS = 2  # so that the passes of further timed runs are exercised too
+
+
 @pytest.fixture(scope='module')
 def quick_run(tmp_path_factory):
     out = tmp_path_factory.mktemp('bench')
     stream = io.StringIO()
-    rows, summary = bench.work_precision(quick=True, out_dir=out, stream=stream)
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(bench, 'QUICK_REPEATS', QUICK_RUN_REPEATS)
+        rows, summary = bench.work_precision(quick=True, out_dir=out, stream=stream)
     return out, stream.getvalue(), rows, summary
+
+
+def test_quick_run_times_every_point_as_often_as_asked(quick_run):
+    _, _, rows, _ = quick_run
+    assert len(rows) == len(bench.QUICK_METHODS) * len(bench.QUICK_TOLERANCES)
+    for r in rows:
+        assert r['status'] == 'ok' and 'times' not in r
+        assert r['note'] == f'{QUICK_RUN_REPEATS} timed run(s)'
+        assert 0.0 < r['wall_s'] < bench.QUICK_RUN_BUDGET_S
 
 
 def test_quick_run_writes_beside_the_full_results(quick_run):
