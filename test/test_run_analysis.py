@@ -64,7 +64,9 @@ def test_lockstep_recording_reports_and_replays_exactly(ros_nodes, tmp_path):
     finally:
         probe.close()
     ros_nodes.stop_all()
-    assert all(p.returncode == 0 for p in ros_nodes.processes)
+    failed = [f'{p.name} exited with {p.returncode}:\n{p.stderr_text()[-2000:]}'
+              for p in ros_nodes.processes if p.returncode != 0]
+    assert not failed, '\n'.join(failed)
 
     parser_args = type('Args', (), {'bag': bag, 'out': tmp_path, 'band_deg': 0.05})
     assert report.run(parser_args) == 0
