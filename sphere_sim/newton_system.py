@@ -26,6 +26,7 @@ import numba
 import numpy as np
 
 from sphere_sim import block_lu
+from sphere_sim import dynamics as dyn
 
 
 @numba.njit(cache=True)
@@ -73,6 +74,17 @@ def layout(n, pos, vel, perm, block_start, block_end, tail):
         r_start[a] = kept_before[block_start[i]]
         r_end[a] = kept_before[block_end[i]]
     return red, pos_of, r_start, r_end, kept_before[tail]
+
+
+@numba.njit(cache=True)
+def model_layout(flags, n):
+    """:func:`layout` of an assembled model: ``(pos, vel, red, pos_of, r_start, r_end,
+    r_tail)`` from :func:`sphere_sim.dynamics.kinematic_pairs` and the model's block-arrow
+    order."""
+    pos, vel = dyn.kinematic_pairs(flags)
+    perm, start, end, tail = block_lu.arrow_order(flags[dyn.F_N_BEAMS], n)
+    red, pos_of, r_start, r_end, r_tail = layout(n, pos, vel, perm, start, end, tail)
+    return pos, vel, red, pos_of, r_start, r_end, r_tail
 
 
 @numba.njit(cache=True)

@@ -308,10 +308,8 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
 
     # Newton systems without the kinematic states (sphere_sim.newton_system), block-arrow
     # where that succeeds, dense otherwise.
-    pos, vel = dyn.kinematic_pairs(flags)
-    perm, full_start, full_end, full_tail = block_lu.arrow_order(flags[dyn.F_N_BEAMS], n)
-    red, pos_of, arrow_start, arrow_end, arrow_tail = newton_system.layout(
-        n, pos, vel, perm, full_start, full_end, full_tail)
+    pos, vel, red, pos_of, arrow_start, arrow_end, arrow_tail = newton_system.model_layout(
+        flags, n)
     m = red.size
     dense_start, dense_end, dense_tail = block_lu.dense_structure(m)
     J = np.empty((n, n))

@@ -67,3 +67,17 @@ def context(monkeypatch):
     rclpy.init(context=context, domain_id=fresh_domain_id())
     yield context
     rclpy.try_shutdown(context=context)
+
+
+@pytest.fixture(scope='session')
+def kick_trajectory(model, x_rest):
+    """The committed optimised kick, 40 ms from rest sampled every 0.5 ms: every contact phase
+    (pressed, released, bouncing, settling) for tests that need states along a real kick."""
+    from pathlib import Path
+
+    from sphere_sim.kicks import KickDesign
+    from sphere_sim.solve import simulate
+
+    design = Path(__file__).parents[1] / 'bench' / 'results' / 'kick_optimization.json'
+    return simulate(model, x_rest, 40e-3, KickDesign.load(design).programme(),
+                    sample_period_s=0.5e-3)

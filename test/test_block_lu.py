@@ -1,23 +1,15 @@
 """The Newton matrices' LU: dense and block-arrow factorisations against LAPACK."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from sphere_sim import block_lu
 from sphere_sim import radau_compiled as rc
-from sphere_sim.initial_state import rest_state
-from sphere_sim.kicks import KickDesign
-from sphere_sim.model import assemble
-from sphere_sim.scene import load_scene
-from sphere_sim.solve import simulate
 
 # Newton matrices mu / h I - J of the compiled Radau: its real eigenvalue and complex pair,
 # over the step sizes it takes (s).
 MU = (rc.MU_REAL, complex(rc.MU_COMPLEX_RE, rc.MU_COMPLEX_IM))
 STEPS_S = (1e-8, 1e-6, 1e-4)
-OPTIMISED_KICK = Path(__file__).parents[1] / 'bench' / 'results' / 'kick_optimization.json'
 
 
 def factor_and_solve(a, b, structure, threshold=block_lu.PIVOT_THRESHOLD):
@@ -52,11 +44,9 @@ def test_arrow_order_groups_each_beam():
 
 
 @pytest.fixture(scope='module')
-def kick_jacobians():
+def kick_jacobians(model, kick_trajectory):
     """Jacobians (arrow order) along the optimised kick, through every contact phase."""
-    model = assemble(load_scene('rest'))
-    programme = KickDesign.load(OPTIMISED_KICK).programme()
-    traj = simulate(model, rest_state(model), 40e-3, programme, sample_period_s=0.5e-3)
+    traj = kick_trajectory
     perm, start, end, tail = block_lu.arrow_order(model.n_beams, model.n_states)
     out = []
     for k in range(traj.x.shape[1]):

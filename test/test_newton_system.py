@@ -1,7 +1,5 @@
 """The Newton systems with the kinematic states eliminated, and the Jacobian's beam columns."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from physics_helpers import scene_with
@@ -10,30 +8,23 @@ from sphere_sim import block_lu, newton_system
 from sphere_sim import dynamics as dyn
 from sphere_sim import radau_compiled as rc
 from sphere_sim.initial_state import rest_state
-from sphere_sim.kicks import KickDesign
 from sphere_sim.model import assemble
 from sphere_sim.scene import load_scene
-from sphere_sim.solve import simulate, state_scale
+from sphere_sim.solve import state_scale
 
 MU = (rc.MU_REAL, complex(rc.MU_COMPLEX_RE, rc.MU_COMPLEX_IM))
 STEPS_S = (1e-8, 1e-6, 1e-4)  # the step sizes the compiled Radau takes
-OPTIMISED_KICK = Path(__file__).parents[1] / 'bench' / 'results' / 'kick_optimization.json'
 
 
 def reduced_layout(model):
-    pos, vel = dyn.kinematic_pairs(model.flags)
-    n = model.n_states
-    perm, start, end, tail = block_lu.arrow_order(model.n_beams, n)
-    return (pos, vel), newton_system.layout(n, pos, vel, perm, start, end, tail)
+    pos, vel, *reduced = newton_system.model_layout(model.flags, model.n_states)
+    return (pos, vel), tuple(reduced)
 
 
 @pytest.fixture(scope='module')
-def kick_states():
-    """(model, states, voltages) along the optimised kick, through every contact phase."""
-    model = assemble(load_scene('rest'))
-    programme = KickDesign.load(OPTIMISED_KICK).programme()
-    traj = simulate(model, rest_state(model), 40e-3, programme, sample_period_s=0.5e-3)
-    return model, traj.x.T, traj.u.T
+def kick_states(model, kick_trajectory):
+    """(model, states, voltages) along the optimised kick (conftest.kick_trajectory)."""
+    return model, kick_trajectory.x.T, kick_trajectory.u.T
 
 
 @pytest.mark.parametrize('sphere', [True, False])
