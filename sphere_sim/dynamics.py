@@ -97,6 +97,11 @@ D_MIN_GROUND_GAP = 4
 D_MIN_SPHERE_GAP = 5
 N_DIAG = 6
 
+# The ``part`` of the model a kernel call evaluates: every term, one beam alone (its index,
+# >= 0), or only the terms that depend on the sphere's state (see rhs_kernel).
+WHOLE_MODEL = -1
+SPHERE_DEPENDENT = -2
+
 QUATERNION_GAIN_PER_S = 1.0e3  # pulls |q| back to 1 without touching the rotation itself
 FAR_GAP_M = 1.0  # reported gap when a contact does not exist
 
@@ -138,7 +143,7 @@ def capacitance_of(z_m, phi_rad, p, flags, rbf_cz, rbf_cphi, rbf_w):
 
 @numba.njit(cache=True)
 def rhs_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, dxdt, diag,
-               only_beam=-1):
+               part=WHOLE_MODEL):
     """Write dx/dt of the assembled model into ``dxdt`` and diagnostics into ``diag``.
 
     Parameters
@@ -156,10 +161,15 @@ def rhs_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, dxdt, di
         RBF capacitance centres (m, rad) and weights (F); unused with the closed form.
     dxdt : ndarray, shape like ``x``
     diag : ndarray, shape (N_DIAG,)
-    only_beam : int, optional
-        If >= 0, evaluate that beam alone: the other beams' rows of ``dxdt`` are left as they
-        were and the sphere's rates feel only this beam's tip. The difference of two such
-        calls is that beam's columns of the Jacobian (:func:`jacobian_kernel`).
+    part : int, optional
+        ``WHOLE_MODEL``; or a beam's index, to evaluate that beam alone: the other beams' rows
+        of ``dxdt`` are left as they were and the sphere's rates feel only this beam's tip;
+        or ``SPHERE_DEPENDENT``: the beams' own forces (gravity, springs, damping,
+        electrostatics, ground contact), which do not depend on the sphere's state, are left
+        out, so that each beam's rates hold only its tip's contact with the sphere. The
+        difference of two calls with the same ``part`` is a beam's, or the sphere's, columns
+        of the Jacobian (:func:`jacobian_kernel`), since the left-out forces enter the rates
+        linearly.
     """
     n = flags[F_N_BEAMS]
     has_sphere = flags[F_SPHERE] != 0
@@ -198,8 +208,9 @@ def rhs_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, dxdt, di
         centre = add(pos, r_sc)
         centre_vel = add(vel, cross(omega_i, r_sc))
 
+    own_forces = part != SPHERE_DEPENDENT
     for k in range(n):
-        if only_beam >= 0 and k != only_beam:
+        if part >= 0 and k != part:
             continue
         z = x[2 * k]
         phi = x[2 * k + 1]
@@ -207,21 +218,24 @@ def rhs_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, dxdt, di
         phid = x[2 * n + 2 * k + 1]
         cphi = math.cos(phi)
         sphi = math.sin(phi)
-        f1 = m_b * l_cog * sphi * phid * phid - m_b * g
-        f2 = -m_b * g * l_cog * cphi
-        f1 -= p[P_KZ] * (z - p[P_SUSPENSION_Z])
-        f2 -= p[P_KPHI] * phi
-        if damping:
+        f1 = 0.0
+        f2 = 0.0
+        if own_forces:
+            f1 = m_b * l_cog * sphi * phid * phid - m_b * g
+            f2 = -m_b * g * l_cog * cphi
+            f1 -= p[P_KZ] * (z - p[P_SUSPENSION_Z])
+            f2 -= p[P_KPHI] * phi
+        if damping and own_forces:
             f1 -= p[P_DZ] * zd
             f2 -= p[P_DPHI] * phid
             diag[D_POWER_DAMPING] -= p[P_DZ] * zd * zd + p[P_DPHI] * phid * phid
-        if flags[F_ELECTROSTATICS] and u[k] != 0.0:
+        if flags[F_ELECTROSTATICS] and u[k] != 0.0 and own_forces:
             _, dcdz, dcdphi = capacitance_of(z, phi, p, flags, rbf_cz, rbf_cphi, rbf_w)
             half_v2 = 0.5 * u[k] * u[k]
             f1 += half_v2 * dcdz
             f2 += half_v2 * dcdphi
             diag[D_POWER_ELECTROSTATIC] += half_v2 * (dcdz * zd + dcdphi * phid)
-        if flags[F_GROUND_CONTACT]:
+        if flags[F_GROUND_CONTACT] and own_forces:
             gap_rear = z - p[P_GROUND_Z] - p[P_ISO]
             lever = p[P_GROUND_LENGTH] / (cphi * cphi)
             gap_front = gap_rear + p[P_GROUND_LENGTH] * sphi / cphi
@@ -335,11 +349,12 @@ def jacobian_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, sca
     ``scale`` (shape (n,)), so that positions in um and rates in m/s are perturbed alike. Why
     differences and not an analytic Jacobian: docs/numerics.md.
 
-    A beam's state enters only its own rows and, through its tip's force, the sphere's, so its
-    columns difference the kernel of that beam alone (``only_beam``); the
-    sphere's columns take a whole kernel call each. For four beams: 14 whole calls and 20 of
-    one beam (each about 0.4 of a whole one, which also computes the sphere's kinematics),
-    18 instead of 26 us at a state of a kick with the sphere on the tips.
+    Each column differences only the terms that depend on its state (the ``part`` of
+    :func:`rhs_kernel`). A beam's state enters only its own rows and, through its tip's force,
+    the sphere's, so its columns difference the kernel of that beam alone; the sphere's state
+    enters the sphere's rows and the beams' through their tips, so its columns difference the
+    kernel without the beams' own forces (and their capacitances). For four beams: 14 calls
+    of ``SPHERE_DEPENDENT`` and 20 of one beam.
     """
     n = x.size
     nb = flags[F_N_BEAMS]
@@ -348,11 +363,13 @@ def jacobian_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, sca
     f1 = np.empty(n)
     diag = np.empty(N_DIAG)
     xp = x.copy()
-    rhs_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, f0, diag)
+    rhs_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, f0, diag,
+               SPHERE_DEPENDENT)
     for j in range(o, n):
         h = _difference_step(x[j], scale[j], JACOBIAN_STEP)
         xp[j] = x[j] + h
-        rhs_kernel(t, xp, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, f1, diag)
+        rhs_kernel(t, xp, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, f1, diag,
+                   SPHERE_DEPENDENT)
         for i in range(n):
             jac[i, j] = (f1[i] - f0[i]) / h
         xp[j] = x[j]

@@ -97,9 +97,10 @@ def test_is_arrow_sees_coupling_between_beams_through_rates_and_positions(kick_s
         assert not newton_system.is_arrow(coupled, red, pos_of, start, end, tail)
 
 
-def test_beam_columns_equal_differences_of_whole_kernel_calls(kick_states):
-    """The Jacobian evaluates a beam's columns with that beam alone (only_beam): they must be
-    the forward differences of the whole kernel, rounding aside."""
+def test_columns_equal_differences_of_whole_kernel_calls(kick_states):
+    """The Jacobian differences, for each column, only the terms that depend on that state
+    (a beam alone, or the sphere-dependent terms): its columns must be the forward
+    differences of the whole kernel, rounding aside."""
     model, states, voltages = kick_states
     scale = state_scale(model)
     worst = 0.0
@@ -113,5 +114,7 @@ def test_beam_columns_equal_differences_of_whole_kernel_calls(kick_states):
             whole[:, j] = (model.rhs(0.0, xp, u) - f0) / h
         jac = model.jacobian(0.0, x, u)
         worst = max(worst, np.max(np.abs(jac - whole)) / np.max(np.abs(whole)))
-    # Measured 4e-16: the sphere's rows differ only in the order of the tips' sums.
-    assert worst < 1e-12
+    # Measured 8e-12, in the beams' rows of the sphere's columns, where the whole kernel adds
+    # the tip's force to the beam's own forces before differencing. The differences
+    # themselves change by 3e-6 to 7e-5 of the same scale between steps h and 2h.
+    assert worst < 1e-10
