@@ -158,3 +158,44 @@ def solve(LU, piv, b, block_start, block_end, tail):
         for j in range(max(tail, end), n):
             acc -= LU[i, j] * b[j]
         b[i] = acc * LU[i, i]
+
+
+@numba.njit(cache=True)
+def solve_pair(LU_a, piv_a, b_a, LU_b, piv_b, b_b, block_start, block_end, tail):
+    """:func:`solve` of two systems factored with the same structure, in one pass.
+
+    Each substitution is a chain of dependent multiply-adds; running the two chains side by
+    side (Radau's real and complex systems) keeps the processor busy while either waits.
+    """
+    n = LU_a.shape[0]
+    for k in range(n):
+        p = piv_a[k]
+        if p != k:
+            tmp = b_a[k]
+            b_a[k] = b_a[p]
+            b_a[p] = tmp
+        p = piv_b[k]
+        if p != k:
+            tmp_b = b_b[k]
+            b_b[k] = b_b[p]
+            b_b[p] = tmp_b
+    for i in range(n):
+        acc_a = b_a[i]
+        acc_b = b_b[i]
+        for j in range(block_start[i], i):
+            acc_a -= LU_a[i, j] * b_a[j]
+            acc_b -= LU_b[i, j] * b_b[j]
+        b_a[i] = acc_a
+        b_b[i] = acc_b
+    for i in range(n - 1, -1, -1):
+        acc_a = b_a[i]
+        acc_b = b_b[i]
+        end = block_end[i]
+        for j in range(i + 1, end):
+            acc_a -= LU_a[i, j] * b_a[j]
+            acc_b -= LU_b[i, j] * b_b[j]
+        for j in range(max(tail, end), n):
+            acc_a -= LU_a[i, j] * b_a[j]
+            acc_b -= LU_b[i, j] * b_b[j]
+        b_a[i] = acc_a * LU_a[i, i]
+        b_b[i] = acc_b * LU_b[i, i]

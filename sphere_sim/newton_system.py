@@ -133,22 +133,63 @@ def factor(J, mu_over_h, red, pos_of, LU, piv, arrow, arrow_start, arrow_end, ar
 
 
 @numba.njit(cache=True)
-def solve(LU, piv, J, mu_over_h, r, red, pos_of, pos, vel, work, block_start, block_end,
-          tail):
+def position_columns(J, red, pos, out):
+    """``out[a, i] = J[red[a], pos[i]]``: the columns J_RP that :func:`solve` multiplies,
+    gathered once per Jacobian (shape (n - p, p))."""
+    for a in range(red.size):
+        k = red[a]
+        for i in range(pos.size):
+            out[a, i] = J[k, pos[i]]
+
+
+@numba.njit(cache=True)
+def solve(LU, piv, J_RP, mu_over_h, r, red, pos, vel, work, block_start, block_end, tail):
     """Solve ``(gamma I - J) d = r`` in place in ``r`` (model order, shape (n,)).
 
     ``LU``, ``piv`` and the structure come from :func:`factor` with the same ``J`` and
-    ``mu_over_h``; ``work`` is scratch of shape (n - p,) and ``r``'s dtype.
+    ``mu_over_h``; ``J_RP`` from :func:`position_columns`; ``work`` is scratch of shape
+    (n - p,) and ``r``'s dtype.
     """
     inv = 1.0 / mu_over_h
     for a in range(red.size):
-        k = red[a]
-        acc = 0.0 * r[k]  # zero of r's dtype
+        acc = 0.0 * r[0]  # zero of r's dtype
         for i in range(pos.size):
-            acc += J[k, pos[i]] * r[pos[i]]
-        work[a] = r[k] + acc * inv
+            acc += J_RP[a, i] * r[pos[i]]
+        work[a] = r[red[a]] + acc * inv
     block_lu.solve(LU, piv, work, block_start, block_end, tail)
     for a in range(red.size):
         r[red[a]] = work[a]
     for i in range(pos.size):
         r[pos[i]] = (r[pos[i]] + r[vel[i]]) * inv
+
+
+@numba.njit(cache=True)
+def solve_pair(LU_real, piv_real, LU_complex, piv_complex, J_RP, mu_real_over_h,
+               mu_complex_over_h, r_real, r_complex, red, pos, vel, work_real, work_complex,
+               block_start, block_end, tail):
+    """:func:`solve` of Radau's real and complex systems, factored with the same structure,
+    in one pass: each entry of ``J_RP`` and of the structure is loaded once for both, and
+    their substitutions run side by side (:func:`sphere_sim.block_lu.solve_pair`)."""
+    inv_real = 1.0 / mu_real_over_h
+    inv_complex = 1.0 / mu_complex_over_h
+    for a in range(red.size):
+        acc_real = 0.0
+        acc_re = 0.0
+        acc_im = 0.0
+        for i in range(pos.size):
+            c = J_RP[a, i]
+            q = pos[i]
+            acc_real += c * r_real[q]
+            acc_re += c * r_complex[q].real
+            acc_im += c * r_complex[q].imag
+        k = red[a]
+        work_real[a] = r_real[k] + acc_real * inv_real
+        work_complex[a] = r_complex[k] + complex(acc_re, acc_im) * inv_complex
+    block_lu.solve_pair(LU_real, piv_real, work_real, LU_complex, piv_complex, work_complex,
+                        block_start, block_end, tail)
+    for a in range(red.size):
+        r_real[red[a]] = work_real[a]
+        r_complex[red[a]] = work_complex[a]
+    for i in range(pos.size):
+        r_real[pos[i]] = (r_real[pos[i]] + r_real[vel[i]]) * inv_real
+        r_complex[pos[i]] = (r_complex[pos[i]] + r_complex[vel[i]]) * inv_complex

@@ -174,8 +174,9 @@ def _rms(v, scale):
 
 @numba.njit(cache=True)
 def _jacobian(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, scale, J, central,
-              red, pos_of, block_start, block_end, tail):
-    """Jacobian into ``J`` (model order).
+              red, pos_of, pos, J_RP, block_start, block_end, tail):
+    """Jacobian into ``J`` (model order) and its position columns into ``J_RP``
+    (:func:`sphere_sim.newton_system.position_columns`).
 
     Returns True if its reduced Newton matrix has the block-arrow structure
     (:func:`sphere_sim.newton_system.is_arrow`).
@@ -185,6 +186,7 @@ def _jacobian(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, scale, J,
                                     scale, J)
     else:
         dyn.jacobian_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, scale, J)
+    newton_system.position_columns(J, red, pos, J_RP)
     return newton_system.is_arrow(J, red, pos_of, block_start, block_end, tail)
 
 
@@ -313,8 +315,9 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
     m = red.size
     dense_start, dense_end, dense_tail = block_lu.dense_structure(m)
     J = np.empty((n, n))
+    J_RP = np.empty((m, pos.size))
     arrow = _jacobian(t, y, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, jac_scale, J,
-                      jac_central, red, pos_of, arrow_start, arrow_end, arrow_tail)
+                      jac_central, red, pos_of, pos, J_RP, arrow_start, arrow_end, arrow_tail)
     counters[C_NJEV] += 1
     current_jac = True
     start_r, end_r, tail_r = arrow_start, arrow_end, arrow_tail
@@ -464,10 +467,16 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                         fc_re = TI[1, 0] * F[0, j] + TI[1, 1] * F[1, j] + TI[1, 2] * F[2, j]
                         fc_im = TI[2, 0] * F[0, j] + TI[2, 1] * F[1, j] + TI[2, 2] * F[2, j]
                         f_cplx[j] = complex(fc_re, fc_im) - mc * complex(W[1, j], W[2, j])
-                    newton_system.solve(LU_real, piv_real, J, mr, f_real, red, pos_of, pos,
-                                        vel, work_real, start_r, end_r, tail_r)
-                    newton_system.solve(LU_complex, piv_complex, J, mc, f_cplx, red, pos_of,
-                                        pos, vel, work_complex, start_c, end_c, tail_c)
+                    if tail_r == tail_c:  # both block-arrow, or both dense
+                        newton_system.solve_pair(LU_real, piv_real, LU_complex, piv_complex,
+                                                 J_RP, mr, mc, f_real, f_cplx, red, pos, vel,
+                                                 work_real, work_complex, start_r, end_r,
+                                                 tail_r)
+                    else:
+                        newton_system.solve(LU_real, piv_real, J_RP, mr, f_real, red, pos,
+                                            vel, work_real, start_r, end_r, tail_r)
+                        newton_system.solve(LU_complex, piv_complex, J_RP, mc, f_cplx, red,
+                                            pos, vel, work_complex, start_c, end_c, tail_c)
                     for j in range(n):
                         dW[0, j] = f_real[j]
                         dW[1, j] = f_cplx[j].real
@@ -500,8 +509,8 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                     if current_jac:
                         break
                     arrow = _jacobian(t, y, u, p, flags, beam_angles, rbf_cz, rbf_cphi,
-                                      rbf_w, jac_scale, J, jac_central, red, pos_of,
-                                      arrow_start, arrow_end, arrow_tail)
+                                      rbf_w, jac_scale, J, jac_central, red, pos_of, pos,
+                                      J_RP, arrow_start, arrow_end, arrow_tail)
                     counters[C_NJEV] += 1
                     current_jac = True
                     have_lu = False
@@ -530,8 +539,8 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                 ZE[j] = (Z[0, j] * E[0] + Z[1, j] * E[1] + Z[2, j] * E[2]) / h
                 err[j] = f[j] + ZE[j]
                 scale[j] = atol[j] + max(abs(y[j]), abs(y_new[j])) * rtol
-            newton_system.solve(LU_real, piv_real, J, MU_REAL / h_lu, err, red, pos_of, pos,
-                                vel, work_real, start_r, end_r, tail_r)
+            newton_system.solve(LU_real, piv_real, J_RP, MU_REAL / h_lu, err, red, pos, vel,
+                                work_real, start_r, end_r, tail_r)
             error_norm = _rms(err, scale)
             safety = 0.9 * (2 * NEWTON_MAXITER + 1) / (2 * NEWTON_MAXITER + n_iter)
             if rejected and error_norm > 1.0:
@@ -542,8 +551,8 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                 counters[C_NFEV] += 1
                 for j in range(n):
                     err[j] = f_new[j] + ZE[j]
-                newton_system.solve(LU_real, piv_real, J, MU_REAL / h_lu, err, red, pos_of, pos,
-                                vel, work_real, start_r, end_r, tail_r)
+                newton_system.solve(LU_real, piv_real, J_RP, MU_REAL / h_lu, err, red, pos, vel,
+                                work_real, start_r, end_r, tail_r)
                 error_norm = _rms(err, scale)
             if not math.isfinite(error_norm):
                 error_norm = 1e10
@@ -568,8 +577,8 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
         counters[C_NFEV] += 1
         if recompute_jac:
             arrow = _jacobian(t_new, y_new, u, p, flags, beam_angles, rbf_cz, rbf_cphi,
-                              rbf_w, jac_scale, J, jac_central, red, pos_of, arrow_start,
-                              arrow_end, arrow_tail)
+                              rbf_w, jac_scale, J, jac_central, red, pos_of, pos, J_RP,
+                              arrow_start, arrow_end, arrow_tail)
             counters[C_NJEV] += 1
             current_jac = True
         else:

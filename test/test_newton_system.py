@@ -21,6 +21,12 @@ def reduced_layout(model):
     return (pos, vel), tuple(reduced)
 
 
+def position_columns(jac, red, pos):
+    out = np.empty((red.size, pos.size))
+    newton_system.position_columns(jac, red, pos, out)
+    return out
+
+
 @pytest.fixture(scope='module')
 def kick_states(model, kick_trajectory):
     """(model, states, voltages) along the optimised kick (conftest.kick_trajectory)."""
@@ -77,12 +83,44 @@ def test_reduced_solve_equals_the_full_newton_system_along_a_kick(kick_states):
                 assert ok and structure[2] == tail  # the block-arrow factorisation held
                 b = rng.standard_normal(n).astype(dtype)
                 d = b.copy()
-                newton_system.solve(lu, piv, jac, gamma, d, red, pos_of, pos, vel,
-                                    np.empty(m, dtype=dtype), *structure)
+                newton_system.solve(lu, piv, position_columns(jac, red, pos), gamma, d, red,
+                                    pos, vel, np.empty(m, dtype=dtype), *structure)
                 exact = np.linalg.solve(gamma * np.eye(n) - full, b)
                 worst = max(worst, np.max(np.abs(d - exact)) / np.max(np.abs(exact)))
     # Measured 1.8e-12 (the block-arrow pivots, block_lu); the Newton iteration needs far less.
     assert worst < 1e-10
+
+
+def test_paired_solve_equals_the_real_and_complex_solves_apart(kick_states):
+    """Radau's real and complex systems solved in one pass (solve_pair) give what the two
+    solves give apart, to the last bit: the same operations in the same order."""
+    model, states, voltages = kick_states
+    (pos, vel), (red, pos_of, start, end, tail) = reduced_layout(model)
+    n, m = model.n_states, red.size
+    dense = block_lu.dense_structure(m)
+    rng = np.random.default_rng(7)
+    gammas = (MU[0] / STEPS_S[0], MU[1] / STEPS_S[0])
+    for x, u in zip(states[::5], voltages[::5], strict=True):
+        jac = model.jacobian(0.0, x, u)
+        j_rp = position_columns(jac, red, pos)
+        lus = [np.empty((m, m), dtype=np.result_type(g, float)) for g in gammas]
+        pivs = [np.empty(m, dtype=np.int64) for _ in gammas]
+        for lu, piv, gamma in zip(lus, pivs, gammas, strict=True):
+            ok, *structure = newton_system.factor(jac, gamma, red, pos_of, lu, piv, True,
+                                                  start, end, tail, *dense)
+            assert ok and structure[2] == tail
+        b_real = rng.standard_normal(n)
+        b_complex = rng.standard_normal(n) + 1j * rng.standard_normal(n)
+        apart = [b_real.copy(), b_complex.copy()]
+        for lu, piv, gamma, d in zip(lus, pivs, gammas, apart, strict=True):
+            newton_system.solve(lu, piv, j_rp, gamma, d, red, pos, vel,
+                                np.empty(m, dtype=d.dtype), start, end, tail)
+        d_real, d_complex = b_real.copy(), b_complex.copy()
+        newton_system.solve_pair(lus[0], pivs[0], lus[1], pivs[1], j_rp, *gammas, d_real,
+                                 d_complex, red, pos, vel, np.empty(m),
+                                 np.empty(m, dtype=complex), start, end, tail)
+        np.testing.assert_array_equal(d_real, apart[0])
+        np.testing.assert_array_equal(d_complex, apart[1])
 
 
 def test_is_arrow_sees_coupling_between_beams_through_rates_and_positions(kick_states):
