@@ -101,36 +101,51 @@ def n_contacts(flags):
 
 
 @numba.njit(cache=True)
-def contact_gaps(x, p, flags, beam_angles, out):
+def beam_directions(beam_angles):
+    """cos and sin of each beam's angle delta_k, shape (n, 2): :func:`contact_gaps` needs
+    them at every stage of every step, and they never change."""
+    out = np.empty((beam_angles.size, 2))
+    for k in range(beam_angles.size):
+        out[k, 0] = math.cos(beam_angles[k])
+        out[k, 1] = math.sin(beam_angles[k])
+    return out
+
+
+@numba.njit(cache=True)
+def contact_gaps(x, p, flags, directions, out):
     """Signed gaps (m) of every point contact the model has, the same as the kernel's.
 
     Order: rear ground gaps of the beams, front ground gaps, then tip-to-sphere gaps (eq. 23,
     24, 32); only the contacts switched on are present (``n_contacts(flags)`` entries).
+    ``directions`` is :func:`beam_directions` of the model's beam angles.
     """
     n = flags[dyn.F_N_BEAMS]
-    i = 0
-    if flags[dyn.F_GROUND_CONTACT]:
-        for k in range(n):
-            out[i] = x[2 * k] - p[dyn.P_GROUND_Z] - p[dyn.P_ISO]
-            out[i + n] = out[i] + p[dyn.P_GROUND_LENGTH] * math.tan(x[2 * k + 1])
-            i += 1
-        i += n
-    if flags[dyn.F_SPHERE] and flags[dyn.F_SPHERE_CONTACT]:
+    ground = flags[dyn.F_GROUND_CONTACT] != 0
+    sphere = flags[dyn.F_SPHERE] != 0 and flags[dyn.F_SPHERE_CONTACT] != 0
+    first_sphere_gap = 2 * n if ground else 0
+    cx = cy = cz = 0.0
+    if sphere:
         o = 4 * n
         R = quat_rows(x[o + 3:o + 7])
         d = p[dyn.P_COG_OFFSET]
         cx = x[o] + R[0][2] * d
         cy = x[o + 1] + R[1][2] * d
         cz = x[o + 2] + R[2][2] * d
-        l_b = p[dyn.P_BEAM_LENGTH]
-        for k in range(n):
-            phi = x[2 * k + 1]
-            radial = -p[dyn.P_SUSPENSION_RADIUS] + l_b * math.cos(phi)
-            rx = radial * math.cos(beam_angles[k]) - cx
-            ry = radial * math.sin(beam_angles[k]) - cy
-            rz = x[2 * k] + l_b * math.sin(phi) - cz
-            out[i] = math.sqrt(rx * rx + ry * ry + rz * rz) - p[dyn.P_SPHERE_RADIUS]
-            i += 1
+    l_b = p[dyn.P_BEAM_LENGTH]
+    for k in range(n):
+        z = x[2 * k]
+        sin_phi = math.sin(x[2 * k + 1])
+        cos_phi = math.cos(x[2 * k + 1])
+        if ground:
+            out[k] = z - p[dyn.P_GROUND_Z] - p[dyn.P_ISO]
+            out[n + k] = out[k] + p[dyn.P_GROUND_LENGTH] * sin_phi / cos_phi
+        if sphere:
+            radial = -p[dyn.P_SUSPENSION_RADIUS] + l_b * cos_phi
+            rx = radial * directions[k, 0] - cx
+            ry = radial * directions[k, 1] - cy
+            rz = z + l_b * sin_phi - cz
+            out[first_sphere_gap + k] = (math.sqrt(rx * rx + ry * ry + rz * rz)
+                                         - p[dyn.P_SPHERE_RADIUS])
 
 
 @numba.njit(cache=True, inline='always')
@@ -191,17 +206,19 @@ def _jacobian(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, scale, J,
 
 
 @numba.njit(cache=True)
-def _onset_fraction(y, Z, gaps0, gaps_stage, stage, n_gaps, p, flags, beam_angles,
+def _onset_fraction(y, Z, gaps0, gaps_stage, stage, n_gaps, p, flags, directions,
                     onset_depth_m):
     """Fraction of the step after which the stages ``y + Z[i]`` first close a contact that is
     open at ``y`` (gaps ``gaps0``) to half ``onset_depth_m``; 1.0 if none closes deeper than
     ``onset_depth_m``. Gaps are interpolated linearly between the step start and each stage."""
     n = y.size
     worst = 1.0
+    if not np.any(gaps0[:n_gaps] > 0.0):
+        return worst
     for i in range(3):
         for j in range(n):
             stage[j] = y[j] + Z[i, j]
-        contact_gaps(stage, p, flags, beam_angles, gaps_stage)
+        contact_gaps(stage, p, flags, directions, gaps_stage)
         for c in range(n_gaps):
             g0 = gaps0[c]
             g1 = gaps_stage[c]
@@ -339,6 +356,7 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
     y_old = y.copy()
 
     n_gaps = n_contacts(flags)
+    directions = beam_directions(beam_angles)
     check_onset = onset_depth_m > 0.0 and n_gaps > 0
     check_electrodes = flags[dyn.F_ELECTROSTATICS] != 0 and flags[dyn.F_N_BEAMS] > 0
     electrode_gap0 = np.zeros(flags[dyn.F_N_BEAMS])
@@ -379,7 +397,7 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
             h_abs_old = -1.0
             error_norm_old = -1.0
         if check_onset:
-            contact_gaps(y, p, flags, beam_angles, gaps0)
+            contact_gaps(y, p, flags, directions, gaps0)
         rejected = False
         accepted = False
         n_iter = 0
@@ -412,7 +430,7 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
             # costs up to NEWTON_MAXITER stage sweeps and a fresh Jacobian before h is halved.
             if check_onset and have_dense:
                 worst = _onset_fraction(y, Z, gaps0, gaps_stage, stage, n_gaps, p, flags,
-                                        beam_angles, onset_depth_m)
+                                        directions, onset_depth_m)
                 if worst < 1.0:
                     h_abs *= min(ONSET_SHRINK_MAX, max(ONSET_SHRINK_MIN, worst))
                     counters[C_ONSET_PREDICTED] += 1
@@ -524,7 +542,7 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
             # Contact onset: reject a step that closes an open contact too deeply.
             if check_onset:
                 worst = _onset_fraction(y, Z, gaps0, gaps_stage, stage, n_gaps, p, flags,
-                                        beam_angles, onset_depth_m)
+                                        directions, onset_depth_m)
                 if worst < 1.0:
                     h_abs *= min(ONSET_SHRINK_MAX, max(ONSET_SHRINK_MIN, worst))
                     have_lu = False

@@ -194,7 +194,7 @@ def contact_gaps(model, x):
 
     out = np.empty(max(1, rc.n_contacts(model.flags)))
     rc.contact_gaps(np.ascontiguousarray(x, dtype=float), model.p, model.flags,
-                    model.beam_angles, out)
+                    rc.beam_directions(model.beam_angles), out)
     return out[:rc.n_contacts(model.flags)]
 
 
