@@ -142,7 +142,7 @@ def capacitance_of(z_m, phi_rad, p, flags, rbf_cz, rbf_cphi, rbf_w):
 
 
 @numba.njit(cache=True)
-def rhs_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, dxdt, diag,
+def rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, dxdt, diag,
                part=WHOLE_MODEL):
     """Write dx/dt of the assembled model into ``dxdt`` and diagnostics into ``diag``.
 
@@ -155,8 +155,8 @@ def rhs_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, dxdt, di
         Beam voltages in V, held constant by the caller between programme edges.
     p : ndarray, shape (N_PARAMS,)
     flags : ndarray of int64, shape (N_FLAGS,)
-    beam_angles : ndarray, shape (n,)
-        delta_k of each beam present (rad).
+    directions : ndarray, shape (n, 2)
+        cos and sin of delta_k, the angle of each beam present (``Model.beam_directions``).
     rbf_cz, rbf_cphi, rbf_w : ndarray
         RBF capacitance centres (m, rad) and weights (F); unused with the closed form.
     dxdt : ndarray, shape like ``x``
@@ -251,8 +251,8 @@ def rhs_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, dxdt, di
                                                + (f_front - elastic_front) * rate_front)
             diag[D_MIN_GROUND_GAP] = min(diag[D_MIN_GROUND_GAP], gap_rear, gap_front)
         if has_sphere and flags[F_SPHERE_CONTACT]:
-            cd = math.cos(beam_angles[k])
-            sd = math.sin(beam_angles[k])
+            cd = directions[k, 0]
+            sd = directions[k, 1]
             radial = -p[P_SUSPENSION_RADIUS] + l_b * cphi
             tip = (radial * cd, radial * sd, z + l_b * sphi)
             dtip_dphi = (-l_b * sphi * cd, -l_b * sphi * sd, l_b * cphi)
@@ -342,7 +342,7 @@ def _difference_step(x_j, scale_j, relative):
 
 
 @numba.njit(cache=True)
-def jacobian_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, scale, jac):
+def jacobian_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, scale, jac):
     """d(dx/dt)/dx by compiled forward differences into ``jac``, shape (n, n).
 
     Steps are :func:`_difference_step` with ``JACOBIAN_STEP`` and the characteristic scales
@@ -363,12 +363,12 @@ def jacobian_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, sca
     f1 = np.empty(n)
     diag = np.empty(N_DIAG)
     xp = x.copy()
-    rhs_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, f0, diag,
+    rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, f0, diag,
                SPHERE_DEPENDENT)
     for j in range(o, n):
         h = _difference_step(x[j], scale[j], JACOBIAN_STEP)
         xp[j] = x[j] + h
-        rhs_kernel(t, xp, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, f1, diag,
+        rhs_kernel(t, xp, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, f1, diag,
                    SPHERE_DEPENDENT)
         for i in range(n):
             jac[i, j] = (f1[i] - f0[i]) / h
@@ -378,11 +378,11 @@ def jacobian_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, sca
             jac[i, j] = 0.0
     for k in range(nb):
         rows = (2 * k, 2 * k + 1, 2 * nb + 2 * k, 2 * nb + 2 * k + 1)
-        rhs_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, f0, diag, k)
+        rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, f0, diag, k)
         for j in rows:
             h = _difference_step(x[j], scale[j], JACOBIAN_STEP)
             xp[j] = x[j] + h
-            rhs_kernel(t, xp, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, f1, diag, k)
+            rhs_kernel(t, xp, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, f1, diag, k)
             xp[j] = x[j]
             for i in rows:
                 jac[i, j] = (f1[i] - f0[i]) / h
@@ -391,7 +391,7 @@ def jacobian_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, sca
 
 
 @numba.njit(cache=True)
-def jacobian_kernel_central(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, scale, jac):
+def jacobian_kernel_central(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, scale, jac):
     """d(dx/dt)/dx by compiled central differences into ``jac``, shape (n, n).
 
     Twice the cost of :func:`jacobian_kernel` (2 n kernel calls) for an error of O(h^2)
@@ -406,9 +406,9 @@ def jacobian_kernel_central(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rb
     for j in range(n):
         h = _difference_step(x[j], scale[j], JACOBIAN_STEP_CENTRAL)
         xp[j] = x[j] + h
-        rhs_kernel(t, xp, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, fp, diag)
+        rhs_kernel(t, xp, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, fp, diag)
         xp[j] = x[j] - h
-        rhs_kernel(t, xp, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, fm, diag)
+        rhs_kernel(t, xp, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, fm, diag)
         for i in range(n):
             jac[i, j] = (fp[i] - fm[i]) / (2.0 * h)
         xp[j] = x[j]

@@ -78,6 +78,10 @@ class Model:
         Beam numbers present, in state order.
     parts : tuple of str
         The parts assembled, e.g. ``('beams', 'electrostatics:closed_form', ...)``.
+    beam_angles : ndarray, shape (n_beams,)
+        delta_k of each beam (rad).
+    beam_directions : ndarray, shape (n_beams, 2)
+        Their cos and sin, which is what the compiled kernels use.
     """
 
     scene: object
@@ -88,6 +92,7 @@ class Model:
     p: np.ndarray
     flags: np.ndarray
     beam_angles: np.ndarray
+    beam_directions: np.ndarray
     rbf_cz: np.ndarray
     rbf_cphi: np.ndarray
     rbf_w: np.ndarray
@@ -124,7 +129,7 @@ class Model:
             diag = np.empty(dyn.N_DIAG)
         self._kernel()(float(t), np.ascontiguousarray(x, dtype=float),
                        np.ascontiguousarray(u, dtype=float), self.p, self.flags,
-                       self.beam_angles, self.rbf_cz, self.rbf_cphi, self.rbf_w, out, diag)
+                       self.beam_directions, self.rbf_cz, self.rbf_cphi, self.rbf_w, out, diag)
         return out
 
     def jacobian(self, t, x, u):
@@ -134,7 +139,7 @@ class Model:
         jac = np.empty((self.n_states, self.n_states))
         kernel = dyn.jacobian_kernel if self.jit else dyn.jacobian_kernel.py_func
         kernel(float(t), np.ascontiguousarray(x, dtype=float), np.ascontiguousarray(u, dtype=float),
-               self.p, self.flags, self.beam_angles, self.rbf_cz, self.rbf_cphi, self.rbf_w,
+               self.p, self.flags, self.beam_directions, self.rbf_cz, self.rbf_cphi, self.rbf_w,
                state_scale(self), jac)
         return jac
 
@@ -292,7 +297,9 @@ def assemble(scene, params=None, jit=True):
     if sphere_contact:
         parts.append('sphere_contact')
         parts += [f'friction:{t}' for t in ('viscous', 'coulomb', 'stribeck') if getattr(fx, t)]
+    angles = np.array([beam_angle_rad(b) for b in scene.beams], dtype=float).reshape(-1)
     return Model(scene=scene, params=params, beams=tuple(scene.beams), has_sphere=has_sphere,
                  parts=tuple(parts), p=p, flags=flags,
-                 beam_angles=np.array([beam_angle_rad(b) for b in scene.beams]),
+                 beam_angles=angles,
+                 beam_directions=np.stack([np.cos(angles), np.sin(angles)], axis=1),
                  rbf_cz=rbf_cz, rbf_cphi=rbf_cphi, rbf_w=rbf_w, jit=jit)

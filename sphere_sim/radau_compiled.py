@@ -101,23 +101,12 @@ def n_contacts(flags):
 
 
 @numba.njit(cache=True)
-def beam_directions(beam_angles):
-    """cos and sin of each beam's angle delta_k, shape (n, 2): :func:`contact_gaps` needs
-    them at every stage of every step, and they never change."""
-    out = np.empty((beam_angles.size, 2))
-    for k in range(beam_angles.size):
-        out[k, 0] = math.cos(beam_angles[k])
-        out[k, 1] = math.sin(beam_angles[k])
-    return out
-
-
-@numba.njit(cache=True)
 def contact_gaps(x, p, flags, directions, out):
     """Signed gaps (m) of every point contact the model has, the same as the kernel's.
 
     Order: rear ground gaps of the beams, front ground gaps, then tip-to-sphere gaps (eq. 23,
     24, 32); only the contacts switched on are present (``n_contacts(flags)`` entries).
-    ``directions`` is :func:`beam_directions` of the model's beam angles.
+    ``directions`` holds the cos and sin of each beam's angle (``Model.beam_directions``).
     """
     n = flags[dyn.F_N_BEAMS]
     ground = flags[dyn.F_GROUND_CONTACT] != 0
@@ -188,7 +177,7 @@ def _rms(v, scale):
 
 
 @numba.njit(cache=True)
-def _jacobian(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, scale, J, central,
+def _jacobian(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, scale, J, central,
               red, pos_of, pos, J_RP, block_start, block_end, tail):
     """Jacobian into ``J`` (model order) and its position columns into ``J_RP``
     (:func:`sphere_sim.newton_system.position_columns`).
@@ -197,10 +186,10 @@ def _jacobian(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, scale, J,
     (:func:`sphere_sim.newton_system.is_arrow`).
     """
     if central:
-        dyn.jacobian_kernel_central(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w,
+        dyn.jacobian_kernel_central(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w,
                                     scale, J)
     else:
-        dyn.jacobian_kernel(t, x, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, scale, J)
+        dyn.jacobian_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, scale, J)
     newton_system.position_columns(J, red, pos, J_RP)
     return newton_system.is_arrow(J, red, pos_of, block_start, block_end, tail)
 
@@ -240,7 +229,7 @@ def _predict_factor(h_abs, h_abs_old, error_norm, error_norm_old):
 
 
 @numba.njit(cache=True)
-def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w,
+def integrate(t_start, t_end, x_start, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w,
               rtol, atol, jac_scale, t_eval, x_eval, i_eval, h_first, max_step, max_steps,
               onset_depth_m, jac_rate, jac_central, counters):
     """Integrate dx/dt = rhs(t, x, u) from ``t_start`` towards ``t_end`` with Radau IIA.
@@ -252,7 +241,7 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
     x_start : ndarray, shape (n,)
     u : ndarray, shape (n_beams,)
         Beam voltages (V).
-    p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w
+    p, flags, directions, rbf_cz, rbf_cphi, rbf_w
         The packed model (:class:`sphere_sim.model.Model`).
     rtol : float
     atol : ndarray, shape (n,)
@@ -299,7 +288,7 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
     t = t_start
     y = x_start.copy()
     f = np.empty(n)
-    dyn.rhs_kernel(t, y, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, f, diag)
+    dyn.rhs_kernel(t, y, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, f, diag)
     counters[C_NFEV] += 1
     rtol = max(rtol, 100.0 * EPS)
     newton_tol = max(10.0 * EPS / rtol, min(0.03, rtol**0.5))
@@ -318,7 +307,7 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
         h0 = min(h0, interval)
         y1 = y + h0 * f
         f1 = np.empty(n)
-        dyn.rhs_kernel(t + h0, y1, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, f1, diag)
+        dyn.rhs_kernel(t + h0, y1, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, f1, diag)
         counters[C_NFEV] += 1
         d2 = _rms(f1 - f, sc) / h0
         tiny = d1 <= 1e-15 and d2 <= 1e-15
@@ -333,7 +322,7 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
     dense_start, dense_end, dense_tail = block_lu.dense_structure(m)
     J = np.empty((n, n))
     J_RP = np.empty((m, pos.size))
-    arrow = _jacobian(t, y, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, jac_scale, J,
+    arrow = _jacobian(t, y, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, jac_scale, J,
                       jac_central, red, pos_of, pos, J_RP, arrow_start, arrow_end, arrow_tail)
     counters[C_NJEV] += 1
     current_jac = True
@@ -356,7 +345,6 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
     y_old = y.copy()
 
     n_gaps = n_contacts(flags)
-    directions = beam_directions(beam_angles)
     check_onset = onset_depth_m > 0.0 and n_gaps > 0
     check_electrodes = flags[dyn.F_ELECTROSTATICS] != 0 and flags[dyn.F_N_BEAMS] > 0
     electrode_gap0 = np.zeros(flags[dyn.F_N_BEAMS])
@@ -471,7 +459,7 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                     for i in range(3):
                         for j in range(n):
                             stage[j] = y[j] + Z[i, j]
-                        dyn.rhs_kernel(t + C[i] * h, stage, u, p, flags, beam_angles, rbf_cz,
+                        dyn.rhs_kernel(t + C[i] * h, stage, u, p, flags, directions, rbf_cz,
                                        rbf_cphi, rbf_w, F[i], diag)
                         counters[C_NFEV] += 1
                         for j in range(n):
@@ -526,7 +514,7 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
                 if not converged:
                     if current_jac:
                         break
-                    arrow = _jacobian(t, y, u, p, flags, beam_angles, rbf_cz, rbf_cphi,
+                    arrow = _jacobian(t, y, u, p, flags, directions, rbf_cz, rbf_cphi,
                                       rbf_w, jac_scale, J, jac_central, red, pos_of, pos,
                                       J_RP, arrow_start, arrow_end, arrow_tail)
                     counters[C_NJEV] += 1
@@ -564,7 +552,7 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
             if rejected and error_norm > 1.0:
                 for j in range(n):
                     stage[j] = y[j] + err[j]
-                dyn.rhs_kernel(t, stage, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w,
+                dyn.rhs_kernel(t, stage, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w,
                                f_new, diag)
                 counters[C_NFEV] += 1
                 for j in range(n):
@@ -590,11 +578,11 @@ def integrate(t_start, t_end, x_start, u, p, flags, beam_angles, rbf_cz, rbf_cph
             factor = 1.0
         else:
             have_lu = False
-        dyn.rhs_kernel(t_new, y_new, u, p, flags, beam_angles, rbf_cz, rbf_cphi, rbf_w, f_new,
+        dyn.rhs_kernel(t_new, y_new, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, f_new,
                        diag)
         counters[C_NFEV] += 1
         if recompute_jac:
-            arrow = _jacobian(t_new, y_new, u, p, flags, beam_angles, rbf_cz, rbf_cphi,
+            arrow = _jacobian(t_new, y_new, u, p, flags, directions, rbf_cz, rbf_cphi,
                               rbf_w, jac_scale, J, jac_central, red, pos_of, pos, J_RP,
                               arrow_start, arrow_end, arrow_tail)
             counters[C_NJEV] += 1

@@ -194,7 +194,7 @@ def contact_gaps(model, x):
 
     out = np.empty(max(1, rc.n_contacts(model.flags)))
     rc.contact_gaps(np.ascontiguousarray(x, dtype=float), model.p, model.flags,
-                    rc.beam_directions(model.beam_angles), out)
+                    model.beam_directions, out)
     return out[:rc.n_contacts(model.flags)]
 
 
@@ -261,7 +261,7 @@ def _segment_fast(model, x, t0, t1, u, rtol, atol, t_eval, onset_depth_m, budget
         steps_before = int(counters[rc.C_STEPS])
         x_chunk = x
         status, t, x, h, i_eval = rc.integrate(
-            t, t1, x, u, model.p, model.flags, model.beam_angles, model.rbf_cz,
+            t, t1, x, u, model.p, model.flags, model.beam_directions, model.rbf_cz,
             model.rbf_cphi, model.rbf_w, float(rtol), atol, jac_scale, t_eval, x_eval, i_eval,
             h, np.inf, max(1, budget.max_steps - budget.steps), onset_depth_m,
             FAST_JACOBIAN_RATE, FAST_JACOBIAN_CENTRAL, counters)

@@ -34,8 +34,9 @@ def scaled(model, jac):
 
 def central_jacobian(model, x, u):
     jac = np.empty((model.n_states, model.n_states))
-    dyn.jacobian_kernel_central(0.0, x, u, model.p, model.flags, model.beam_angles, model.rbf_cz,
-                                model.rbf_cphi, model.rbf_w, state_scale(model), jac)
+    dyn.jacobian_kernel_central(0.0, x, u, model.p, model.flags, model.beam_directions,
+                                model.rbf_cz, model.rbf_cphi, model.rbf_w, state_scale(model),
+                                jac)
     return jac
 
 
