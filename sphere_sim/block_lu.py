@@ -73,6 +73,35 @@ def arrow_order(n_beams, n):
     return perm, block_start, block_end, tail
 
 
+@numba.njit(cache=True, inline='always')
+def _pivot(A, k, start, end, tail, n, piv, pivot_threshold):
+    """Choose the pivot of column ``k`` among rows [k, end) and swap its row in from column
+    ``start`` (the block's first) on; returns False if it is zero or, in a beam block, below
+    ``pivot_threshold`` times the largest border entry of the column."""
+    p = k
+    best = _size(A[k, k])
+    for i in range(k + 1, end):
+        v = _size(A[i, k])
+        if v > best:
+            best = v
+            p = i
+    piv[k] = p
+    if best == 0.0:
+        return False
+    if k < tail:
+        border = 0.0
+        for i in range(tail, n):
+            border = max(border, _size(A[i, k]))
+        if best < pivot_threshold * border:
+            return False
+    if p != k:
+        for j in range(start, n):
+            tmp = A[k, j]
+            A[k, j] = A[p, j]
+            A[p, j] = tmp
+    return True
+
+
 @numba.njit(cache=True)
 def factor(A, piv, block_start, block_end, tail, pivot_threshold):
     """LU with partial pivoting within diagonal blocks, in place.
@@ -98,27 +127,8 @@ def factor(A, piv, block_start, block_end, tail, pivot_threshold):
     n = A.shape[0]
     for k in range(n):
         end = block_end[k]
-        p = k
-        best = _size(A[k, k])
-        for i in range(k + 1, end):
-            v = _size(A[i, k])
-            if v > best:
-                best = v
-                p = i
-        piv[k] = p
-        if best == 0.0:
+        if not _pivot(A, k, block_start[k], end, tail, n, piv, pivot_threshold):
             return False
-        if k < tail:
-            border = 0.0
-            for i in range(tail, n):
-                border = max(border, _size(A[i, k]))
-            if best < pivot_threshold * border:
-                return False
-        if p != k:
-            for j in range(block_start[k], n):
-                tmp = A[k, j]
-                A[k, j] = A[p, j]
-                A[p, j] = tmp
         inv = 1.0 / A[k, k]
         A[k, k] = inv  # solve multiplies by it: a complex division costs several products
         border_start = max(tail, end)
@@ -132,6 +142,42 @@ def factor(A, piv, block_start, block_end, tail, pivot_threshold):
                     A[i, j] -= a * A[k, j]
                 for j in range(border_start, n):
                     A[i, j] -= a * A[k, j]
+    return True
+
+
+@numba.njit(cache=True)
+def factor_pair(A, piv_a, B, piv_b, block_start, block_end, tail, pivot_threshold):
+    """:func:`factor` of two matrices of the same structure, in one pass.
+
+    The eliminations run side by side (Radau's real and complex Newton matrices), as in
+    :func:`solve_pair`. Returns False if either fails; both are then to be factored apart.
+    """
+    n = A.shape[0]
+    for k in range(n):
+        end = block_end[k]
+        start = block_start[k]
+        if not (_pivot(A, k, start, end, tail, n, piv_a, pivot_threshold)
+                and _pivot(B, k, start, end, tail, n, piv_b, pivot_threshold)):
+            return False
+        inv_a = 1.0 / A[k, k]
+        inv_b = 1.0 / B[k, k]
+        A[k, k] = inv_a
+        B[k, k] = inv_b
+        border_start = max(tail, end)
+        for i in range(k + 1, n):
+            if end <= i < border_start:
+                continue
+            a = A[i, k] * inv_a
+            b = B[i, k] * inv_b
+            A[i, k] = a
+            B[i, k] = b
+            if a != 0.0 or b != 0.0:
+                for j in range(k + 1, end):
+                    A[i, j] -= a * A[k, j]
+                    B[i, j] -= b * B[k, j]
+                for j in range(border_start, n):
+                    A[i, j] -= a * A[k, j]
+                    B[i, j] -= b * B[k, j]
     return True
 
 

@@ -115,6 +115,26 @@ def matrix(J, mu_over_h, red, pos_of, out):
 
 
 @numba.njit(cache=True)
+def matrix_pair(J, mu_real_over_h, mu_complex_over_h, red, pos_of, out_real, out_complex):
+    """:func:`matrix` for the real and the complex ``gamma`` in one pass over ``J``."""
+    m = red.size
+    inv_real = 1.0 / mu_real_over_h
+    inv_complex = 1.0 / mu_complex_over_h
+    for a in range(m):
+        k = red[a]
+        for b in range(m):
+            entry = -J[k, red[b]]
+            out_real[a, b] = entry
+            out_complex[a, b] = entry
+            if pos_of[b] >= 0:
+                coupling = J[k, pos_of[b]]
+                out_real[a, b] -= coupling * inv_real
+                out_complex[a, b] -= coupling * inv_complex
+        out_real[a, a] += mu_real_over_h
+        out_complex[a, a] += mu_complex_over_h
+
+
+@numba.njit(cache=True)
 def factor(J, mu_over_h, red, pos_of, LU, piv, arrow, arrow_start, arrow_end, arrow_tail,
            dense_start, dense_end, dense_tail):
     """LU of the reduced Newton matrix into ``LU``: block-arrow when the reduced matrix is one
@@ -130,6 +150,31 @@ def factor(J, mu_over_h, red, pos_of, LU, piv, arrow, arrow_start, arrow_end, ar
     matrix(J, mu_over_h, red, pos_of, LU)
     ok = block_lu.factor(LU, piv, dense_start, dense_end, dense_tail, 0.0)
     return ok, dense_start, dense_end, dense_tail
+
+
+@numba.njit(cache=True)
+def factor_pair(J, mu_real_over_h, mu_complex_over_h, red, pos_of, LU_real, piv_real,
+                LU_complex, piv_complex, arrow, arrow_start, arrow_end, arrow_tail,
+                dense_start, dense_end, dense_tail):
+    """:func:`factor` of Radau's real and complex Newton matrices; in one pass
+    (:func:`sphere_sim.block_lu.factor_pair`) when both are block-arrow.
+
+    Returns ``(ok, real structure, complex structure)``, each structure a
+    ``(block_start, block_end, tail)``; ``ok`` is False if either factorisation failed.
+    """
+    if arrow:
+        matrix_pair(J, mu_real_over_h, mu_complex_over_h, red, pos_of, LU_real, LU_complex)
+        if block_lu.factor_pair(LU_real, piv_real, LU_complex, piv_complex, arrow_start,
+                                arrow_end, arrow_tail, block_lu.PIVOT_THRESHOLD):
+            return (True, (arrow_start, arrow_end, arrow_tail),
+                    (arrow_start, arrow_end, arrow_tail))
+    ok_r, start_r, end_r, tail_r = factor(J, mu_real_over_h, red, pos_of, LU_real, piv_real,
+                                          arrow, arrow_start, arrow_end, arrow_tail,
+                                          dense_start, dense_end, dense_tail)
+    ok_c, start_c, end_c, tail_c = factor(J, mu_complex_over_h, red, pos_of, LU_complex,
+                                          piv_complex, arrow, arrow_start, arrow_end,
+                                          arrow_tail, dense_start, dense_end, dense_tail)
+    return ok_r and ok_c, (start_r, end_r, tail_r), (start_c, end_c, tail_c)
 
 
 @numba.njit(cache=True)

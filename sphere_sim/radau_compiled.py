@@ -430,14 +430,13 @@ def integrate(t_start, t_end, x_start, u, p, flags, directions, rbf_cz, rbf_cphi
                 if not have_lu:
                     mr = MU_REAL / h
                     mc = mu_c / h
-                    ok_r, start_r, end_r, tail_r = newton_system.factor(
-                        J, mr, red, pos_of, LU_real, piv_real, arrow, arrow_start,
-                        arrow_end, arrow_tail, dense_start, dense_end, dense_tail)
-                    ok_c, start_c, end_c, tail_c = newton_system.factor(
-                        J, mc, red, pos_of, LU_complex, piv_complex, arrow, arrow_start,
-                        arrow_end, arrow_tail, dense_start, dense_end, dense_tail)
+                    ok, (start_r, end_r, tail_r), (start_c, end_c, tail_c) = (
+                        newton_system.factor_pair(
+                            J, mr, mc, red, pos_of, LU_real, piv_real, LU_complex,
+                            piv_complex, arrow, arrow_start, arrow_end, arrow_tail,
+                            dense_start, dense_end, dense_tail))
                     counters[C_NLU] += 2
-                    if not (ok_r and ok_c):
+                    if not ok:
                         break
                     have_lu = True
                     h_lu = h

@@ -91,36 +91,47 @@ def test_reduced_solve_equals_the_full_newton_system_along_a_kick(kick_states):
     assert worst < 1e-10
 
 
-def test_paired_solve_equals_the_real_and_complex_solves_apart(kick_states):
-    """Radau's real and complex systems solved in one pass (solve_pair) give what the two
-    solves give apart, to the last bit: the same operations in the same order."""
+def test_paired_factor_and_solve_equal_the_real_and_complex_apart(kick_states):
+    """Radau's real and complex systems factored and solved in one pass (factor_pair,
+    solve_pair) give what they give apart: the same operations in the same order."""
     model, states, voltages = kick_states
     (pos, vel), (red, pos_of, start, end, tail) = reduced_layout(model)
     n, m = model.n_states, red.size
     dense = block_lu.dense_structure(m)
     rng = np.random.default_rng(7)
-    gammas = (MU[0] / STEPS_S[0], MU[1] / STEPS_S[0])
     for x, u in zip(states[::5], voltages[::5], strict=True):
         jac = model.jacobian(0.0, x, u)
         j_rp = position_columns(jac, red, pos)
-        lus = [np.empty((m, m), dtype=np.result_type(g, float)) for g in gammas]
-        pivs = [np.empty(m, dtype=np.int64) for _ in gammas]
-        for lu, piv, gamma in zip(lus, pivs, gammas, strict=True):
-            ok, *structure = newton_system.factor(jac, gamma, red, pos_of, lu, piv, True,
-                                                  start, end, tail, *dense)
-            assert ok and structure[2] == tail
-        b_real = rng.standard_normal(n)
-        b_complex = rng.standard_normal(n) + 1j * rng.standard_normal(n)
-        apart = [b_real.copy(), b_complex.copy()]
-        for lu, piv, gamma, d in zip(lus, pivs, gammas, apart, strict=True):
-            newton_system.solve(lu, piv, j_rp, gamma, d, red, pos, vel,
-                                np.empty(m, dtype=d.dtype), start, end, tail)
-        d_real, d_complex = b_real.copy(), b_complex.copy()
-        newton_system.solve_pair(lus[0], pivs[0], lus[1], pivs[1], j_rp, *gammas, d_real,
-                                 d_complex, red, pos, vel, np.empty(m),
-                                 np.empty(m, dtype=complex), start, end, tail)
-        np.testing.assert_array_equal(d_real, apart[0])
-        np.testing.assert_array_equal(d_complex, apart[1])
+        for h in STEPS_S:
+            gammas = (MU[0] / h, MU[1] / h)
+            lus = [np.empty((m, m), dtype=np.result_type(g, float)) for g in gammas]
+            pivs = [np.empty(m, dtype=np.int64) for _ in gammas]
+            for lu, piv, gamma in zip(lus, pivs, gammas, strict=True):
+                ok, *structure = newton_system.factor(jac, gamma, red, pos_of, lu, piv, True,
+                                                      start, end, tail, *dense)
+                assert ok and structure[2] == tail
+            lu_r, lu_c = np.empty_like(lus[0]), np.empty_like(lus[1])
+            piv_r, piv_c = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
+            ok, real, cplx = newton_system.factor_pair(jac, *gammas, red, pos_of, lu_r, piv_r,
+                                                       lu_c, piv_c, True, start, end, tail,
+                                                       *dense)
+            assert ok and real[2] == cplx[2] == tail
+            np.testing.assert_array_equal(lu_r, lus[0])
+            np.testing.assert_array_equal(lu_c, lus[1])
+            np.testing.assert_array_equal(piv_r, pivs[0])
+            np.testing.assert_array_equal(piv_c, pivs[1])
+            b_real = rng.standard_normal(n)
+            b_complex = rng.standard_normal(n) + 1j * rng.standard_normal(n)
+            apart = [b_real.copy(), b_complex.copy()]
+            for lu, piv, gamma, d in zip(lus, pivs, gammas, apart, strict=True):
+                newton_system.solve(lu, piv, j_rp, gamma, d, red, pos, vel,
+                                    np.empty(m, dtype=d.dtype), start, end, tail)
+            d_real, d_complex = b_real.copy(), b_complex.copy()
+            newton_system.solve_pair(lu_r, piv_r, lu_c, piv_c, j_rp, *gammas, d_real,
+                                     d_complex, red, pos, vel, np.empty(m),
+                                     np.empty(m, dtype=complex), start, end, tail)
+            np.testing.assert_array_equal(d_real, apart[0])
+            np.testing.assert_array_equal(d_complex, apart[1])
 
 
 def test_is_arrow_sees_coupling_between_beams_through_rates_and_positions(kick_states):
