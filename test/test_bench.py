@@ -4,6 +4,7 @@ import io
 import math
 import re
 
+import numpy as np
 import pytest
 
 from sphere_twin.commands import bench
@@ -75,3 +76,33 @@ def test_quick_run_errors_fall_with_the_tolerance(quick_run):
         errors = [r['angle_error_rad'] for r in sorted(rows, key=lambda r: -r['rtol'])
                   if r['method'] == method]
         assert errors[-1] < errors[0] / 100, method
+
+
+def test_final_angle_error_is_the_largest_over_the_final_window(model):
+    """A run that rocks about the reference and meets it at the last sample is charged its
+    largest deviation over the final window, not the chance agreement at the end; a larger
+    deviation before the window does not count."""
+    from types import SimpleNamespace
+
+    from sphere_sim.initial_state import rest_state
+
+    x_rest = rest_state(model)
+    o = model.sphere_offset
+    t = np.arange(0.0, 0.0301, 1e-3)
+    tilt_rad = np.zeros(t.size)
+    tilt_rad[t < t[-1] - bench.FINAL_WINDOW_S - 1e-9] = 1e-3  # before the window
+    tilt_rad[-5] = 3e-6  # inside it
+    tilt_rad[-1] = 0.0  # meets the reference at the end
+
+    def trajectory(angles):
+        x = np.repeat(x_rest[:, None], t.size, axis=1)
+        x[o + 3] = np.cos(angles / 2)  # rotated about the body x axis
+        x[o + 4] = np.sin(angles / 2)
+        x[o + 5:o + 7] = 0.0
+        return SimpleNamespace(t=t, x=x, final_state=x[:, -1])
+
+    scene = SimpleNamespace(model=model)
+    final, state, last = bench.errors(scene, trajectory(tilt_rad), trajectory(0.0 * tilt_rad))
+    assert final == pytest.approx(3e-6, rel=1e-6)
+    assert last == 0.0
+    assert state > 0.0

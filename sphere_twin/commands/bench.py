@@ -57,6 +57,14 @@ QUICK_REFERENCE_RTOL = 1e-9
 # Error samples: the normal and the state are compared on this fixed grid (s).
 SAMPLE_PERIOD_S = 1e-3
 TARGET_ANGLE_ERROR_RAD = 1e-6  # the speedup is compared at this final-angle error
+# The final-angle error is the largest angle between the surface normals over the samples of
+# this last stretch of a run, not at its last sample alone: at the end of the kick windows
+# the sphere still rocks on the tips (the reference's normal moves by up to 1.2e-5 rad over
+# its last 10 ms), and a solution that rocks about the reference can meet it at one sample by
+# chance. Measured: LSODA at rtol 1e-3 on the diagonal kick was 2.1e-6 rad off at one of its
+# last ten samples and 4e-8 rad off two samples later. The last sample's error is reported
+# beside it.
+FINAL_WINDOW_S = 10e-3
 # A run longer than this (first, untimed run) is not repeated and tighter tolerances of the
 # same method are skipped: DOP853 on this stiff model needs minutes.
 RUN_BUDGET_S = 30.0
@@ -127,13 +135,26 @@ def run_once(scene, method, rtol, max_wall_s):
 
 
 def errors(scene, traj, reference):
-    """(final-angle error in rad, largest scaled state error over the sample grid)."""
+    """Errors of ``traj`` against ``reference`` (same sample grid).
+
+    Returns
+    -------
+    final_angle_rad : float
+        Largest angle between their surface normals over the last ``FINAL_WINDOW_S``.
+    state : float
+        Largest scaled state error over the whole sample grid.
+    last_sample_angle_rad : float
+        Angle between the surface normals at the last sample.
+    """
     model = scene.model
-    angle = angle_between(model.surface_normal(traj.final_state),
-                          model.surface_normal(reference.final_state))
+    angles = [angle_between(model.surface_normal(traj.x[:, i]),
+                            model.surface_normal(reference.x[:, i]))
+              for i in np.flatnonzero(traj.t >= traj.t[-1] - FINAL_WINDOW_S)]
+    last = angle_between(model.surface_normal(traj.final_state),
+                         model.surface_normal(reference.final_state))
     scale = state_scale(model)[:, None]
     state = float(np.max(np.abs(traj.x - reference.x) / scale))
-    return angle, state
+    return max(angles), state, last
 
 
 def reference_runs(scene, methods, rtol, budget_s):
@@ -222,24 +243,25 @@ def _measure(scene, method, rtol, reference, budget_s):
         traj, first = run_once(scene, method, rtol, budget_s)
     except SolverError as exc:
         return {**row, 'status': exc.status.value, 'wall_s': math.nan, 'times': [],
-                'angle_error_rad': math.nan, 'state_error': math.nan, 'steps': -1,
+                'angle_error_rad': math.nan, 'last_sample_angle_error_rad': math.nan,
+                'state_error': math.nan, 'steps': -1,
                 'nfev': -1, 'njev': -1, 'note': str(exc).splitlines()[0][:80]}
-    angle, state = errors(scene, traj, reference)
+    angle, state, last = errors(scene, traj, reference)
     s = traj.stats
     # Each method was warmed up beforehand, so the first run counts.
     return {**row, 'status': 'ok', 'times': [first], 'angle_error_rad': angle,
-            'state_error': state, 'steps': -1 if s.n_steps is None else s.n_steps,
-            'nfev': s.nfev, 'njev': s.njev}
+            'last_sample_angle_error_rad': last, 'state_error': state,
+            'steps': -1 if s.n_steps is None else s.n_steps, 'nfev': s.nfev, 'njev': s.njev}
 
 
-def time_at_error(rows, scene, method, target):
-    """Wall time (s) of ``method`` at final-angle error ``target``.
+def time_at_error(rows, scene, method, target, key='angle_error_rad'):
+    """Wall time (s) of ``method`` at final-angle error ``target`` (the rows' ``key``).
 
     Interpolated linearly in log(error)-log(time) between the two tolerances, loosest first,
     across which the error first falls to ``target``; the loosest run's time if that run
     is already as accurate; NaN if no run reaches ``target``.
     """
-    pts = sorted(((r['rtol'], r['angle_error_rad'], r['wall_s']) for r in rows
+    pts = sorted(((r['rtol'], r[key], r['wall_s']) for r in rows
                   if r['scene'] == scene and r['method'] == method and r['status'] == 'ok'),
                  reverse=True)
     for i, (_, err, wall) in enumerate(pts):
@@ -255,25 +277,24 @@ def time_at_error(rows, scene, method, target):
 
 
 def summarise(rows, scene):
-    """Speedup of 'fast' over the best scipy method at TARGET_ANGLE_ERROR_RAD on ``scene``."""
-    fast = time_at_error(rows, scene, 'fast', TARGET_ANGLE_ERROR_RAD)
-    scipy_times = {m: time_at_error(rows, scene, m, TARGET_ANGLE_ERROR_RAD)
+    """Speedup of 'fast' over the best scipy method at TARGET_ANGLE_ERROR_RAD, on ``scene``
+    and on each scene (``per_scene``), by the final-angle error and (``last_sample``) by the
+    last sample's."""
+    per_scene = {}
+    for name in sorted({r['scene'] for r in rows}):
+        per_scene[name] = {'last_sample': _speedup(rows, name, 'last_sample_angle_error_rad'),
+                           **_speedup(rows, name, 'angle_error_rad')}
+    return {'scene': scene, **per_scene[scene], 'per_scene': per_scene}
+
+
+def _speedup(rows, scene, key):
+    fast = time_at_error(rows, scene, 'fast', TARGET_ANGLE_ERROR_RAD, key)
+    scipy_times = {m: time_at_error(rows, scene, m, TARGET_ANGLE_ERROR_RAD, key)
                    for m in SCIPY_METHODS}
     finite = {m: t for m, t in scipy_times.items() if math.isfinite(t)}
     best = min(finite, key=finite.get) if finite else None
-    speedup = finite[best] / fast if best and math.isfinite(fast) else math.nan
-    per_scene = {}
-    for name in sorted({r['scene'] for r in rows}):
-        f = time_at_error(rows, name, 'fast', TARGET_ANGLE_ERROR_RAD)
-        s = {m: time_at_error(rows, name, m, TARGET_ANGLE_ERROR_RAD) for m in SCIPY_METHODS}
-        s = {m: t for m, t in s.items() if math.isfinite(t)}
-        b = min(s, key=s.get) if s else None
-        per_scene[name] = {'fast_s': f, 'best_scipy': b,
-                           'best_scipy_s': s[b] if b else math.nan,
-                           'speedup': s[b] / f if b and math.isfinite(f) else math.nan}
-    return {'scene': scene, 'fast_s': fast, 'best_scipy': best,
-            'best_scipy_s': finite.get(best, math.nan), 'speedup': speedup,
-            'per_scene': per_scene}
+    return {'fast_s': fast, 'best_scipy': best, 'best_scipy_s': finite.get(best, math.nan),
+            'speedup': finite[best] / fast if best and math.isfinite(fast) else math.nan}
 
 
 def real_time_factor(repeats):
@@ -291,8 +312,8 @@ def real_time_factor(repeats):
     return RTF_DURATION_S / wall, wall
 
 
-COLUMNS = ('scene', 'method', 'rtol', 'status', 'wall_s', 'angle_error_rad', 'state_error',
-           'steps', 'nfev', 'njev', 'note')
+COLUMNS = ('scene', 'method', 'rtol', 'status', 'wall_s', 'angle_error_rad',
+           'last_sample_angle_error_rad', 'state_error', 'steps', 'nfev', 'njev', 'note')
 
 
 def write_results(rows, summary, scenes, out_dir):
@@ -316,27 +337,35 @@ def markdown(rows, summary, scenes):
              + (' --quick' if summary['quick'] else '') + '`; see docs/numerics.md.', '',
              f"Reference: {summary['reference']['methods'][0]} and "
              f"{summary['reference']['methods'][1]} at rtol {summary['reference']['rtol']:g}; "
-             'wall time is the median of the timed runs (integration only, one core).', '']
+             'wall time is the median of the timed runs (integration only, one core). The '
+             f'final-angle error is the largest angle between the surface normals over the last '
+             f'{FINAL_WINDOW_S * 1e3:.0f} ms of a run: the sphere still rocks slightly at the end '
+             'of the window, and one sample can meet the reference by chance. The last '
+             "sample's error is listed beside it.", '']
     for scene in scenes:
         agree = summary['agreement'][scene.name]
         lines += [f'## {scene.name}: {scene.description}, {scene.duration_s * 1e3:.0f} ms', '',
                   f'Reference agreement: {agree[0]:.2e} rad final normal, {agree[1]:.2e} '
                   'largest scaled state difference.', '',
-                  '| method | rtol | wall (s) | final-angle error (rad) | scaled state error '
-                  '| steps | nfev | njev | status |',
-                  '|---|---|---|---|---|---|---|---|---|']
+                  '| method | rtol | wall (s) | final-angle error (rad) | at the last sample '
+                  '(rad) | scaled state error | steps | nfev | njev | status |',
+                  '|---|---|---|---|---|---|---|---|---|---|']
         for r in rows:
             if r['scene'] != scene.name:
                 continue
             steps = '-' if r['steps'] < 0 else r['steps']
             lines.append(f"| {r['method']} | {r['rtol']:.0e} | {r['wall_s']:.4g} | "
-                         f"{r['angle_error_rad']:.2e} | {r['state_error']:.2e} | {steps} | "
-                         f"{r['nfev']} | {r['njev']} | {r['status']} |")
+                         f"{r['angle_error_rad']:.2e} | {r['last_sample_angle_error_rad']:.2e} | "
+                         f"{r['state_error']:.2e} | {steps} | {r['nfev']} | {r['njev']} | "
+                         f"{r['status']} |")
         p = summary['per_scene'].get(scene.name, {})
         if p:
+            q = p['last_sample']
             lines += ['', f"Wall time at a final-angle error of 1e-6 rad (interpolated): fast "
                       f"{p['fast_s']:.4g} s, best scipy ({p['best_scipy']}) "
-                      f"{p['best_scipy_s']:.4g} s: {p['speedup']:.1f}x.", '']
+                      f"{p['best_scipy_s']:.4g} s: {p['speedup']:.1f}x. By the last sample's "
+                      f"error alone: fast {q['fast_s']:.4g} s, best scipy ({q['best_scipy']}) "
+                      f"{q['best_scipy_s']:.4g} s: {q['speedup']:.1f}x.", '']
     lines += ['## Summary', '',
               f"speedup vs best scipy at 1e-6 rad: {summary['speedup']:.1f}x "
               f"(scene {summary['scene']}, best scipy method {summary['best_scipy']}); "
