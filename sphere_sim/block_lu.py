@@ -181,16 +181,22 @@ def factor_pair(A, piv_a, B, piv_b, block_start, block_end, tail, pivot_threshol
     return True
 
 
-@numba.njit(cache=True)
-def solve(LU, piv, b, block_start, block_end, tail):
-    """Solve A x = b in place in ``b`` from :func:`factor`'s output (same structure)."""
-    n = LU.shape[0]
-    for k in range(n):
+@numba.njit(cache=True, inline='always')
+def _interchange(b, piv):
+    """Apply the factorisation's row interchanges to ``b``, in order."""
+    for k in range(b.size):
         p = piv[k]
         if p != k:
             tmp = b[k]
             b[k] = b[p]
             b[p] = tmp
+
+
+@numba.njit(cache=True)
+def solve(LU, piv, b, block_start, block_end, tail):
+    """Solve A x = b in place in ``b`` from :func:`factor`'s output (same structure)."""
+    n = LU.shape[0]
+    _interchange(b, piv)
     for i in range(n):
         acc = b[i]
         for j in range(block_start[i], i):
@@ -214,17 +220,8 @@ def solve_pair(LU_a, piv_a, b_a, LU_b, piv_b, b_b, block_start, block_end, tail)
     side (Radau's real and complex systems) keeps the processor busy while either waits.
     """
     n = LU_a.shape[0]
-    for k in range(n):
-        p = piv_a[k]
-        if p != k:
-            tmp = b_a[k]
-            b_a[k] = b_a[p]
-            b_a[p] = tmp
-        p = piv_b[k]
-        if p != k:
-            tmp_b = b_b[k]
-            b_b[k] = b_b[p]
-            b_b[p] = tmp_b
+    _interchange(b_a, piv_a)
+    _interchange(b_b, piv_b)
     for i in range(n):
         acc_a = b_a[i]
         acc_b = b_b[i]

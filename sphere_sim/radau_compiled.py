@@ -18,7 +18,8 @@ Additions (docs/numerics.md measures each):
   bounce away. The same rule is applied beforehand to the stages predicted by the previous
   step's collocation polynomial, so that Newton rarely starts across an impact.
 * **The kinematic states are eliminated** from the Newton systems, which are then factored
-  in block-arrow form (:mod:`sphere_sim.newton_system`, :mod:`sphere_sim.block_lu`).
+  in block-arrow form (:mod:`sphere_sim.newton_system`, :mod:`sphere_sim.block_lu`); the real
+  and the complex system are built, factored and solved side by side.
 * **RADAU5's first-iterate test**: Newton may stop after one iteration when the previous
   solve contracted fast enough (Hairer's FACCON); scipy always takes two.
 * **The model's domain**: a step after which an electrode has reached the ground electrode
