@@ -80,6 +80,12 @@ def run_node(build, args=None, spin=None, farewell=None):
     rclpy.init(args=args)
     node = None
     try:
+        # The executor that rclpy.spin uses exists before the node announces itself: a signal
+        # that interrupts Executor.__init__ before it sets _sigint_gc makes Executor.__del__
+        # print an AttributeError traceback (seen once: a SIGTERM sent right after the
+        # simulator's ready line, while rclpy.spin was still creating its executor; the exit
+        # code was still 0).
+        rclpy.get_global_executor()
         node = build()
         (spin or rclpy.spin)(node)
     except (KeyboardInterrupt, ExternalShutdownException):
