@@ -211,10 +211,18 @@ def solve(LU, piv, J_RP, mu_over_h, r, red, pos, vel, work, block_start, block_e
 @numba.njit(cache=True)
 def solve_pair(LU_real, piv_real, LU_complex, piv_complex, J_RP, mu_real_over_h,
                mu_complex_over_h, r_real, r_complex, red, pos, vel, work_real, work_complex,
-               block_start, block_end, tail):
-    """:func:`solve` of Radau's real and complex systems, factored with the same structure,
+               structure_real, structure_complex):
+    """:func:`solve` of Radau's real and complex systems with the structures
+    :func:`factor_pair` returned. When both are the same (both block-arrow, or both dense),
     in one pass: each entry of ``J_RP`` and of the structure is loaded once for both, and
     their substitutions run side by side (:func:`sphere_sim.block_lu.solve_pair`)."""
+    block_start, block_end, tail = structure_real
+    if tail != structure_complex[2]:
+        solve(LU_real, piv_real, J_RP, mu_real_over_h, r_real, red, pos, vel, work_real,
+              *structure_real)
+        solve(LU_complex, piv_complex, J_RP, mu_complex_over_h, r_complex, red, pos, vel,
+              work_complex, *structure_complex)
+        return
     inv_real = 1.0 / mu_real_over_h
     inv_complex = 1.0 / mu_complex_over_h
     for a in range(red.size):

@@ -473,16 +473,10 @@ def integrate(t_start, t_end, x_start, u, p, flags, directions, rbf_cz, rbf_cphi
                         fc_re = TI[1, 0] * F[0, j] + TI[1, 1] * F[1, j] + TI[1, 2] * F[2, j]
                         fc_im = TI[2, 0] * F[0, j] + TI[2, 1] * F[1, j] + TI[2, 2] * F[2, j]
                         f_cplx[j] = complex(fc_re, fc_im) - mc * complex(W[1, j], W[2, j])
-                    if tail_r == tail_c:  # both block-arrow, or both dense
-                        newton_system.solve_pair(LU_real, piv_real, LU_complex, piv_complex,
-                                                 J_RP, mr, mc, f_real, f_cplx, red, pos, vel,
-                                                 work_real, work_complex, start_r, end_r,
-                                                 tail_r)
-                    else:
-                        newton_system.solve(LU_real, piv_real, J_RP, mr, f_real, red, pos,
-                                            vel, work_real, start_r, end_r, tail_r)
-                        newton_system.solve(LU_complex, piv_complex, J_RP, mc, f_cplx, red,
-                                            pos, vel, work_complex, start_c, end_c, tail_c)
+                    newton_system.solve_pair(LU_real, piv_real, LU_complex, piv_complex, J_RP,
+                                             mr, mc, f_real, f_cplx, red, pos, vel, work_real,
+                                             work_complex, (start_r, end_r, tail_r),
+                                             (start_c, end_c, tail_c))
                     for j in range(n):
                         dW[0, j] = f_real[j]
                         dW[1, j] = f_cplx[j].real

@@ -129,7 +129,7 @@ def test_paired_factor_and_solve_equal_the_real_and_complex_apart(kick_states):
             d_real, d_complex = b_real.copy(), b_complex.copy()
             newton_system.solve_pair(lu_r, piv_r, lu_c, piv_c, j_rp, *gammas, d_real,
                                      d_complex, red, pos, vel, np.empty(m),
-                                     np.empty(m, dtype=complex), start, end, tail)
+                                     np.empty(m, dtype=complex), real, cplx)
             np.testing.assert_array_equal(d_real, apart[0])
             np.testing.assert_array_equal(d_complex, apart[1])
 
