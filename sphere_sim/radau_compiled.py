@@ -138,6 +138,18 @@ def contact_gaps(x, p, flags, directions, out):
                                          - p[dyn.P_SPHERE_RADIUS])
 
 
+@numba.njit(cache=True)
+def closed_too_deep(gaps_start, x, p, flags, directions, depth_m, gaps_end):
+    """Write the contact gaps of ``x`` into ``gaps_end`` (:func:`contact_gaps`) and return
+    True if a contact open in ``gaps_start`` (gap > 0) is closed deeper than ``depth_m`` (m)
+    at ``x``: the library methods' per-step onset test."""
+    contact_gaps(x, p, flags, directions, gaps_end)
+    for c in range(n_contacts(flags)):  # noqa: SIM110 (numba compiles no generators)
+        if gaps_start[c] > 0.0 and gaps_end[c] < -depth_m:
+            return True
+    return False
+
+
 @numba.njit(cache=True, inline='always')
 def _electrode_gap(x, p, k):
     gap = x[2 * k] - p[dyn.P_GROUND_Z]

@@ -81,6 +81,48 @@ def test_contact_gaps_match_the_model(model, x_rest):
                                rtol=0, atol=1e-15)
 
 
+def test_functions_at_held_voltages_equal_rhs_and_jacobian(model, x_rest):
+    rng = np.random.default_rng(5)
+    u = np.array([35.0, 0.0, 80.0, 80.0])
+    fun, jac = model.at_voltages(u)
+    x = x_rest + 0.3 * state_scale(model) * rng.standard_normal(model.n_states)
+    np.testing.assert_array_equal(fun(1e-3, x), model.rhs(1e-3, x, u))
+    np.testing.assert_array_equal(jac(1e-3, x), model.jacobian(1e-3, x, u))
+    out = np.full(model.n_states, np.nan)
+    assert fun(1e-3, x, out) is out
+    np.testing.assert_array_equal(out, model.rhs(1e-3, x, u))
+    # The voltages were bound, not referenced: changing the caller's array changes nothing.
+    u[:] = 0.0
+    np.testing.assert_array_equal(fun(1e-3, x), model.rhs(1e-3, x, np.array([35, 0, 80, 80.])))
+
+
+def test_library_onset_test_flags_only_open_contacts_closed_too_deep(model, x_rest):
+    from sphere_sim import radau_compiled as rc
+
+    depth = default_onset_depth_m(model)
+    gaps_start = contact_gaps(model, x_rest)
+    assert np.any(gaps_start > 0.0) and np.any(gaps_start < 0.0)  # both kinds at rest
+    gaps_end = np.empty_like(gaps_start)
+    args = (model.p, model.flags, model.beam_directions, depth, gaps_end)
+    # At rest: the closed tips stay closed, nothing open closes.
+    assert not rc.closed_too_deep(gaps_start, x_rest, *args)
+    np.testing.assert_array_equal(gaps_end, gaps_start)
+    # Lift the sphere off the tips, then lower it back 0.9 and 1.1 allowed depths into them.
+    o = model.sphere_offset
+    lifted = x_rest.copy()
+    lifted[o + 2] += np.max(-model.sphere_gaps(x_rest)) + 5e-9
+    gaps_lifted = contact_gaps(model, lifted)
+    assert np.all(model.sphere_gaps(lifted) > 0.0)
+    deepest = np.max(-model.sphere_gaps(x_rest))
+    for fraction, expected in ((0.9, False), (1.1, True)):
+        x = x_rest.copy()
+        x[o + 2] += deepest - fraction * depth
+        assert rc.closed_too_deep(gaps_lifted, x, *args) is expected
+        np.testing.assert_allclose(gaps_end, contact_gaps(model, x), rtol=0, atol=1e-18)
+    # The same state is no onset for contacts that were already closed at the step's start.
+    assert not rc.closed_too_deep(gaps_start, x, *args)
+
+
 def test_fast_radau_agrees_with_scipy_radau(model, x_rest):
     """Same method, same tolerance: the compiled port and scipy's agree far below the tolerance
     scale, and both take about the same number of steps."""
