@@ -334,6 +334,7 @@ def _segment_scipy(model, method, x, t0, t1, u, rtol, atol, t_eval, onset_depth_
     gaps = contact_gaps(model, x)
     gaps_end = np.empty_like(gaps)
     check_onset = onset_depth_m > 0 and gaps.size > 0
+    p, flags, directions = model.p, model.flags, model.beam_directions
     while True:
         budget.check(solver.t, solver.y)
         t_a = solver.t
@@ -351,8 +352,8 @@ def _segment_scipy(model, method, x, t0, t1, u, rtol, atol, t_eval, onset_depth_
         dense = None
         restart = None
         # One compiled call per step: the test is timed as part of the library method's cost.
-        if check_onset and rc.closed_too_deep(gaps, solver.y, model.p, model.flags,
-                                              model.beam_directions, onset_depth_m, gaps_end):
+        if check_onset and rc.closed_too_deep(gaps, solver.y, p, flags, directions,
+                                              onset_depth_m, gaps_end):
             dense = solver.dense_output()
             restart = _first_onset(model, dense, t_a, t_b, gaps > 0.0, onset_depth_m)
         t_stop = t_b if restart is None else restart
