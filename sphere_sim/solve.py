@@ -385,8 +385,17 @@ def _count_scipy(solver, stats):
 
 
 def _cvode_events(model, open_index, onset_depth_m):
+    """CVODE's root functions: the gaps of the contacts open at the segment's start, plus half
+    the onset depth. CVODE evaluates them at every step, so they make one compiled call."""
+    from sphere_sim import radau_compiled as rc
+
+    p, flags, directions = model.p, model.flags, model.beam_directions
+    gaps = np.empty(max(1, rc.n_contacts(flags)))
+    offset = 0.5 * onset_depth_m
+
     def eventsfn(t, y, events):
-        events[:] = contact_gaps(model, y)[open_index] + 0.5 * onset_depth_m
+        rc.contact_gaps(y, p, flags, directions, gaps)
+        np.add(gaps[open_index], offset, out=events)
 
     return eventsfn
 
