@@ -151,7 +151,8 @@ class Model:
         Jacobian's difference scales bound once. A library solver calls them for every
         evaluation, and the benchmarks time it: each call then costs the compiled kernel and
         one dispatch into it, not the argument conversions of :meth:`rhs` (2.2 against 1.6 µs
-        per call, of which the kernel is 0.55). ``x`` must be a contiguous float64 array.
+        per call, of which the kernel is 0.55). ``x`` is passed on as it is: another dtype or
+        layout than contiguous float64 costs a compilation of the kernel for it.
         """
         from sphere_sim.solve import state_scale
 
