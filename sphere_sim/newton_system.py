@@ -217,6 +217,9 @@ def solve_pair(LU_real, piv_real, LU_complex, piv_complex, J_RP, mu_real_over_h,
     in one pass: each entry of ``J_RP`` and of the structure is loaded once for both, and
     their substitutions run side by side (:func:`sphere_sim.block_lu.solve_pair`)."""
     block_start, block_end, tail = structure_real
+    # Block-arrow and dense differ in their tail, except without the sphere, where neither
+    # has a border: the matrix is then block-diagonal (is_arrow), its dense factors keep
+    # the blocks' zeros, and the block structure solves either factorisation alike.
     if tail != structure_complex[2]:
         solve(LU_real, piv_real, J_RP, mu_real_over_h, r_real, red, pos, vel, work_real,
               *structure_real)

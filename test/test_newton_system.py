@@ -134,6 +134,43 @@ def test_paired_factor_and_solve_equal_the_real_and_complex_apart(kick_states):
             np.testing.assert_array_equal(d_complex, apart[1])
 
 
+@pytest.mark.parametrize('sphere', [True, False])
+def test_paired_solve_of_an_arrow_and_a_dense_factorisation(sphere):
+    """When only one of the pair factored block-arrow, solve_pair gives what the two solves
+    give apart. Without the sphere neither structure has a border and their tails are
+    equal; the block-diagonal matrix's dense factors then solve alike with either."""
+    model = assemble(scene_with(sphere=sphere))
+    (pos, vel), (red, pos_of, start, end, tail) = reduced_layout(model)
+    n, m = model.n_states, red.size
+    dense = block_lu.dense_structure(m)
+    rng = np.random.default_rng(8)
+    x = rest_state(model) + 0.3 * state_scale(model) * rng.standard_normal(n)
+    jac = model.jacobian(0.0, x, np.array([35.0, 35.0, 80.0, 80.0]))
+    j_rp = position_columns(jac, red, pos)
+    gammas = (MU[0] / STEPS_S[1], MU[1] / STEPS_S[1])
+    lu_r, lu_c = np.empty((m, m)), np.empty((m, m), dtype=complex)
+    piv_r, piv_c = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
+    ok, *real = newton_system.factor(jac, gammas[0], red, pos_of, lu_r, piv_r, True, start,
+                                     end, tail, *dense)
+    assert ok and real[1][0] < m  # block-arrow
+    ok, *cplx = newton_system.factor(jac, gammas[1], red, pos_of, lu_c, piv_c, False, start,
+                                     end, tail, *dense)
+    assert ok and cplx[1][0] == m  # dense
+    assert (real[2] == cplx[2]) is not sphere
+    b_real = rng.standard_normal(n)
+    b_complex = rng.standard_normal(n) + 1j * rng.standard_normal(n)
+    apart = [b_real.copy(), b_complex.copy()]
+    for lu, piv, gamma, d, structure in zip((lu_r, lu_c), (piv_r, piv_c), gammas, apart,
+                                            (real, cplx), strict=True):
+        newton_system.solve(lu, piv, j_rp, gamma, d, red, pos, vel,
+                            np.empty(m, dtype=d.dtype), *structure)
+    newton_system.solve_pair(lu_r, piv_r, lu_c, piv_c, j_rp, *gammas, b_real, b_complex, red,
+                             pos, vel, np.empty(m), np.empty(m, dtype=complex), tuple(real),
+                             tuple(cplx))
+    np.testing.assert_array_equal(b_real, apart[0])
+    np.testing.assert_array_equal(b_complex, apart[1])
+
+
 def test_is_arrow_sees_coupling_between_beams_through_rates_and_positions(kick_states):
     model, states, voltages = kick_states
     _, (red, pos_of, start, end, tail) = reduced_layout(model)
