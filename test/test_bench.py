@@ -31,6 +31,14 @@ def test_time_at_error_is_nan_when_no_run_is_accurate_enough():
     assert math.isnan(bench.time_at_error(rows, 's', 'LSODA', 1e-6))
 
 
+def test_only_the_reference_run_is_marked_as_such():
+    rows = [{**row('fast', 1e-10, 0.0, 9.0), 'note': '3 timed run(s)'},
+            row('fast', 1e-9, 1e-12, 2.0), row('CVODE', 1e-10, 1e-11, 1.0)]
+    bench.mark_reference(rows, 'fast', 1e-10)
+    assert rows[0]['note'] == '3 timed run(s); ' + bench.REFERENCE_NOTE
+    assert 'note' not in rows[1] and 'note' not in rows[2]
+
+
 QUICK_RUN_REPEATS = 2  # so that the passes of further timed runs are exercised too
 
 

@@ -222,6 +222,7 @@ def work_precision(quick=False, out_dir=RESULTS_DIR, stream=sys.stdout):
         if times:
             row['wall_s'] = statistics.median(times)
             row['note'] = f'{len(times)} timed run(s)'
+    mark_reference(rows, ref_methods[0], ref_rtol)
     summary = summarise(rows, scenes[0].name)
     summary['agreement'] = agreements
     summary['reference'] = {'methods': ref_methods, 'rtol': ref_rtol}
@@ -233,6 +234,16 @@ def work_precision(quick=False, out_dir=RESULTS_DIR, stream=sys.stdout):
             f"real-time factor: {summary['real_time_factor']:.2f}")
     print(line, file=stream, flush=True)
     return rows, summary
+
+
+REFERENCE_NOTE = 'the reference run itself: error 0 by construction'
+
+
+def mark_reference(rows, method, rtol):
+    """Note on the rows that repeat the reference run: their zero error is by construction."""
+    for row in rows:
+        if row['method'] == method and row['rtol'] == rtol:
+            row['note'] = '; '.join(filter(None, (row.get('note'), REFERENCE_NOTE)))
 
 
 def _measure(scene, method, rtol, reference, budget_s):
@@ -354,10 +365,12 @@ def markdown(rows, summary, scenes):
             if r['scene'] != scene.name:
                 continue
             steps = '-' if r['steps'] < 0 else r['steps']
+            status = r['status'] + (' (the reference)' if REFERENCE_NOTE in r.get('note', '')
+                                    else '')
             lines.append(f"| {r['method']} | {r['rtol']:.0e} | {r['wall_s']:.4g} | "
                          f"{r['angle_error_rad']:.2e} | {r['last_sample_angle_error_rad']:.2e} | "
                          f"{r['state_error']:.2e} | {steps} | {r['nfev']} | {r['njev']} | "
-                         f"{r['status']} |")
+                         f"{status} |")
         p = summary['per_scene'].get(scene.name, {})
         if p:
             q = p['last_sample']
@@ -389,12 +402,13 @@ def plot(rows, scenes, path):
                                       (1, 'state_error', 'largest scaled state error')):
             ax = axes[row_index, col]
             for method in METHODS:
+                # A run with no error is the reference itself: a log axis has no place for
+                # it, and drawing it at an arbitrary floor would show an accuracy nobody has.
                 pts = [(r[key], r['wall_s']) for r in rows if r['scene'] == scene.name
-                       and r['method'] == method and r['status'] == 'ok']
+                       and r['method'] == method and r['status'] == 'ok' and r[key] > 0.0]
                 if not pts:
                     continue
                 err, wall = zip(*pts, strict=True)
-                err = np.maximum(np.array(err), 1e-16)
                 ax.loglog(err, wall, marker=markers[method], label=method)
             if row_index == 0:
                 ax.axvline(TARGET_ANGLE_ERROR_RAD, color='grey', lw=0.8, ls=':')
