@@ -12,6 +12,7 @@ import numba
 import numpy as np
 
 from sphere_sim import dynamics as dyn
+from sphere_sim.solve import state_scale
 
 
 class RecordingModel:
@@ -72,8 +73,6 @@ def replay(model, calls, jacobian=False):
     wall_s : float
         Wall time of the compiled loop alone (s).
     """
-    from sphere_sim.solve import state_scale
-
     n = model.n_states
     t = np.array([c[0] for c in calls], dtype=float)
     x = np.array([c[1] for c in calls], dtype=float).reshape(len(calls), n)

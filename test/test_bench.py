@@ -31,12 +31,12 @@ def test_time_at_error_is_nan_when_no_run_is_accurate_enough():
     assert math.isnan(bench.time_at_error(rows, 's', 'LSODA', 1e-6))
 
 
-def test_rtol_reaching_is_the_run_that_bounds_the_interpolation():
+def test_run_reaching_is_the_run_that_bounds_the_interpolation():
     rows = [row('LSODA', 1e-3, 1e-4, 1.0), row('LSODA', 1e-4, 1e-8, 100.0),
             row('LSODA', 1e-5, 1e-9, 200.0)]
-    assert bench.rtol_reaching(rows, 's', 'LSODA', 1e-6) == 1e-4
-    assert bench.rtol_reaching(rows, 's', 'LSODA', 1e-3) == 1e-3
-    assert math.isnan(bench.rtol_reaching(rows, 's', 'LSODA', 1e-10))
+    assert bench.run_reaching(rows, 's', 'LSODA', 1e-6) == (1e-4, 1e-8, 100.0)
+    assert bench.run_reaching(rows, 's', 'LSODA', 1e-3) == (1e-3, 1e-4, 1.0)
+    assert all(math.isnan(v) for v in bench.run_reaching(rows, 's', 'LSODA', 1e-10))
 
 
 def test_only_the_reference_run_is_marked_as_such():
@@ -84,6 +84,16 @@ def test_quick_run_ends_with_the_summary_line(quick_run):
     assert float(match.group(1)) == pytest.approx(summary['speedup'], rel=0.05)
 
 
+def test_quick_run_times_the_best_library_methods_bare_evaluations(quick_run):
+    _, printed, rows, summary = quick_run
+    p = summary['per_scene']['diagonal_kick']
+    rtol, _, wall_s = bench.run_reaching(rows, 'diagonal_kick', p['best_scipy'],
+                                         bench.TARGET_ANGLE_ERROR_RAD)
+    assert (p['kernels_rtol'], p['kernels_run_s']) == (rtol, wall_s)
+    assert summary['kernels_s'] == p['kernels_s'] > 0.0
+    assert f"{p['best_scipy']} at rtol {p['kernels_rtol']:g}: its kernel evaluations" in printed
+
+
 def test_quick_run_errors_fall_with_the_tolerance(quick_run):
     _, _, rows, summary = quick_run
     # The two reference methods agree far below the errors being measured.
@@ -122,12 +132,3 @@ def test_final_angle_error_is_the_largest_over_the_final_window(model):
     assert final == pytest.approx(3e-6, rel=1e-6)
     assert last == 0.0
     assert state > 0.0
-
-
-def test_quick_run_times_the_best_library_methods_bare_evaluations(quick_run):
-    _, printed, rows, summary = quick_run
-    p = summary['per_scene']['diagonal_kick']
-    assert p['kernels_rtol'] == bench.rtol_reaching(rows, 'diagonal_kick', p['best_scipy'],
-                                                    bench.TARGET_ANGLE_ERROR_RAD)
-    assert summary['kernels_s'] == p['kernels_s'] > 0.0
-    assert f"{p['best_scipy']} at rtol {p['kernels_rtol']:g}: its kernel evaluations" in printed
