@@ -95,6 +95,11 @@ def replay_wall_s(model, recording, repeats):
     recorded solver's kernel evaluations alone."""
     parts = [(calls, jacobian) for calls, jacobian in
              ((recording.rhs_calls, False), (recording.jac_calls, True)) if calls]
+    if not parts:
+        # The compiled 'fast' method evaluates the kernels inside its own loop, not through
+        # at_voltages: a zero here would read as a floor of nothing.
+        raise ValueError('nothing was recorded: only solvers that evaluate the model through '
+                         'Model.at_voltages (the library methods) can be replayed')
     for calls, jacobian in parts:
         replay(model, calls[:1], jacobian)  # compiles, so that no timed loop includes it
     best = np.inf

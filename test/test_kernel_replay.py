@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from sphere_sim.kernel_replay import RecordingModel, replay
+from sphere_sim.kernel_replay import RecordingModel, replay, replay_wall_s
 from sphere_sim.programme import Pulse, PulseProgramme
 from sphere_sim.solve import simulate
 
@@ -41,3 +41,11 @@ def test_replay_evaluates_what_the_solver_received(model, recorded):
     values, _ = replay(model, calls, jacobian=True)
     for (t, x, u), value in zip(calls, values, strict=True):
         np.testing.assert_array_equal(value, model.jacobian(t, x, u))
+
+
+def test_a_run_that_recorded_nothing_is_an_error(model, x_rest):
+    recording = RecordingModel(model)
+    simulate(recording, x_rest, 0.1e-3, PROGRAMME, rtol=1e-4, method='fast')
+    assert recording.rhs_calls == [] and recording.jac_calls == []
+    with pytest.raises(ValueError, match='nothing was recorded'):
+        replay_wall_s(model, recording, repeats=1)
