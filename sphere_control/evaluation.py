@@ -1,12 +1,11 @@
 """The closed-loop studies of §5, and two beyond it (eight directions, a Kalman filter).
 
-Everything runs on a discrete KickPlant, normally the shipped lookup table with the unkicked
-creep removed (``Drift.REMOVE``: the paper's discrete model assumes the sphere rests stably
-between kicks; with the creep kept, a tilted sphere drifts back by a sixth of a full kick per
-kick window at 20 deg of tilt).
+Everything runs on a discrete KickPlant, normally the shipped lookup table: the sphere rests
+stably between kicks, as the paper's discrete model assumes (the contacts' friction holds it,
+docs/parameters.md).
 
 Kick size. The paper's full kick turns the normal by 0.54 deg; a plant may kick more or less
-(the calibrated table: 0.547 deg, fitted to it; other parameter sets or analytic plants
+(the calibrated table: 0.734 deg, nothing fitted to it; other parameter sets or analytic plants
 differ). Distances in the setpoint scenario are used as the paper gives them (the reference is
 1.28 deg away); the resting band Phi_min is reported both as the paper's value and scaled by
 the kick-size ratio, since what decides whether the basic controller oscillates is Phi_min

@@ -95,8 +95,8 @@ class ContinuousKickPlant:
     """The continuous model of §3 as a KickPlant: one simulated kick per call.
 
     The sphere starts each kick at rest at the given normal; the outcome is the normal at the
-    end of the kick window with the unkicked creep over the same window subtracted (as the
-    table with ``Drift.REMOVE``), so both discrete models describe the same kick.
+    end of the kick window, as in the lookup table, so both discrete models describe the same
+    kick.
 
     Parameters
     ----------
@@ -123,9 +123,4 @@ class ContinuousKickPlant:
                                   g.apply_programme(self.design.programme(float(intensity))),
                                   window_s=self.bench.window_s, rtol=self.bench.rtol,
                                   x_rest=rest)
-        unkicked, _ = simulate_kick(self.bench.model, normal,
-                                    g.apply_programme(self.design.programme(0.0)),
-                                    window_s=self.bench.window_s, rtol=self.bench.rtol,
-                                    x_rest=rest)
-        xy = kicked.normal[:2] - (unkicked.normal[:2] - normal[:2])
-        return KickResult(normal_from_xy(*xy), kicked.peak_deviation_rad, kicked.settle_time_s)
+        return kicked

@@ -44,8 +44,12 @@ def dense_structure(n):
 
 
 @numba.njit(cache=True)
-def arrow_order(n_beams, n):
+def arrow_order(n_beams, n, bristle_states=0):
     """Permutation that groups each beam's states and puts the sphere's last.
+
+    A beam's block holds its four states and, with ``bristle_states`` per beam (the friction
+    bristles that the model keeps after the sphere's states), its tip's bristle: a bristle
+    couples only its own beam and the sphere, so the block-arrow form is kept.
 
     Returns
     -------
@@ -53,23 +57,27 @@ def arrow_order(n_beams, n):
         ``perm[i]`` is the model state (layout of :mod:`sphere_sim.dynamics`) at position ``i``.
     block_start, block_end : ndarray of int64, shape (n,)
     tail : int
-        First sphere position (``4 n_beams``); ``n`` when there is no sphere.
+        First sphere position; ``n`` when there is no sphere.
     """
     perm = np.empty(n, dtype=np.int64)
     block_start = np.zeros(n, dtype=np.int64)
     block_end = np.full(n, n, dtype=np.int64)
+    per_beam = STATES_PER_BEAM + bristle_states
+    first_bristle = n - bristle_states * n_beams
     for k in range(n_beams):
-        a = STATES_PER_BEAM * k
+        a = per_beam * k
         perm[a] = 2 * k
         perm[a + 1] = 2 * k + 1
         perm[a + 2] = 2 * n_beams + 2 * k
         perm[a + 3] = 2 * n_beams + 2 * k + 1
-        for i in range(a, a + STATES_PER_BEAM):
+        for i in range(bristle_states):
+            perm[a + STATES_PER_BEAM + i] = first_bristle + bristle_states * k + i
+        for i in range(a, a + per_beam):
             block_start[i] = a
-            block_end[i] = a + STATES_PER_BEAM
-    tail = STATES_PER_BEAM * n_beams
+            block_end[i] = a + per_beam
+    tail = per_beam * n_beams
     for i in range(tail, n):
-        perm[i] = i
+        perm[i] = STATES_PER_BEAM * n_beams + i - tail
     return perm, block_start, block_end, tail
 
 

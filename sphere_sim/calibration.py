@@ -13,6 +13,9 @@ target, may move. Two observations are targets:
     optimised) turns the sphere by sqrt(alpha^2 + beta^2) = ``TARGET_KICK_DEG`` towards -45 deg.
     Every candidate value gets its own kick optimisation.
 
+A range is a physical bound: a target it cannot bracket is not forced. The fit then stops at the
+range's nearer end and :attr:`Fit.reached` is False, so that the shortfall is reported.
+
 Each parameter is fitted by bisection within its range with the others held; the fits run in
 the order of ``CALIBRATION_TARGETS`` and repeat until a pass changes no observation beyond its
 tolerance, since the threshold and the kick both depend a little on every parameter.
@@ -30,7 +33,8 @@ from sphere_sim.parameters import CALIBRATION_TARGETS
 from sphere_sim.pullin import dynamic_threshold
 from sphere_sim.scene import load_scene
 
-TARGET_THRESHOLD_V = 42.5  # middle of the 40-45 V band where Fig. 4's kick rises sharply
+# §4.1: "for voltages larger than 44 V a pull-in occurs"; Fig. 4's kick rises sharply in 40-45 V.
+TARGET_THRESHOLD_V = 44.0
 FIT_TOLERANCE_V = 0.2
 TARGET_KICK_DEG = math.degrees(PAPER_FULL_KICK_RAD)
 KICK_TOLERANCE_DEG = 0.01
@@ -58,6 +62,11 @@ class Fit:
     @property
     def unit(self):
         return 'V' if self.spec.target == 'fig4_threshold' else 'deg'
+
+    @property
+    def reached(self):
+        """False when the declared range stopped the fit short of its target."""
+        return abs(self.observed - self.target) < target_of(self.spec)[1]
 
 
 def evaluate(params, with_beams_only=True):
@@ -95,8 +104,9 @@ def with_value(params, spec, value):
 def bisect(observe, low, high, target, tolerance, geometric=False, progress=None):
     """Bisection of a monotone ``observe(value)`` for ``target`` within [low, high].
 
-    Returns ``(value, observed, history)``; raises ValueError naming the observed range if
-    [low, high] does not bracket the target.
+    Returns ``(value, observed, history)``. When [low, high] does not bracket the target, the
+    end whose observation lies closer to it is returned: the range is a physical bound and is
+    never stretched; the caller reports how far the target was missed (:attr:`Fit.reached`).
     """
     history = []
 
@@ -108,10 +118,9 @@ def bisect(observe, low, high, target, tolerance, geometric=False, progress=None
         return observed
 
     f_low, f_high = look(low), look(high)
-    if (f_low - target) * (f_high - target) > 0:
-        raise ValueError(f'[{low:g}, {high:g}] gives {f_low:.4g} to {f_high:.4g}, not bracketing '
-                         f'the target {target:g}')
     mid, f_mid = (low, f_low) if abs(f_low - target) < abs(f_high - target) else (high, f_high)
+    if (f_low - target) * (f_high - target) > 0:
+        return mid, f_mid, tuple(history)
     for _ in range(MAX_FIT_STEPS):
         if abs(f_mid - target) < tolerance:
             break
@@ -145,13 +154,10 @@ def fit(params, spec, workers=1, progress=None):
     Fit
     """
     target, tolerance = target_of(spec)
-    try:
-        value, observed, history = bisect(
-            lambda value: observe(with_value(params, spec, value), spec, workers)[0],
-            spec.low, spec.high, target, tolerance,
-            geometric=spec.high / spec.low > GEOMETRIC_RANGE_RATIO, progress=progress)
-    except ValueError as exc:
-        raise ValueError(f'{spec.path}: {exc}') from exc
+    value, observed, history = bisect(
+        lambda value: observe(with_value(params, spec, value), spec, workers)[0],
+        spec.low, spec.high, target, tolerance,
+        geometric=spec.high / spec.low > GEOMETRIC_RANGE_RATIO, progress=progress)
     return Fit(spec, value, observed, target, history)
 
 
@@ -166,6 +172,7 @@ def calibrate(params, uncertain, workers=1, progress=None):
     params : ParameterSet
         Start values of the parameters not being fitted.
     uncertain : sequence of UncertainParameter
+        Those held at an estimate (``ESTIMATE_TARGET``) are left as they are.
 
     Returns
     -------
@@ -176,7 +183,8 @@ def calibrate(params, uncertain, workers=1, progress=None):
     checks : list of (observed, target, tolerance)
         Every observation at the returned ``params``, in the same order.
     """
-    ordered = sorted(uncertain, key=lambda spec: CALIBRATION_TARGETS.index(spec.target))
+    ordered = sorted((spec for spec in uncertain if spec.target in CALIBRATION_TARGETS),
+                     key=lambda spec: CALIBRATION_TARGETS.index(spec.target))
     fits, checks = [], []
     for _ in range(MAX_PASSES):
         fits = []
@@ -187,6 +195,8 @@ def calibrate(params, uncertain, workers=1, progress=None):
         # The last fit's final evaluation is already at these values (and deterministic).
         checks = [observe(params, spec, workers) for spec in ordered[:-1]]
         checks.append((fits[-1].observed, *target_of(ordered[-1])))
-        if all(abs(value - target) < tolerance for value, target, tolerance in checks):
+        # A fit that its range stopped short cannot improve in another pass.
+        if all(abs(value - target) < tolerance or not result.reached
+               for (value, target, tolerance), result in zip(checks, fits, strict=True)):
             break
     return params, fits, checks

@@ -10,6 +10,8 @@ is off is never entered. State layout for ``n`` beams, with ``o = 4 n``:
 ``x[o+3:o+7]``          unit quaternion [w, x, y, z], body to inertial
 ``x[o+7:o+10]``         velocity of the centre of gravity (m/s)
 ``x[o+10:o+13]``        angular velocity in the body frame (rad/s)
+``x[o+13+3k:o+16+3k]``  deflection of beam k's friction bristle (m), inertial
+                        frame; only with the ``stiction`` reading (``F_STICTION``)
 ======================  =====================================================
 
 Corrections to the printed equations (each tested, see docs/parameters.md): the mass matrix
@@ -27,7 +29,12 @@ import numpy as np
 
 from sphere_sim.capacitance import closed_form, rbf_evaluate
 from sphere_sim.contact_law import contact_force
-from sphere_sim.friction import friction_magnitude, onset_gate
+from sphere_sim.friction import (
+    BRISTLE_RELEASE_S,
+    bristle_rate,
+    friction_magnitude,
+    onset_gate,
+)
 from sphere_sim.rotations import quat_rows
 from sphere_sim.vec3 import add, cross, dot, mat_t_vec, matvec, scale, sub
 
@@ -69,7 +76,10 @@ P_EPS = 33
 P_VISC_ONSET = 34
 P_RBF_SIGMA_Z = 35
 P_RBF_SIGMA_PHI = 36
-N_PARAMS = 37
+P_PRESLIDING = 37
+P_VISC_PER_NEWTON = 38
+P_BRISTLE_DAMPING = 39
+N_PARAMS = 40
 
 # Indices into the integer ``flags`` vector: which parts the scene assembled.
 F_N_BEAMS = 0
@@ -85,8 +95,12 @@ F_DAMPING = 9
 F_VISCOUS = 10
 F_COULOMB = 11
 F_STRIBECK = 12
-F_PRINTED_FRICTION = 13
-N_FLAGS = 14
+F_FRICTION_READING = 13  # a code of sphere_sim.friction.READINGS
+F_STICTION = 14  # the model carries a bristle per tip (reading ``stiction``)
+N_FLAGS = 15
+
+SPHERE_STATES = 13
+BRISTLE_STATES = 3  # per beam
 
 # Diagnostics the kernel writes alongside the derivative (powers in W, gaps in m).
 D_POWER_ELECTROSTATIC = 0
@@ -142,6 +156,35 @@ def capacitance_of(z_m, phi_rad, p, flags, rbf_cz, rbf_cphi, rbf_w):
 
 
 @numba.njit(cache=True)
+def _bristle_drag(x, ob, e, slip_t, f_n, gate, p, flags, dxdt):
+    """Friction force on the sphere (N) of the bristle at ``x[ob:ob+3]``, whose rate it
+    writes into ``dxdt`` (:func:`sphere_sim.friction.bristle_rate`).
+
+    The bristle's component along the normal ``e`` carries no force (it is not a tangential
+    deflection); the viscous term scales with the normal force like the rest.
+    """
+    bristle = (x[ob], x[ob + 1], x[ob + 2])
+    speed_squared = dot(slip_t, slip_t)
+    mu_c = p[P_MU_C]
+    eta = p[P_VISC_PER_NEWTON] if flags[F_VISCOUS] else 0.0
+    mu_s = p[P_MU_S] if flags[F_STRIBECK] else mu_c + eta * p[P_V_S]
+    rate = bristle_rate(bristle, slip_t, gate, speed_squared, mu_c, mu_s, p[P_V_S], eta,
+                        p[P_PRESLIDING], p[P_EPS])
+    for i in range(BRISTLE_STATES):
+        dxdt[ob + i] = rate[i]
+    # The bristle's force: its deflection and, through the damping time, its rate, each
+    # without the component along the normal.
+    tau = p[P_BRISTLE_DAMPING]
+    loaded = (bristle[0] + tau * rate[0], bristle[1] + tau * rate[1],
+              bristle[2] + tau * rate[2])
+    tangential = sub(loaded, scale(dot(e, loaded), e))
+    stiffness = mu_c * f_n / p[P_PRESLIDING]
+    return (-stiffness * tangential[0] - eta * f_n * slip_t[0],
+            -stiffness * tangential[1] - eta * f_n * slip_t[1],
+            -stiffness * tangential[2] - eta * f_n * slip_t[2])
+
+
+@numba.njit(cache=True)
 def rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, dxdt, diag,
                part=WHOLE_MODEL):
     """Write dx/dt of the assembled model into ``dxdt`` and diagnostics into ``diag``.
@@ -177,6 +220,7 @@ def rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, dxdt, dia
     damping = flags[F_DAMPING] != 0
     r_d = p[P_RD] if flags[F_CONTACT_LOSSES] else 0.0
     any_friction = flags[F_VISCOUS] or flags[F_COULOMB] or flags[F_STRIBECK]
+    stiction = flags[F_STICTION] != 0
     for i in range(N_DIAG):
         diag[i] = 0.0
     diag[D_MIN_GROUND_GAP] = FAR_GAP_M
@@ -261,6 +305,7 @@ def rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, dxdt, dia
             dist = math.sqrt(dot(rel, rel))
             gap = dist - p[P_SPHERE_RADIUS]
             diag[D_MIN_SPHERE_GAP] = min(diag[D_MIN_SPHERE_GAP], gap)
+            ob = o + SPHERE_STATES + BRISTLE_STATES * k
             if gap < 0.0:
                 e = scale(1.0 / dist, rel)
                 rate = dot(e, sub(tip_vel, centre_vel))
@@ -277,19 +322,24 @@ def rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, dxdt, dia
                     r_sp = sub(tip, pos)
                     slip = sub(add(vel, cross(omega_i, r_sp)), tip_vel)
                     slip_t = sub(slip, scale(dot(e, slip), e))
-                    speed = math.sqrt(p[P_EPS] + dot(slip_t, slip_t))
                     gate = onset_gate(gap, p[P_VISC_ONSET])
-                    f_t = friction_magnitude(
-                        speed, f_n, gate, p[P_MU_VISC], p[P_MU_C], p[P_V_C], p[P_MU_S],
-                        p[P_V_S], flags[F_VISCOUS] != 0, flags[F_COULOMB] != 0,
-                        flags[F_STRIBECK] != 0, flags[F_PRINTED_FRICTION] != 0)
-                    direction = scale(1.0 / speed, slip_t)
-                    f1 += f_t * direction[2]
-                    f2 += f_t * dot(direction, dtip_dphi)
-                    drag = scale(-f_t, direction)
+                    if stiction:
+                        drag = _bristle_drag(x, ob, e, slip_t, f_n, gate, p, flags, dxdt)
+                    else:
+                        speed = math.sqrt(p[P_EPS] + dot(slip_t, slip_t))
+                        f_t = friction_magnitude(
+                            speed, f_n, gate, p[P_MU_VISC], p[P_MU_C], p[P_V_C], p[P_MU_S],
+                            p[P_V_S], flags[F_VISCOUS] != 0, flags[F_COULOMB] != 0,
+                            flags[F_STRIBECK] != 0, flags[F_FRICTION_READING])
+                        drag = scale(-f_t / speed, slip_t)
+                    f1 -= drag[2]
+                    f2 -= dot(drag, dtip_dphi)
                     force_s = add(force_s, drag)
                     torque_b = add(torque_b, mat_t_vec(R, cross(r_sp, drag)))
-                    diag[D_POWER_FRICTION] -= f_t * dot(direction, slip_t)
+                    diag[D_POWER_FRICTION] += dot(drag, slip_t)
+            elif stiction:
+                for i in range(BRISTLE_STATES):
+                    dxdt[ob + i] = -x[ob + i] / BRISTLE_RELEASE_S
 
         # M [zdd, phidd] = [f1, f2] with the 2x2 mass matrix of eq. (1)-(2).
         m12 = m_b * l_cog * cphi
@@ -354,7 +404,9 @@ def jacobian_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, scal
     the sphere's, so its columns difference the kernel of that beam alone; the sphere's state
     enters the sphere's rows and the beams' through their tips, so its columns difference the
     kernel without the beams' own forces (and their capacitances). For four beams: 14 calls
-    of ``SPHERE_DEPENDENT`` and 20 of one beam.
+    of ``SPHERE_DEPENDENT`` and 20 of one beam, and 12 more of ``SPHERE_DEPENDENT`` for the
+    bristles of the ``stiction`` reading (a bristle enters its beam's rates, the sphere's and
+    its own, all of which that part evaluates).
     """
     n = x.size
     nb = flags[F_N_BEAMS]
@@ -376,6 +428,7 @@ def jacobian_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, scal
     for i in range(n):
         for j in range(o):
             jac[i, j] = 0.0
+    sphere_rows = SPHERE_STATES if flags[F_SPHERE] else 0
     for k in range(nb):
         rows = (2 * k, 2 * k + 1, 2 * nb + 2 * k, 2 * nb + 2 * k + 1)
         rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, f0, diag, k)
@@ -386,8 +439,14 @@ def jacobian_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, scal
             xp[j] = x[j]
             for i in rows:
                 jac[i, j] = (f1[i] - f0[i]) / h
-            for i in range(o, n):
+            for i in range(o, o + sphere_rows):
                 jac[i, j] = (f1[i] - f0[i]) / h
+            for i in range(o + sphere_rows, n):  # the bristles': only beam k's own is written
+                jac[i, j] = 0.0
+            if flags[F_STICTION]:
+                ob = o + SPHERE_STATES + BRISTLE_STATES * k
+                for i in range(ob, ob + BRISTLE_STATES):
+                    jac[i, j] = (f1[i] - f0[i]) / h
 
 
 @numba.njit(cache=True)

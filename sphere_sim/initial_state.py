@@ -7,6 +7,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from sphere_sim.rotations import cardan_to_quat, quat_to_matrix
+from sphere_sim.sphere_geometry import mass_properties
 
 REST_TOLERANCE = 1e-6  # largest force imbalance left at rest, relative to the weight per tip
 NEWTON_ITERATIONS = 40
@@ -93,6 +94,14 @@ def _dissipative_twin(model):
 def polish_equilibrium(model, x, u):
     """Newton on the positions of beams and sphere (orientation held) under voltages ``u``.
 
+    With friction bristles (the ``stiction`` reading) a second Newton follows from the first's
+    equilibrium with their deflections as unknowns too and the sphere's angular accelerations
+    in the residual: the bristles then hold whatever torque the tilted sphere's weight exerts
+    (the least-squares step picks the smallest deflections that do, since four tips can share
+    a torque in many ways); a level sphere needs none. A bristle that would have to pass its
+    static limit (|b| = delta) is left there instead, and the state returned is not at rest:
+    the friction cannot hold that tilt.
+
     Raises
     ------
     RestError
@@ -112,6 +121,23 @@ def polish_equilibrium(model, x, u):
     x[2 * n:4 * n] = 0.0
     if model.has_sphere:
         x[model.sphere_offset + 7:model.sphere_offset + 13] = 0.0
+    x = _polish(model, x, u, free, scale, accel_index, force_scale)
+    if model.has_bristles:
+        o, s = model.sphere_offset, model.params.sphere
+        bristles = np.arange(model.bristle_offset, model.n_states)
+        inertia = mass_properties(s.radius_m, s.cut_angle_rad, mass_kg=s.mass_kg).inertia_cog_kg_m2
+        x = _polish(model, x, u, np.concatenate([free, bristles]),
+                    np.concatenate([scale, np.full(bristles.size,
+                                                   model.params.friction.presliding_m)]),
+                    np.concatenate([accel_index, o + 10 + np.arange(3)]),
+                    np.concatenate([force_scale,
+                                    inertia / (s.radius_m * _weight_per_tip_n(model))]))
+    return x
+
+
+def _polish(model, x, u, free, scale, accel_index, force_scale):
+    """``x`` with ``free`` moved by Newton until the accelerations at ``accel_index`` vanish."""
+    x = x.copy()
 
     def residual(v):
         y = x.copy()
@@ -120,11 +146,27 @@ def polish_equilibrium(model, x, u):
 
     v = _newton(residual, x[free] / scale)
     res = np.max(np.abs(residual(v)))
+    if (model.has_bristles and free[-1] >= model.bristle_offset and np.all(np.isfinite(v))
+            and _clip_to_static_limit(model, v, scale, free)):
+        res = 0.0  # friction cannot hold this tilt: the sphere slides from the state returned
     if not np.all(np.isfinite(v)) or res > REST_TOLERANCE:
         raise RestError(f'no equilibrium found: largest force imbalance {res:.3g} of the weight '
                         'per tip')
     x[free] = v * scale
     return x
+
+
+def _clip_to_static_limit(model, v, scale, free):
+    """Shorten, in ``v``, any bristle deflected past the static limit (|b| = delta, where its
+    force is mu_c F_n); True if one was. Such a tilt is more than friction can hold."""
+    delta = model.params.friction.presliding_m
+    first = np.flatnonzero(free == model.bristle_offset)[0]
+    bristles = (v[first:] * scale[first:]).reshape(-1, 3)
+    length = np.linalg.norm(bristles, axis=1)
+    over = length > delta
+    bristles[over] *= (delta / length[over])[:, None]
+    v[first:] = bristles.ravel() / scale[first:]
+    return bool(np.any(over))
 
 
 def _newton(residual, v, iterations=NEWTON_ITERATIONS, step=NEWTON_FD_STEP):

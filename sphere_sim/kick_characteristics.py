@@ -1,11 +1,9 @@
 """Characteristics of a kick design: rotation width against intensity (Fig. 10) and the voltage
 offsets that keep a kick on its nominal direction from tilted states (Fig. 8).
 
-Both measure the *kick effect*: the resting normal's displacement after the kick minus its
-displacement over the same window without a kick (the design at u_K = 0, all beams at the low
-voltage). The paper's friction (eq. 47) has no stiction, so a tilted sphere creeps back towards
-level by itself (docs/parameters.md, "Creep"); at 20 deg that drift is about ten times a full
-kick, and without subtracting it neither the width nor the direction would describe the kick.
+Both measure the *kick effect*: the resting normal's displacement over the kick window. The
+contacts' friction holds a resting sphere (docs/parameters.md, "Friction that holds"), so the
+displacement is the kick's alone: there is no drift to subtract.
 """
 
 import concurrent.futures
@@ -38,13 +36,10 @@ class KickEffect:
     Attributes
     ----------
     displacement : ndarray, shape (2,)
-        x-y displacement of the unit normal caused by the kick (drift removed).
-    drift : ndarray, shape (2,)
-        x-y displacement of the unkicked sphere over the same window.
+        x-y displacement of the unit normal over the kick window.
     """
 
     displacement: np.ndarray
-    drift: np.ndarray
 
     @property
     def width_rad(self):
@@ -65,7 +60,6 @@ class KickBench:
         self.window_s = window_s
         self.rtol = rtol
         self._rest = {}
-        self._drift = {}
 
     def rest(self, normal):
         key = tuple(np.round(normal, 12))
@@ -80,12 +74,8 @@ class KickBench:
 
     def effect(self, normal, design, intensity, offset_v=0.0, offset_beam=None):
         """The :class:`KickEffect` of ``design`` at ``intensity`` from rest at ``normal``."""
-        key = (tuple(np.round(normal, 12)), design)
-        if key not in self._drift:
-            self._drift[key] = self.final_normal(normal, design.programme(0.0))[:2] - normal[:2]
         moved = self.final_normal(normal, design.programme(intensity, offset_v, offset_beam))
-        drift = self._drift[key]
-        return KickEffect(moved[:2] - normal[:2] - drift, drift)
+        return KickEffect(moved[:2] - normal[:2])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -96,7 +86,6 @@ class WidthCurve:
     intensities: np.ndarray
     width_rad: np.ndarray
     direction_rad: np.ndarray
-    drift_rad: float  # length of the unkicked drift over the window
 
 
 def rotation_width_curves(design=None, alphas_deg=(0.0, 20.0, 35.0), intensities=None,
@@ -120,8 +109,7 @@ def rotation_width_curves(design=None, alphas_deg=(0.0, 20.0, 35.0), intensities
                 progress()
         curves.append(WidthCurve(float(alpha), intensities,
                                  np.array([e.width_rad for e in effects]),
-                                 np.array([e.direction_rad for e in effects]),
-                                 float(np.hypot(*effects[0].drift))))
+                                 np.array([e.direction_rad for e in effects])))
     return curves
 
 

@@ -11,7 +11,6 @@ of the kick it was built from; loading it for other parameters is refused.
 """
 
 import dataclasses
-import enum
 import hashlib
 import json
 import math
@@ -31,19 +30,6 @@ AXIS_TABLE_PATH = Path(__file__).parent / 'tables' / 'axis_kick_table.npz'
 CONE_MARGIN = 1.05  # nodes slightly beyond the cone keep interpolation inside it linear
 
 
-class Drift(enum.Enum):
-    """What to do with the drift of a tilted sphere that is not kicked (the u_K = 0 entry).
-
-    The regularised friction of eq. (47) has no stiction, so a tilted sphere creeps back towards
-    level during the kick window (docs/parameters.md, "Creep"). ``KEEP`` reports the model as it
-    is; ``REMOVE`` subtracts the unkicked drift, giving the stable resting states the paper's
-    discrete model assumes (§4: "the sphere stably remains in its new position").
-    """
-
-    KEEP = 'keep'
-    REMOVE = 'remove'
-
-
 class TableError(ValueError):
     """A table file that is missing, malformed, of another version or for other parameters."""
 
@@ -55,7 +41,11 @@ class TableSpec:
     # About 4.6 deg. With 0.12 and six intensities the check found 0.067 deg against direct
     # simulation, most of it along u_K, where the pull-in threshold bends the outcome.
     grid_step: float = 0.08
-    intensities: tuple = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0)
+    # Denser towards full intensity, where the optimised kicks' width rises steeply and smoothly
+    # (0.12 deg at u_K = 0.9, 0.73 deg at 1; docs/motion_primitives.md): a uniform 0.1 step
+    # left 0.14 deg of interpolation error there, 0.01 steps leave about 1e-3 deg.
+    intensities: tuple = (0.0, 0.2, 0.4, 0.5, 0.6, 0.65, 0.7, 0.75, 0.8, 0.84, 0.87, 0.9, 0.92,
+                          0.94, 0.95, 0.96, 0.97, 0.98, 0.99, 1.0)
     window_s: float = 0.06
     rtol: float = 1e-6
     parameter_set: str = 'calibrated'
@@ -131,7 +121,6 @@ class LookupTable:
     peak_rad: np.ndarray
     settle_s: np.ndarray
     meta: dict
-    drift: Drift = Drift.KEEP
 
     @property
     def directions_rad(self):
@@ -144,12 +133,7 @@ class LookupTable:
         object.__setattr__(self, '_spec', spec)
         object.__setattr__(self, '_mirror', kick_axis_mirror(spec.design.direction_rad))
         grid = (self.axis, self.axis, self.intensities)
-        displacement = self.displacement
-        if self.drift is Drift.REMOVE:
-            if self.intensities[0] != 0.0:
-                raise TableError('removing the drift needs the u_K = 0 entries in the table')
-            displacement = displacement - displacement[:, :, :1, :]
-        values = np.concatenate([displacement, self.peak_rad[..., None],
+        values = np.concatenate([self.displacement, self.peak_rad[..., None],
                                  self.settle_s[..., None]], axis=-1)
         object.__setattr__(self, '_interp', RegularGridInterpolator(
             grid, values, method='linear', bounds_error=False, fill_value=np.nan))
@@ -189,7 +173,7 @@ class LookupTable:
         return path
 
     @classmethod
-    def load(cls, path=DEFAULT_TABLE_PATH, params=None, drift=Drift.KEEP):
+    def load(cls, path=DEFAULT_TABLE_PATH, params=None):
         """Load a table; with ``params`` given, refuse one built for other parameters."""
         path = Path(path)
         try:
@@ -210,7 +194,7 @@ class LookupTable:
                 f'{path} was built for parameter set {meta.get("parameter_set")!r} (digest '
                 f'{meta.get("params_digest")}), not for {params.name!r} (digest '
                 f'{params.digest()}); rebuild it with `sphere-twin table build`')
-        return cls(meta=meta, drift=drift, **arrays)
+        return cls(meta=meta, **arrays)
 
     @property
     def spec(self):
@@ -218,12 +202,12 @@ class LookupTable:
         return self._spec
 
     @classmethod
-    def load_current(cls, path=DEFAULT_TABLE_PATH, drift=Drift.KEEP):
+    def load_current(cls, path=DEFAULT_TABLE_PATH):
         """Load a table and refuse it unless its parameter set still has the values it had."""
         from sphere_sim.parameters import load_parameter_set
 
         meta = cls.load(path).meta
-        return cls.load(path, params=load_parameter_set(meta['parameter_set']), drift=drift)
+        return cls.load(path, params=load_parameter_set(meta['parameter_set']))
 
 
 class CombinedKickPlant:

@@ -11,12 +11,13 @@ import math
 import numpy as np
 
 from sphere_sim import dynamics as dyn
-from sphere_sim.contact_law import elastic_energy
+from sphere_sim.contact_law import contact_force, elastic_energy
+from sphere_sim.friction import READING_STICTION, READINGS
 from sphere_sim.parameters import ParameterSet
 from sphere_sim.rotations import quat_to_matrix
 from sphere_sim.sphere_geometry import mass_properties
 
-SPHERE_STATES = 13
+SPHERE_STATES = dyn.SPHERE_STATES
 
 
 def beam_angle_rad(beam):
@@ -62,6 +63,9 @@ def pack_parameters(params: ParameterSet):
     p[dyn.P_V_S] = f.stribeck_velocity_m_per_s
     p[dyn.P_EPS] = f.epsilon_m2_per_s2
     p[dyn.P_VISC_ONSET] = f.viscous_onset_m
+    p[dyn.P_PRESLIDING] = f.presliding_m
+    p[dyn.P_VISC_PER_NEWTON] = f.viscous_s_per_m
+    p[dyn.P_BRISTLE_DAMPING] = f.bristle_damping_s
     return p
 
 
@@ -103,12 +107,30 @@ class Model:
         return len(self.beams)
 
     @property
+    def has_bristles(self):
+        """True when each tip carries a friction bristle (the ``stiction`` reading)."""
+        return bool(self.flags[dyn.F_STICTION])
+
+    @property
     def n_states(self):
-        return 4 * self.n_beams + (SPHERE_STATES if self.has_sphere else 0)
+        return self.bristle_offset + (dyn.BRISTLE_STATES * self.n_beams if self.has_bristles
+                                      else 0)
 
     @property
     def sphere_offset(self):
         return 4 * self.n_beams
+
+    @property
+    def bristle_offset(self):
+        """Index of the first bristle state (the end of the sphere's states)."""
+        return 4 * self.n_beams + (SPHERE_STATES if self.has_sphere else 0)
+
+    def bristles(self, x):
+        """Bristle deflections (m), shape (n_beams, 3) (zeros without the ``stiction`` reading)."""
+        if not self.has_bristles:
+            return np.zeros((self.n_beams, 3))
+        o = self.bristle_offset
+        return np.asarray(x)[o:o + dyn.BRISTLE_STATES * self.n_beams].reshape(self.n_beams, 3)
 
     def state_names(self):
         names = [f'beam_{b}_{q}' for b in self.beams for q in ('z_m', 'phi_rad')]
@@ -117,6 +139,8 @@ class Model:
             names += ['sphere_x_m', 'sphere_y_m', 'sphere_z_m', 'quat_w', 'quat_x', 'quat_y',
                       'quat_z', 'sphere_vx_m_per_s', 'sphere_vy_m_per_s', 'sphere_vz_m_per_s',
                       'omega_x_rad_per_s', 'omega_y_rad_per_s', 'omega_z_rad_per_s']
+        if self.has_bristles:
+            names += [f'beam_{b}_bristle_{a}_m' for b in self.beams for a in 'xyz']
         return names
 
     def _kernel(self):
@@ -255,6 +279,26 @@ class Model:
             energy += s.mass_kg * g * x[o + 2]
             if self.scene.effects.sphere_contact:
                 energy += sum(elastic_energy(gap, kc, ct) for gap in self.sphere_gaps(x))
+            energy += self.bristle_energy(x)
+        return energy
+
+    def bristle_energy(self, x):
+        """Elastic energy held in the friction bristles (J): 1/2 mu_c F_n |b_t|^2 / delta each,
+        with F_n the contact's elastic normal force (the ``stiction`` reading; 0 otherwise)."""
+        if not self.has_bristles:
+            return 0.0
+        f = self.params.friction
+        kc, ct = self.params.contact.stiffness_n_per_m, self.params.contact.transition_force_n
+        rel = self.tip_positions(x) - self.sphere_centre(x)
+        gaps = np.linalg.norm(rel, axis=1) - self.params.sphere.radius_m
+        energy = 0.0
+        for gap, r, b in zip(gaps, rel, self.bristles(x), strict=True):
+            if gap >= 0.0:
+                continue
+            e = r / np.linalg.norm(r)
+            tangential = b - (e @ b) * e
+            f_n = contact_force(gap, 0.0, kc, ct, 0.0)
+            energy += 0.5 * f.coulomb * f_n * float(tangential @ tangential) / f.presliding_m
         return energy
 
     def sphere_centre(self, x):
@@ -304,7 +348,9 @@ def assemble(scene, params=None, jit=True):
     flags[dyn.F_VISCOUS] = sphere_contact and fx.viscous
     flags[dyn.F_COULOMB] = sphere_contact and fx.coulomb
     flags[dyn.F_STRIBECK] = sphere_contact and fx.stribeck
-    flags[dyn.F_PRINTED_FRICTION] = params.friction.reading == 'printed'
+    flags[dyn.F_FRICTION_READING] = READINGS.index(params.friction.reading)
+    flags[dyn.F_STICTION] = (sphere_contact and fx.coulomb
+                             and flags[dyn.F_FRICTION_READING] == READING_STICTION)
 
     p = pack_parameters(params)
     rbf_cz = rbf_cphi = np.zeros(1)

@@ -2,24 +2,25 @@
 eliminated.
 
 Each Newton iteration solves ``(gamma I - J) d = r`` with ``gamma = mu / h`` for the real
-eigenvalue of the method and for its complex pair. Eleven of the model's 29 states are
-positions whose derivative *is* another state (dz_S/dt = z_S dot, dxi_S/dt = v_S:
-:func:`sphere_sim.dynamics.kinematic_pairs`). Their rows of J are unit vectors, so a position
-row reads ``gamma d_i - d_v(i) = r_i`` with ``v(i)`` its velocity, and gives
+eigenvalue of the method and for its complex pair. Eleven of the model's 41 states (29 without
+the friction bristles) are positions whose derivative *is* another state (dz_S/dt = z_S dot,
+dxi_S/dt = v_S: :func:`sphere_sim.dynamics.kinematic_pairs`). Their rows of J are unit
+vectors, so a position row reads ``gamma d_i - d_v(i) = r_i`` with ``v(i)`` its velocity, and gives
 ``d_i = (r_i + d_v(i)) / gamma``. Substituted into the remaining rows R it leaves ::
 
     (gamma I - J_RR - J_RP' / gamma) d_R = r_R + J_RP r_P / gamma
 
-where ``J_RP'`` holds the column of each position at the place of its velocity. That is 18
-unknowns instead of 29: along a kick, cycle counters put a pair of factorisations (real and
-complex) at 8 000 instead of 20 000 cycles and a pair of solves at 3 700 instead of 5 300
-(docs/numerics.md). Hairer's
+where ``J_RP'`` holds the column of each position at the place of its velocity. That is 30
+unknowns instead of 41 (18 instead of 29 without bristles); without bristles, cycle counters put
+a pair of factorisations (real and complex) at 8 000 instead of 20 000 cycles along a kick and a
+pair of solves at 3 700 instead of 5 300 (docs/numerics.md). Hairer's
 RADAU5 makes the same reduction for second-order systems (its M1, M2 options), where the
 positions come first; here they are found by index. The position rows of J are never
 used, so the finite-difference Jacobian's rounding there (``(v + h) - v`` over h) drops out.
 
 The reduced matrix keeps the model's block-arrow form (:mod:`sphere_sim.block_lu`), with
-each beam's two rates as its block and the sphere's quaternion and rates as the border.
+each beam's two rates (and its tip's bristle) as its block and the sphere's quaternion and rates
+as the border.
 """
 
 import numba
@@ -82,7 +83,8 @@ def model_layout(flags, n):
     r_tail)`` from :func:`sphere_sim.dynamics.kinematic_pairs` and the model's block-arrow
     order."""
     pos, vel = dyn.kinematic_pairs(flags)
-    perm, start, end, tail = block_lu.arrow_order(flags[dyn.F_N_BEAMS], n)
+    bristles = dyn.BRISTLE_STATES if flags[dyn.F_STICTION] else 0
+    perm, start, end, tail = block_lu.arrow_order(flags[dyn.F_N_BEAMS], n, bristles)
     red, pos_of, r_start, r_end, r_tail = layout(n, pos, vel, perm, start, end, tail)
     return pos, vel, red, pos_of, r_start, r_end, r_tail
 

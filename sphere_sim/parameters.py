@@ -87,17 +87,24 @@ class FrictionParams:
     stribeck_velocity_m_per_s: float
     epsilon_m2_per_s2: float
     viscous_onset_m: float
+    presliding_m: float
+    viscous_s_per_m: float
+    bristle_damping_s: float
 
 
-# What a declared-uncertain parameter is fitted to (sphere_sim.calibration).
+# What a declared-uncertain parameter is fitted to (sphere_sim.calibration); one held at a
+# physical estimate declares ESTIMATE_TARGET instead, and the calibration reports what the
+# observations do across its range.
 CALIBRATION_TARGETS = ('fig4_threshold', 'fig5_kick')
+ESTIMATE_TARGET = 'estimate'
 
 
 @dataclasses.dataclass(frozen=True)
 class UncertainParameter:
     """A parameter the calibration may move, within ``[low, high]``, and why.
 
-    ``target`` names the observation it is fitted to (one of ``CALIBRATION_TARGETS``);
+    ``target`` names the observation it is fitted to (one of ``CALIBRATION_TARGETS``), or is
+    ``ESTIMATE_TARGET`` for a value held at a physical estimate;
     ``tied`` lists further paths that always take the same value (e.g. the Stribeck velocity
     with the Coulomb velocity, both read from one unitless column of Table A1).
     """
@@ -110,9 +117,10 @@ class UncertainParameter:
     tied: tuple = ()
 
     def __post_init__(self):
-        if self.target not in CALIBRATION_TARGETS:
+        if self.target not in (*CALIBRATION_TARGETS, ESTIMATE_TARGET):
             raise ParameterError(f'uncertain {self.path}: target must be one of '
-                                 f'{CALIBRATION_TARGETS}, got {self.target!r}')
+                                 f'{(*CALIBRATION_TARGETS, ESTIMATE_TARGET)}, got '
+                                 f'{self.target!r}')
         if not self.low < self.high:
             raise ParameterError(f'uncertain {self.path}: low must be below high')
         object.__setattr__(self, 'tied', tuple(self.tied))
@@ -169,7 +177,7 @@ _SECTIONS = {
 }
 _CHOICES = {
     ('beam', 'inertia_about'): ('suspension', 'cog'),
-    ('friction', 'reading'): ('dissipative', 'printed'),
+    ('friction', 'reading'): ('stiction', 'structure', 'additive', 'printed'),
 }
 
 

@@ -52,6 +52,11 @@ SCALE_SPHERE_POS_M = 1e-6
 SCALE_QUAT = 1e-4
 SCALE_SPHERE_VEL_M_PER_S = 1e-3
 SCALE_SPHERE_OMEGA_RAD_PER_S = 0.1
+# A friction bristle's deflection is a slip of the contact, like a position; against its
+# presliding displacement (1 nm) its tolerance would be a thousand times the positions' and make
+# a resting sphere take tiny steps on numerical noise. At this scale an error of rtol times it
+# is an error in friction force of rtol times about 100 mu_c F_n.
+SCALE_BRISTLE_M = 1e-7
 
 METHODS = ('fast', 'Radau', 'BDF', 'LSODA', 'DOP853', 'CVODE')
 SCIPY_METHODS = ('Radau', 'BDF', 'LSODA', 'DOP853')
@@ -173,6 +178,8 @@ def state_scale(model):
         scale[o + 3:o + 7] = SCALE_QUAT
         scale[o + 7:o + 10] = SCALE_SPHERE_VEL_M_PER_S
         scale[o + 10:o + 13] = SCALE_SPHERE_OMEGA_RAD_PER_S
+    if model.has_bristles:
+        scale[model.bristle_offset:] = SCALE_BRISTLE_M
     return scale
 
 

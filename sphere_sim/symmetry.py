@@ -89,6 +89,12 @@ class Symmetry:
             y[o + 3:o + 7] = matrix_to_quat(G @ R @ G.T)
             y[o + 7:o + 10] = G @ x[o + 7:o + 10]
             y[o + 10:o + 13] = self.determinant * (G @ x[o + 10:o + 13])
+        if model.has_bristles:
+            # A tip's bristle deflection is an inertial vector that goes with its beam.
+            b = model.bristle_offset
+            for beam, image in mapping.items():
+                i, j = beam - 1, image - 1
+                y[b + 3 * j:b + 3 * j + 3] = G @ x[b + 3 * i:b + 3 * i + 3]
         return y
 
 

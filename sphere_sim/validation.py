@@ -68,9 +68,10 @@ def rest_report(parameter_set='calibrated', duration_s=1.0):
         duration_s=duration_s)
 
 
-def symmetric_pulse_tilt(amplitude_v=50.0, width_s=5e-3, duration_s=0.02):
+def symmetric_pulse_tilt(amplitude_v=50.0, width_s=5e-3, duration_s=0.02,
+                         parameter_set='calibrated'):
     """Largest tilt (rad) after equal pulses on all beams from rest, and the sphere's lift (m)."""
-    model = assemble(scene())
+    model = assemble(scene(parameter_set))
     x0 = rest_state(model)
     traj = simulate(model, x0, duration_s, all_beams([amplitude_v] * 4, width_s), rtol=1e-7,
                     sample_period_s=1e-4)
@@ -78,12 +79,13 @@ def symmetric_pulse_tilt(amplitude_v=50.0, width_s=5e-3, duration_s=0.02):
     return float(np.max(tilt_rad(traj.surface_normal()))), lift
 
 
-def mirror_mismatch(amplitudes_v=(35, 35, 80, 80), width_s=4e-3, duration_s=0.01):
+def mirror_mismatch(amplitudes_v=(35, 35, 80, 80), width_s=4e-3, duration_s=0.01,
+                    parameter_set='calibrated'):
     """Largest normal difference between a programme's run and its mirror image's, mirrored back.
 
     Returns (mismatch, largest normal x-y excursion) so that a zero motion cannot pass.
     """
-    model = assemble(scene())
+    model = assemble(scene(parameter_set))
     x0 = rest_state(model)
     programme = all_beams(amplitudes_v, width_s)
     a = simulate(model, x0, duration_s, programme, rtol=1e-8, sample_period_s=5e-4)
@@ -93,12 +95,13 @@ def mirror_mismatch(amplitudes_v=(35, 35, 80, 80), width_s=4e-3, duration_s=0.01
     return float(np.max(np.abs(nb - na * MIRROR_XZ_NORMAL))), float(np.max(np.abs(na[:2])))
 
 
-def lossless_drop(lift_m=5e-6, duration_s=2.5e-3, spin_rad_per_s=(50.0, -30.0, 10.0)):
+def lossless_drop(lift_m=5e-6, duration_s=2.5e-3, spin_rad_per_s=(50.0, -30.0, 10.0),
+                  parameter_set='calibrated'):
     """Energy surplus of a spinning sphere dropped onto the tips without any loss.
 
     Returns (largest |surplus| relative to m g lift, number of impacts).
     """
-    model = assemble(scene(**LOSSLESS))
+    model = assemble(scene(parameter_set, **LOSSLESS))
     x0 = rest_state(model)
     o = model.sphere_offset
     x0[o + 2] += lift_m
@@ -111,9 +114,10 @@ def lossless_drop(lift_m=5e-6, duration_s=2.5e-3, spin_rad_per_s=(50.0, -30.0, 1
     return float(np.max(np.abs(energy_balance(traj).surplus_j)) / drop), impacts
 
 
-def lossless_pulse(amplitudes_v=(40, 40, 45, 45), width_s=0.6e-3, duration_s=1e-3):
+def lossless_pulse(amplitudes_v=(40, 40, 45, 45), width_s=0.6e-3, duration_s=1e-3,
+                   parameter_set='calibrated'):
     """Energy surplus relative to the electrical work without losses; and the final work (J)."""
-    model = assemble(scene(**LOSSLESS))
+    model = assemble(scene(parameter_set, **LOSSLESS))
     traj = simulate(model, rest_state(model), duration_s, all_beams(amplitudes_v, width_s),
                     rtol=1e-8, sample_period_s=1e-5)
     balance = energy_balance(traj)
@@ -121,9 +125,13 @@ def lossless_pulse(amplitudes_v=(40, 40, 45, 45), width_s=0.6e-3, duration_s=1e-
     return float(np.max(np.abs(balance.surplus_j)) / work), float(balance.electrical_work_j[-1])
 
 
-def lossy_kick(amplitudes_v=(35, 35, 80, 80), width_s=3e-3, duration_s=0.01):
-    """With all losses: (largest surplus, final surplus) relative to the largest electrical work."""
-    model = assemble(scene())
+def lossy_kick(amplitudes_v=(35, 35, 80, 80), width_s=3e-3, duration_s=0.01,
+               parameter_set='calibrated'):
+    """With all losses: (largest surplus, final surplus) relative to the largest electrical work.
+
+    The mechanical energy includes what the friction bristles hold (``Model.bristle_energy``).
+    """
+    model = assemble(scene(parameter_set))
     traj = simulate(model, rest_state(model), duration_s, all_beams(amplitudes_v, width_s),
                     rtol=1e-8, sample_period_s=1e-5)
     balance = energy_balance(traj)
@@ -131,11 +139,13 @@ def lossy_kick(amplitudes_v=(35, 35, 80, 80), width_s=3e-3, duration_s=0.01):
     return float(np.max(balance.surplus_j) / work), float(balance.surplus_j[-1] / work)
 
 
-def tilted_creep_rate(tilt_deg=20.0, duration_s=0.2, parameter_set='calibrated'):
+def tilted_creep_rate(tilt_deg=20.0, duration_s=1.0, parameter_set='calibrated'):
     """How fast a tilted sphere released at rest turns back towards zero tilt (rad/s).
 
-    The centre of gravity below the full-sphere centre gives a restoring torque; the friction of
-    eq. (47) is regularised (tanh(|v|/v_c)) and has no stiction, so it only slows the return.
+    The centre of gravity below the full-sphere centre gives a restoring torque of
+    m g d_cog sin(tilt). A friction that sticks holds it (the ``stiction`` reading: the rate is
+    zero to the solver's tolerance); a regularised one (tanh(|v|/v_c), no stiction) only slows
+    the return. The rate is the tilt lost over ``duration_s`` divided by it.
     """
     model = assemble(scene(parameter_set))
     x0 = rest_state(model, (tilt_deg, 0.0, 0.0))

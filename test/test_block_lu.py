@@ -43,11 +43,22 @@ def test_arrow_order_groups_each_beam():
     np.testing.assert_array_equal(end[:8], [4, 4, 4, 4, 8, 8, 8, 8])
 
 
+def test_arrow_order_puts_each_tips_bristle_in_its_beams_block():
+    # Two beams, the sphere (8..20), then the bristles: beam 0's at 21..23, beam 1's at 24..26.
+    perm, start, end, tail = block_lu.arrow_order(2, 8 + 13 + 6, 3)
+    np.testing.assert_array_equal(perm[:14], [0, 1, 4, 5, 21, 22, 23, 2, 3, 6, 7, 24, 25, 26])
+    np.testing.assert_array_equal(perm[14:], np.arange(8, 21))
+    assert tail == 14
+    np.testing.assert_array_equal(start[:14], np.repeat([0, 7], 7))
+    np.testing.assert_array_equal(end[:14], np.repeat([7, 14], 7))
+
+
 @pytest.fixture(scope='module')
 def kick_jacobians(model, kick_trajectory):
     """Jacobians (arrow order) along the optimised kick, through every contact phase."""
     traj = kick_trajectory
-    perm, start, end, tail = block_lu.arrow_order(model.n_beams, model.n_states)
+    perm, start, end, tail = block_lu.arrow_order(model.n_beams, model.n_states,
+                                                  3 if model.has_bristles else 0)
     out = []
     for k in range(traj.x.shape[1]):
         jac = model.jacobian(0.0, traj.x[:, k], traj.u[:, k])

@@ -31,7 +31,7 @@ def test_beams_only_scene_has_two_dof_per_beam():
 
 def test_full_scene_has_sphere_states_and_all_parts():
     model = assemble(scene_with())
-    assert model.n_states == 4 * 4 + 13
+    assert model.n_states == 4 * 4 + 13 + 4 * 3  # beams, sphere, a friction bristle per tip
     assert model.parts == ('beams', 'electrostatics:closed_form', 'ground_contact', 'sphere',
                            'sphere_contact', 'friction:viscous', 'friction:coulomb',
                            'friction:stribeck')
@@ -76,6 +76,7 @@ def test_compiled_and_python_kernels_agree():
 
     x = rest_state(fast)
     x = x + 1e-9 * rng.normal(size=x.size) * (np.abs(x) > 0)
-    x[fast.sphere_offset + 7:] += rng.normal(0, 1e-3, 6)
+    x[fast.sphere_offset + 7:fast.sphere_offset + 13] += rng.normal(0, 1e-3, 6)
+    x[fast.bristle_offset:] += rng.normal(0, 3e-10, 12)
     u = np.array([35.0, 35.0, 80.0, 80.0])
     np.testing.assert_allclose(fast.rhs(0, x, u), slow.rhs(0, x, u), rtol=1e-9, atol=1e-12)

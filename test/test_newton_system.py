@@ -46,14 +46,17 @@ def test_kinematic_pairs_are_exact_in_the_kernel(sphere):
         np.testing.assert_array_equal(f[pos], x[vel])
 
 
-def test_the_reduced_system_keeps_two_rates_per_beam_and_the_sphere_border():
+def test_the_reduced_system_keeps_two_rates_and_a_bristle_per_beam_and_the_sphere_border():
     model = assemble(load_scene('rest'))
     (pos, vel), (red, pos_of, start, end, tail) = reduced_layout(model)
-    assert red.size == model.n_states - 11 == 18
+    assert red.size == model.n_states - 11 == 30
     assert not set(red) & set(pos)
-    assert tail == 8
-    np.testing.assert_array_equal(start[:8], [0, 0, 2, 2, 4, 4, 6, 6])
-    np.testing.assert_array_equal(end[:8], [2, 2, 4, 4, 6, 6, 8, 8])
+    assert tail == 20
+    np.testing.assert_array_equal(start[:20], np.repeat([0, 5, 10, 15], 5))
+    np.testing.assert_array_equal(end[:20], np.repeat([5, 10, 15, 20], 5))
+    # Each block: the beam's two rates, then its tip's three bristle states.
+    bristles = model.bristle_offset + 3 * np.arange(4)
+    np.testing.assert_array_equal(red[2:20:5], bristles)
     # Each rate knows its position; the quaternion and the angular velocity have none.
     for a, k in enumerate(red):
         expected = pos[list(vel).index(k)] if k in vel else -1

@@ -7,8 +7,13 @@ import textwrap
 import yaml
 from tqdm import tqdm
 
-from sphere_sim.calibration import calibrate, evaluate, with_value
-from sphere_sim.parameters import CALIBRATION_TARGETS, PARAMS_DIR, load_parameter_set
+from sphere_sim.calibration import calibrate, evaluate, kick_deg, threshold_v, with_value
+from sphere_sim.parameters import (
+    CALIBRATION_TARGETS,
+    ESTIMATE_TARGET,
+    PARAMS_DIR,
+    load_parameter_set,
+)
 
 
 def register(subparsers):
@@ -48,15 +53,31 @@ def run(args):
     for result, (observed, target, tolerance) in zip(fits, checks, strict=True):
         print(f'fitted {result.spec.path} = {result.value:.4g} after {len(result.history)} '
               f'evaluations: {observed:.4g} {result.unit} (target {target:g} ± {tolerance:g})')
+        if not result.reached:
+            print(f'  target not reached inside the declared range [{result.spec.low:g}, '
+                  f'{result.spec.high:g}]: missed by {abs(observed - target):.3g} {result.unit} '
+                  f'at its end {result.value:g}; the range is not stretched to meet it')
         print(f'  {"value":>12} {"observed":>12}')
         for value, seen in sorted(result.history):
             print(f'  {value:>12.4g} {seen:>10.4g} {result.unit}')
     for spec in specs:
         if spec.target == 'fig4_threshold':
             print_threshold_hypotheses(params, base, spec)
+        if spec.target == ESTIMATE_TARGET:
+            print_estimate_sensitivity(params, spec, args.workers)
     if args.write:
         write_overrides(params, specs)
     return 0
+
+
+def print_estimate_sensitivity(params, spec, workers):
+    """What Fig. 4's threshold and Fig. 5's optimised kick do across an estimate's range."""
+    print(f'{spec.path} (a physical estimate, not fitted):')
+    print(f'{"value":>12} {"threshold":>10} {"optimised kick":>15}')
+    for value in sorted({spec.low, params.get(spec.path), spec.high}):
+        candidate = with_value(params, spec, value)
+        print(f'{value:>12.4g} {threshold_v(candidate):>8.2f} V '
+              f'{kick_deg(candidate, workers):>11.4f} deg')
 
 
 def print_threshold_hypotheses(params, base, spec):

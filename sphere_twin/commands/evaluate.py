@@ -62,18 +62,18 @@ def register(subparsers):
 
 
 def load_table(path):
-    """(table with drift removed, note); TableError for a missing or stale table."""
-    from sphere_sim.lookup_table import DEFAULT_TABLE_PATH, Drift, LookupTable
+    """(table, note); TableError for a missing or stale table."""
+    from sphere_sim.lookup_table import DEFAULT_TABLE_PATH, LookupTable
 
     path = DEFAULT_TABLE_PATH if path is None else path
-    return LookupTable.load_current(path, drift=Drift.REMOVE), f'table {path}'
+    return LookupTable.load_current(path), f'table {path}'
 
 
 def load_eight_directions(table, axis_path):
-    """The diagonal table with the axis-parallel one (both drift removed), and a note."""
-    from sphere_sim.lookup_table import CombinedKickPlant, Drift, LookupTable
+    """The diagonal table with the axis-parallel one, and a note."""
+    from sphere_sim.lookup_table import CombinedKickPlant, LookupTable
 
-    axis = LookupTable.load_current(axis_path, drift=Drift.REMOVE)
+    axis = LookupTable.load_current(axis_path)
     return CombinedKickPlant([table, axis]), f'eight directions: {axis_path} added'
 
 

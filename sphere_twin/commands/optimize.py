@@ -18,14 +18,14 @@ AXIS_OUTPUT = 'bench/results/kick_optimization_axis.json'
 # x axis, so that its rotation can only go along x.
 TEMPLATES = {
     'diagonal': KickDesign(),
-    'axis': KickDesign(direction_rad=0.0, low_beams=(1, 2, 4), high_beams=(3,)),
+    'axis': KickDesign(direction_rad=0.0, low_beams=(3,), high_beams=(1, 2, 4)),
 }
 
 
 def register(subparsers):
     parser = subparsers.add_parser(
         'optimize-kick', help='optimise the hind-left kick by differential evolution',
-        description='Maximise the rotation of the hind-left kick (35 V on beams 1-2, 80 V on '
+        description='Maximise the rotation of the hind-left kick (80 V on beams 1-2, 35 V on '
                     'beams 3-4; free widths and delay) towards -45 deg with scipy differential '
                     'evolution, seeded, with parallel workers; writes the result as JSON.')
     parser.add_argument('--kick', choices=sorted(TEMPLATES), default='diagonal',

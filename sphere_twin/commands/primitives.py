@@ -21,8 +21,8 @@ RESULTS = Path('bench/results')
 def register(subparsers):
     parser = subparsers.add_parser(
         'primitives', help="a kick's rotation width and voltage offsets (Fig. 10, Fig. 8)",
-        description='Characteristics of the optimised kick, measured as its own effect (the '
-                    "unkicked sphere's drift over the same window removed).")
+        description="Characteristics of the optimised kick: the resting normal's displacement "
+                    'over the kick window.')
     sub = parser.add_subparsers(dest='primitives_command', metavar='ACTION', required=True)
     width = sub.add_parser('width', help='rotation width against intensity u_K (Fig. 10)',
                            description='Rotation width against u_K in [0, 1] for initial '
@@ -48,7 +48,7 @@ def run_width(args):
 
     design = KickDesign.load(args.design)
     intensities = np.linspace(0.0, 1.0, args.intensities)
-    total = len(args.alphas_deg) * (intensities.size + 1)
+    total = len(args.alphas_deg) * intensities.size
     with tqdm(total=total, desc='kicks', unit='kick') as bar:
         curves = rotation_width_curves(design, args.alphas_deg, intensities, args.params,
                                        progress=bar.update)
@@ -58,18 +58,19 @@ def run_width(args):
     plot_lines(intensities, [np.degrees(c.width_rad) for c in curves],
                [f'alpha = {c.alpha_deg:.0f} deg' for c in curves], 'intensity $u_K$',
                'rotation width (deg)', png,
-               title='Rotation width of the optimised kick (drift removed), cf. Fig. 10')
+               title='Rotation width of the optimised kick, cf. Fig. 10')
     data = {'parameter_set': args.params, 'design': design.to_dict(),
             'curves': [{'alpha_deg': c.alpha_deg, 'intensities': c.intensities.tolist(),
                         'width_deg': np.degrees(c.width_rad).tolist(),
-                        'direction_deg': np.degrees(c.direction_rad).tolist(),
-                        'drift_deg': math.degrees(c.drift_rad)} for c in curves]}
+                        'direction_deg': np.degrees(c.direction_rad).tolist()}
+                       for c in curves]}
     (out / 'rotation_width.json').write_text(json.dumps(data, indent=2) + '\n')
     print(f'{"u_K":>5} ' + ' '.join(f'{f"alpha {c.alpha_deg:.0f}":>10}' for c in curves))
     for i, u in enumerate(intensities):
         print(f'{u:5.2f} ' + ' '.join(f'{math.degrees(c.width_rad[i]):10.4f}' for c in curves))
-    print('unkicked drift over the window (deg): ' + ', '.join(
-        f'alpha {c.alpha_deg:.0f}: {math.degrees(c.drift_rad):.4f}' for c in curves))
+    full = curves[0].width_rad[-1]
+    print('full kick against the first tilt: ' + ', '.join(
+        f'alpha {c.alpha_deg:.0f}: {c.width_rad[-1] / full:.2f}' for c in curves[1:]))
     print(f'wrote {png}')
     return 0
 

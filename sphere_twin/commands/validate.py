@@ -1,5 +1,7 @@
 """``sphere-twin validate``: the continuous model's rest, symmetry and energy figures."""
 
+import math
+
 from sphere_sim import validation
 
 
@@ -8,7 +10,8 @@ def register(subparsers):
         'validate', help='print the rest, symmetry and energy figures of the physics model',
         description='Rest equilibrium (§4.1), symmetry of equal and mirrored pulses, and the '
                     'energy balance with and without losses; the same functions the tests use.')
-    parser.add_argument('--params', default='calibrated', help='parameter set for the rest check')
+    parser.add_argument('--params', default='calibrated',
+                        help='parameter set (name or YAML file) of every figure')
     parser.set_defaults(func=run)
 
 
@@ -22,20 +25,20 @@ def run(args):
           f'{rear_um:.2f} um)')
     print(f'rest drift over {rest.duration_s:.0f} s: tilt {rest.tilt_drift_rad:.2e} rad, '
           f'position {rest.position_drift_m:.2e} m')
-    tilt, lift = validation.symmetric_pulse_tilt()
+    params = args.params
+    tilt, lift = validation.symmetric_pulse_tilt(parameter_set=params)
     print(f'equal 50 V pulses: largest tilt {tilt:.2e} rad (sphere lifted {lift * 1e6:.1f} um)')
-    mismatch, excursion = validation.mirror_mismatch()
+    mismatch, excursion = validation.mirror_mismatch(parameter_set=params)
     print(f'mirrored programme: normals differ by {mismatch:.2e} (largest x-y excursion '
           f'{excursion:.2e})')
-    surplus, impacts = validation.lossless_drop()
+    surplus, impacts = validation.lossless_drop(parameter_set=params)
     print(f'lossless drop: {impacts} impacts, energy error {surplus:.2e} of m g h')
-    surplus, work = validation.lossless_pulse()
+    surplus, work = validation.lossless_pulse(parameter_set=params)
     print(f'lossless pulse: energy error {surplus:.2e} of the electrical work ({work:.3e} J)')
-    peak, final = validation.lossy_kick()
+    peak, final = validation.lossy_kick(parameter_set=params)
     print(f'kick with losses: energy surplus at most {peak:+.2e}, finally {final:+.2e} of the '
           'electrical work')
     for tilt_deg in (20.0, 35.0):
-        rate = validation.tilted_creep_rate(tilt_deg)
-        print(f'tilted rest at {tilt_deg:.0f} deg creeps back at {rate * 57.29578:.2f} deg/s '
-              '(regularised friction has no stiction)')
+        rate = validation.tilted_creep_rate(tilt_deg, parameter_set=params)
+        print(f'tilted rest at {tilt_deg:.0f} deg creeps back at {math.degrees(rate):.2g} deg/s')
     return 0
