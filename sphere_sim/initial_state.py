@@ -126,17 +126,21 @@ def polish_equilibrium(model, x, u):
         o, s = model.sphere_offset, model.params.sphere
         bristles = np.arange(model.bristle_offset, model.n_states)
         inertia = mass_properties(s.radius_m, s.cut_angle_rad, mass_kg=s.mass_kg).inertia_cog_kg_m2
-        x = _polish(model, x, u, np.concatenate([free, bristles]),
-                    np.concatenate([scale, np.full(bristles.size,
-                                                   model.params.friction.presliding_m)]),
-                    np.concatenate([accel_index, o + 10 + np.arange(3)]),
+        free = np.concatenate([free, bristles])
+        scale = np.concatenate([scale, np.full(bristles.size, model.params.friction.presliding_m)])
+        x = _polish(model, x, u, free, scale, np.concatenate([accel_index, o + 10 + np.arange(3)]),
                     np.concatenate([force_scale,
-                                    inertia / (s.radius_m * _weight_per_tip_n(model))]))
+                                    inertia / (s.radius_m * _weight_per_tip_n(model))]),
+                    limit=lambda v: _clip_to_static_limit(model, v, scale, free))
     return x
 
 
-def _polish(model, x, u, free, scale, accel_index, force_scale):
-    """``x`` with ``free`` moved by Newton until the accelerations at ``accel_index`` vanish."""
+def _polish(model, x, u, free, scale, accel_index, force_scale, limit=None):
+    """``x`` with ``free`` moved by Newton until the accelerations at ``accel_index`` vanish.
+
+    ``limit(v)``, if given, bounds the solution in place and returns True when it had to: the
+    state is then returned out of balance, without the imbalance check.
+    """
     x = x.copy()
 
     def residual(v):
@@ -146,8 +150,7 @@ def _polish(model, x, u, free, scale, accel_index, force_scale):
 
     v = _newton(residual, x[free] / scale)
     res = np.max(np.abs(residual(v)))
-    if (model.has_bristles and free[-1] >= model.bristle_offset and np.all(np.isfinite(v))
-            and _clip_to_static_limit(model, v, scale, free)):
+    if limit is not None and np.all(np.isfinite(v)) and limit(v):
         res = 0.0  # friction cannot hold this tilt: the sphere slides from the state returned
     if not np.all(np.isfinite(v)) or res > REST_TOLERANCE:
         raise RestError(f'no equilibrium found: largest force imbalance {res:.3g} of the weight '

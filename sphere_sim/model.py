@@ -289,7 +289,7 @@ class Model:
             return 0.0
         f = self.params.friction
         kc, ct = self.params.contact.stiffness_n_per_m, self.params.contact.transition_force_n
-        rel = self.tip_positions(x) - self.sphere_centre(x)
+        rel = self._tips_from_centre(x)
         gaps = np.linalg.norm(rel, axis=1) - self.params.sphere.radius_m
         energy = 0.0
         for gap, r, b in zip(gaps, rel, self.bristles(x), strict=True):
@@ -308,8 +308,12 @@ class Model:
 
     def sphere_gaps(self, x):
         """Signed tip-to-sphere-surface distances (m), shape (n_beams,), eq. (32)."""
-        rel = self.tip_positions(x) - self.sphere_centre(x)
-        return np.linalg.norm(rel, axis=1) - self.params.sphere.radius_m
+        return (np.linalg.norm(self._tips_from_centre(x), axis=1)
+                - self.params.sphere.radius_m)
+
+    def _tips_from_centre(self, x):
+        """Vectors from the full-sphere centre to each beam tip (m), shape (n_beams, 3)."""
+        return self.tip_positions(x) - self.sphere_centre(x)
 
     def ground_gaps(self, x):
         """Rear and front beam-ground gaps (m), shape (2, n_beams), eq. (23)-(24)."""
