@@ -25,7 +25,7 @@ setup(
     entry_points={
         'console_scripts': [
             'sphere-twin = sphere_twin.cli:main',
-            'simulator = sphere_sim.simulator_node:main',
+            'simulator = sphere_sim.twin.simulator_node:main',
             'monitor = sphere_twin.monitor_node:main',
             'recorder = sphere_twin.recorder_node:main',
             'player = sphere_twin.player_node:main',

@@ -1,13 +1,14 @@
 """numpy <-> message conversions for the topics of :mod:`msg_defs.topics`.
 
 Functions named ``*_to_msg`` build a message from arrays, ``*_from_msg`` read one back.
-Both validate: a message that does not follow the contract raises ``ValueError`` with a
-message saying what is wrong, so a node can log it and drop the message instead of acting
-on it. No rclpy here; stamps are ``builtin_interfaces/Time`` (a node passes
-``self.get_clock().now().to_msg()``).
+Both validate the encoding: a message that does not follow the contract (names, lengths,
+frames, finite numbers) raises ``ValueError`` saying what is wrong, so a node can log it and
+drop the message instead of acting on it. The rules of a beam command itself (limits, time
+order, the last segment off: :mod:`msg_defs.voltage_rules`) are checked once where it enters
+something: here by a sender, in the twin by the receiver. No rclpy here; stamps are
+``builtin_interfaces/Time`` (a node passes ``self.get_clock().now().to_msg()``).
 """
 
-import math
 
 import numpy as np
 from builtin_interfaces.msg import Duration, Time
@@ -16,20 +17,14 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from msg_defs.topics import (
-    BEAM_COUNT,
-    BEAM_NAMES,
-    BEAM_STATE_JOINT_NAMES,
-    MAX_ABS_VOLTAGE_V,
-    SPHERE_FRAME,
-    WORLD_FRAME,
-)
+from msg_defs.device import BEAM_COUNT, NS_PER_S, VOLTAGE_LIMIT_V
+from msg_defs.topics import BEAM_NAMES, BEAM_STATE_JOINT_NAMES, SPHERE_FRAME, WORLD_FRAME
+from msg_defs.voltage_rules import check_segments, check_voltages
 
 # A published normal is a float64 unit vector; anything further from length 1 than this did
 # not come from a normalised rotation and is rejected.
 UNIT_NORM_TOLERANCE = 1e-6
 
-NANOSECONDS_PER_SECOND = 1_000_000_000
 
 
 def time_from_ns(stamp_ns):
@@ -37,13 +32,13 @@ def time_from_ns(stamp_ns):
     stamp_ns = int(stamp_ns)
     if stamp_ns < 0:
         raise ValueError(f'stamp must be >= 0 ns, got {stamp_ns}')
-    sec, nanosec = divmod(stamp_ns, NANOSECONDS_PER_SECOND)
+    sec, nanosec = divmod(stamp_ns, NS_PER_S)
     return Time(sec=sec, nanosec=nanosec)
 
 
 def ns_from_time(stamp):
     """Integer nanoseconds of a ``builtin_interfaces/Time``."""
-    return stamp.sec * NANOSECONDS_PER_SECOND + stamp.nanosec
+    return stamp.sec * NS_PER_S + stamp.nanosec
 
 
 def _finite_vector(values, length, what):
@@ -128,7 +123,7 @@ def surface_normal_from_msg(msg, frame_id=WORLD_FRAME):
 
 # --- beam voltages (sensor_msgs/JointState, volts in effort) ------------------------------
 
-def voltages_to_msg(voltages_v, stamp=None, max_abs_voltage_v=MAX_ABS_VOLTAGE_V):
+def voltages_to_msg(voltages_v, stamp=None, max_abs_voltage_v=VOLTAGE_LIMIT_V):
     """Message for ``/beams/voltage_command`` or ``/beams/voltage``.
 
     Parameters
@@ -150,7 +145,7 @@ def voltages_to_msg(voltages_v, stamp=None, max_abs_voltage_v=MAX_ABS_VOLTAGE_V)
     ValueError
         If the voltages are not 4 finite values within the limit.
     """
-    voltages = _checked_voltages(voltages_v, max_abs_voltage_v)
+    voltages = check_voltages(voltages_v, max_abs_voltage_v)
     msg = JointState()
     msg.header.stamp = _stamp_or_zero(stamp)
     msg.name = list(BEAM_NAMES)
@@ -158,15 +153,15 @@ def voltages_to_msg(voltages_v, stamp=None, max_abs_voltage_v=MAX_ABS_VOLTAGE_V)
     return msg
 
 
-def voltages_from_msg(msg, max_abs_voltage_v=MAX_ABS_VOLTAGE_V):
+def voltages_from_msg(msg):
     """Beam voltages of a ``JointState``, in beam order 1..4 whatever the joint order.
+
+    The receiver applies the command's rules (:func:`msg_defs.voltage_rules.check_voltages`).
 
     Parameters
     ----------
     msg : sensor_msgs.msg.JointState
         Joints ``beam_1 .. beam_4``, each exactly once, voltages in ``effort``.
-    max_abs_voltage_v : float
-        Largest admissible magnitude (V).
 
     Returns
     -------
@@ -177,7 +172,7 @@ def voltages_from_msg(msg, max_abs_voltage_v=MAX_ABS_VOLTAGE_V):
     ------
     ValueError
         On missing, unknown or repeated joint names, an ``effort`` whose length differs from
-        the names', non-finite values, or a voltage beyond the limit.
+        the names', or non-finite values.
     """
     names = list(msg.name)
     if sorted(names) != sorted(BEAM_NAMES):
@@ -187,22 +182,7 @@ def voltages_from_msg(msg, max_abs_voltage_v=MAX_ABS_VOLTAGE_V):
     if len(effort) != len(names):
         raise ValueError(f'voltages: {len(names)} joint names but {len(effort)} effort values')
     by_name = dict(zip(names, effort, strict=True))
-    return _checked_voltages([by_name[name] for name in BEAM_NAMES], max_abs_voltage_v)
-
-
-def _checked_voltages(voltages_v, max_abs_voltage_v):
-    voltages = _finite_vector(voltages_v, BEAM_COUNT, 'voltages')
-    if not (math.isfinite(max_abs_voltage_v) and max_abs_voltage_v > 0):
-        raise ValueError(f'voltage limit must be a positive number, got {max_abs_voltage_v}')
-    # The drivers are unipolar: the electrostatic force goes with V^2, so a negative command
-    # is a sign error upstream, not a request.
-    if np.any(voltages < 0.0):
-        raise ValueError(f'voltages: must be >= 0 V, got {voltages.tolist()}')
-    worst = float(np.max(np.abs(voltages)))
-    if worst > max_abs_voltage_v:
-        raise ValueError(f'voltages: |V| = {worst:g} V exceeds the limit '
-                         f'{max_abs_voltage_v:g} V')
-    return voltages
+    return _finite_vector([by_name[name] for name in BEAM_NAMES], BEAM_COUNT, 'voltages')
 
 
 # --- beam state (sensor_msgs/JointState, joints beam_k_z and beam_k_phi) ------------------
@@ -270,7 +250,7 @@ def _interleave(z_values, phi_values, what):
 
 # --- pulse programme (trajectory_msgs/JointTrajectory, volts in effort) -------------------
 
-def programme_to_msg(times_s, voltages_v, stamp=None, max_abs_voltage_v=MAX_ABS_VOLTAGE_V):
+def programme_to_msg(times_s, voltages_v, stamp=None, max_abs_voltage_v=VOLTAGE_LIMIT_V):
     """Message for ``/beams/pulse_program`` from zero-order-hold segments.
 
     Parameters
@@ -287,21 +267,24 @@ def programme_to_msg(times_s, voltages_v, stamp=None, max_abs_voltage_v=MAX_ABS_
     ValueError
         If the segments break the contract (see :func:`programme_from_msg`).
     """
-    times, volts = _checked_segments(times_s, voltages_v, max_abs_voltage_v)
+    times, volts = check_segments(times_s, voltages_v, max_abs_voltage_v)
     msg = JointTrajectory()
     msg.header.stamp = _stamp_or_zero(stamp)
     msg.joint_names = list(BEAM_NAMES)
     for t, row in zip(times, volts, strict=True):
         point = JointTrajectoryPoint()
-        sec, nanosec = divmod(round(t * NANOSECONDS_PER_SECOND), NANOSECONDS_PER_SECOND)
+        sec, nanosec = divmod(round(t * NS_PER_S), NS_PER_S)
         point.time_from_start = Duration(sec=int(sec), nanosec=int(nanosec))
         point.effort = row.tolist()
         msg.points.append(point)
     return msg
 
 
-def programme_from_msg(msg, max_abs_voltage_v=MAX_ABS_VOLTAGE_V):
+def programme_from_msg(msg):
     """Segments of a ``/beams/pulse_program`` message, beams in order 1..4.
+
+    The receiver applies the programme's rules (:func:`msg_defs.voltage_rules.check_segments`:
+    limits, time order, the last segment off).
 
     Returns
     -------
@@ -312,9 +295,7 @@ def programme_from_msg(msg, max_abs_voltage_v=MAX_ABS_VOLTAGE_V):
     ------
     ValueError
         On joint names other than ``beam_1 .. beam_4`` (any order, each once), no points, a
-        point whose ``effort`` length differs from the names', non-finite, negative or
-        above-limit volts, negative or non-increasing times, or a last point that does not
-        switch every beam off (it would hold for ever).
+        point whose ``effort`` length differs from the names', or non-finite values.
     """
     names = list(msg.joint_names)
     if sorted(names) != sorted(BEAM_NAMES):
@@ -330,25 +311,10 @@ def programme_from_msg(msg, max_abs_voltage_v=MAX_ABS_VOLTAGE_V):
             raise ValueError(f'pulse programme: point {i} has {len(effort)} effort values for '
                              f'{len(names)} joints')
         times.append(point.time_from_start.sec
-                     + point.time_from_start.nanosec / NANOSECONDS_PER_SECOND)
-        rows.append([effort[k] for k in order])
-    return _checked_segments(times, rows, max_abs_voltage_v)
-
-
-def _checked_segments(times_s, voltages_v, max_abs_voltage_v):
-    times = _finite_vector(times_s, len(times_s), 'pulse programme times')
-    if times.size == 0:
-        raise ValueError('pulse programme: no points')
-    if times[0] < 0.0:
-        raise ValueError(f'pulse programme: times must be >= 0 s, got {times[0]:g} s')
-    if np.any(np.diff(times) <= 0.0):
-        raise ValueError(f'pulse programme: times must increase strictly, got {times.tolist()}')
-    volts = np.array([_checked_voltages(row, max_abs_voltage_v) for row in voltages_v])
-    if volts.shape != (times.size, BEAM_COUNT):
-        raise ValueError(f'pulse programme: {times.size} times but {len(volts)} voltage rows')
-    if np.any(volts[-1] != 0.0):
-        raise ValueError('pulse programme: the last point must switch every beam off (0 V)')
-    return times, volts
+                     + point.time_from_start.nanosec / NS_PER_S)
+        rows.append(_finite_vector([effort[k] for k in order], BEAM_COUNT,
+                                   f'pulse programme point {i}'))
+    return np.array(times), np.array(rows)
 
 
 # --- sphere state (nav_msgs/Odometry) -----------------------------------------------------

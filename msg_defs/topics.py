@@ -35,17 +35,18 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
+# The device's constants belong to the contract too; their home is the ROS-free msg_defs.device.
+from msg_defs.device import BEAM_COUNT as BEAM_COUNT
+from msg_defs.device import BEAM_IDS as BEAM_IDS
+from msg_defs.device import NS_PER_S as NS_PER_S
+from msg_defs.device import VOLTAGE_LIMIT_V as VOLTAGE_LIMIT_V
+
 WORLD_FRAME = 'world'
 SPHERE_FRAME = 'sphere'
 
-BEAM_COUNT = 4
-BEAM_NAMES = tuple(f'beam_{k}' for k in range(1, BEAM_COUNT + 1))
+BEAM_NAMES = tuple(f'beam_{k}' for k in BEAM_IDS)
 BEAM_DOFS = ('z', 'phi')
 BEAM_STATE_JOINT_NAMES = tuple(f'{beam}_{dof}' for beam in BEAM_NAMES for dof in BEAM_DOFS)
-
-# Hardware limit of the actuators (paper §4.1); the same value bounds voltage programmes in
-# sphere_sim.programme. A command beyond it is rejected, not clipped.
-MAX_ABS_VOLTAGE_V = 80.0
 
 
 @dataclasses.dataclass(frozen=True)

@@ -9,7 +9,7 @@ import dataclasses
 
 from sphere_control.command import Command, unit_xy
 from sphere_control.geometry import error_angle_rad, error_direction_rad, nearest_action
-from sphere_sim.discrete import DIAGONAL_DIRECTIONS_RAD
+from sphere_sim.kicks.discrete import DIAGONAL_DIRECTIONS_RAD
 
 FULL_INTENSITY = 1.0  # the basic controller always kicks with the optimised full inputs
 
@@ -22,16 +22,16 @@ class BasicParams:
     ----------
     phi_min_rad : float
         Resting band Phi_min (rad): no kick while the error angle is below it.
-    directions_rad : tuple of float
-        The model's kick directions sigma_a (rad), one per action.
     full_width_rad : float
         The model's rotation width of a full kick (rad); only used to predict a kick's effect
         (state estimation), not for the decision.
+    directions_rad : tuple of float
+        The model's kick directions sigma_a (rad), one per action.
     """
 
     phi_min_rad: float
-    directions_rad: tuple = DIAGONAL_DIRECTIONS_RAD
     full_width_rad: float = 0.0
+    directions_rad: tuple = DIAGONAL_DIRECTIONS_RAD
 
 
 class BasicController:

@@ -14,9 +14,10 @@ import math
 
 import numpy as np
 
+from msg_defs.device import KICK_WINDOW_S
 from sphere_control import reference as ref
 from sphere_control.geometry import error_angle_rad
-from sphere_sim.discrete import CONE_HALF_ANGLE_RAD
+from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD
 
 NO_ACTION = -1  # the action recorded for a step spent resting
 
@@ -58,7 +59,7 @@ class LoopSettings:
     """
 
     max_steps: int = 400
-    kick_period_s: float = 0.06
+    kick_period_s: float = KICK_WINDOW_S
     settle_rest_steps: int = 3
     stall_kicks: int = 60
     stall_progress_rad: float = 1e-6

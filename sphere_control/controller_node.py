@@ -21,7 +21,7 @@ from msg_defs.conversions import (
     time_from_ns,
     voltages_to_msg,
 )
-from msg_defs.ros_env import parameter_descriptor, run_node
+from msg_defs.device import BEAM_COUNT, NS_PER_S
 from msg_defs.topics import (
     CONTROLLER_STATUS,
     PULSE_PROGRAM,
@@ -29,11 +29,11 @@ from msg_defs.topics import (
     SURFACE_NORMAL,
     VOLTAGE_COMMAND,
 )
-from sphere_control.controllers import CONTROLLER_KINDS, make_controller
+from node_runtime.ros_env import parameter_descriptor, run_node
+from sphere_control.controllers import CONTROLLER_KINDS, controller_for
 from sphere_control.kick_cycle import KickCycle, Phase
 
 STALE_CHECK_PERIOD_S = 0.25
-NS_PER_S = 1_000_000_000
 
 
 
@@ -43,7 +43,7 @@ class ControllerNode(Node):
     def __init__(self, **node_kwargs):
         # Physics and tables load here rather than at import, so main() installs its signal
         # handlers first and a SIGINT during start-up is a clean shutdown.
-        from sphere_sim.twin_setup import load_kick_model
+        from sphere_sim.twin.plant_setup import load_kick_model
 
         super().__init__('controller', **node_kwargs)
         p = {name: self.declare_parameter(name, default, descriptor).value
@@ -63,8 +63,8 @@ class ControllerNode(Node):
         table = load_kick_model([t for t in p['tables'] if t])
         self.kicks = table
         self.controller_kind = p['controller']
-        self.cycle = KickCycle(make_controller(p['controller'], table,
-                                               math.radians(p['phi_min_deg'])),
+        self.cycle = KickCycle(controller_for(p['controller'], table,
+                                              math.radians(p['phi_min_deg'])),
                                window_s=table.spec.window_s,
                                stale_timeout_s=p['stale_timeout_s'])
         self._programme_pub = self.create_publisher(
@@ -107,7 +107,7 @@ class ControllerNode(Node):
             # One hold in flight at a time: a lockstep simulator advances one sample per
             # command, and holds queued behind a later kick would delay it.
             self._hold_sent_at_s = sample_s
-            self._voltage_pub.publish(voltages_to_msg([0.0] * 4))
+            self._voltage_pub.publish(voltages_to_msg([0.0] * BEAM_COUNT))
         self._publish_status(decision, msg.header.stamp)
 
     def on_stale_check(self):

@@ -1,15 +1,32 @@
-"""Building a controller from its kind and the kick model it starts from (one place)."""
+"""The one factory of controllers: a kind, a resting band and a kick model in, a controller out.
 
+The evaluation, the closed-loop studies and the controller node all build their controllers
+here; the kinds are one list, :class:`ControllerKind`.
+"""
+
+import enum
 import math
 
 import numpy as np
 
 from sphere_control.basic import BasicController, BasicParams
 from sphere_control.extended import ExtendedController, ExtendedParams
-from sphere_sim.discrete import angle_between
+from sphere_sim.kicks.discrete import angle_between
 
-CONTROLLER_KINDS = ('basic', 'extended')
 DEFAULT_PHI_MIN_RAD = math.radians(0.05)  # Fig. 13's tighter resting band
+
+
+class ControllerKind(enum.Enum):
+    """The controllers of §5. ``PRELEARNED`` is the extended one after it has first learned on
+    the device it will run on (Fig. 13); it needs that device, so only the studies offer it."""
+
+    BASIC = 'basic'
+    EXTENDED = 'extended'
+    PRELEARNED = 'pre-learned extended'
+
+
+# What a running twin can choose (the controller node's ``controller`` parameter).
+CONTROLLER_KINDS = (ControllerKind.BASIC.value, ControllerKind.EXTENDED.value)
 
 
 def full_kick_width_rad(kick_plant):
@@ -18,18 +35,31 @@ def full_kick_width_rad(kick_plant):
     return angle_between(up, kick_plant.kick(up, 0, 1.0).normal)
 
 
-def make_controller(kind, kick_plant, phi_min_rad=DEFAULT_PHI_MIN_RAD):
-    """A fresh controller of ``kind`` whose model is ``kick_plant`` (directions and width).
+def make_controller(kind, phi_min_rad, full_width_rad, directions_rad,
+                    direction_learning_min_rad=None):
+    """A fresh controller of ``kind`` (a :class:`ControllerKind` or its value).
+
+    ``PRELEARNED`` gives an extended controller still to be taught by its caller.
 
     Raises
     ------
     ValueError
         For an unknown kind.
     """
-    directions = tuple(kick_plant.directions_rad)
-    width = full_kick_width_rad(kick_plant)
-    if kind == 'basic':
-        return BasicController(BasicParams(phi_min_rad, directions, width))
-    if kind == 'extended':
-        return ExtendedController(ExtendedParams(phi_min_rad, width, directions))
-    raise ValueError(f'unknown controller {kind!r}; choose one of {", ".join(CONTROLLER_KINDS)}')
+    try:
+        kind = ControllerKind(kind)
+    except ValueError:
+        raise ValueError(f'unknown controller {kind!r}; choose one of '
+                         f'{", ".join(k.value for k in ControllerKind)}') from None
+    directions = tuple(directions_rad)
+    if kind is ControllerKind.BASIC:
+        return BasicController(BasicParams(phi_min_rad, full_width_rad, directions))
+    return ExtendedController(ExtendedParams(
+        phi_min_rad, full_width_rad, directions,
+        direction_learning_min_rad=direction_learning_min_rad))
+
+
+def controller_for(kind, kick_plant, phi_min_rad=DEFAULT_PHI_MIN_RAD):
+    """A controller whose model is ``kick_plant``'s directions and full-kick width."""
+    return make_controller(kind, phi_min_rad, full_kick_width_rad(kick_plant),
+                           kick_plant.directions_rad)

@@ -9,7 +9,7 @@ import dataclasses
 
 import numpy as np
 
-from sphere_sim.discrete import normal_from_xy
+from sphere_sim.kicks.discrete import normal_from_xy
 
 IDENTITY_2 = np.eye(2)
 

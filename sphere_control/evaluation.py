@@ -21,19 +21,18 @@ import time
 
 import numpy as np
 
-from sphere_control.basic import BasicController, BasicParams
+from msg_defs.device import KICK_WINDOW_S
 from sphere_control.closed_loop import NO_ACTION, LoopSettings, Outcome, run_closed_loop
+from sphere_control.controllers import ControllerKind, make_controller
 from sphere_control.estimator import KalmanParams, NormalKalmanFilter
 from sphere_control.extended import (
     DIRECTION_LEARNING_MIN_FRACTION,
-    ExtendedController,
-    ExtendedParams,
     prelearn,
 )
+from sphere_control.kick_plants import EightDirectionPlant
 from sphere_control.perturbations import Mismatch, NoisySensor, PerturbedPlant
-from sphere_control.plants import EightDirectionPlant
 from sphere_control.reference import CircleTrajectory, Setpoint
-from sphere_sim.discrete import PAPER_FULL_KICK_RAD, angle_between
+from sphere_sim.kicks.discrete import PAPER_FULL_KICK_RAD, angle_between
 
 # The paper's numbers (§4.1, §5).
 PAPER_SETPOINT_NORMAL = (0.01, 0.02, 0.9997)
@@ -47,9 +46,6 @@ LEVEL_NORMAL = np.array([0.0, 0.0, 1.0])  # "we initialize the sphere to start w
 # An axis-parallel setpoint (as far as the paper's one, along +x), where eight directions should
 # help most.
 AXIS_SETPOINT_NORMAL = (math.hypot(0.01, 0.02), 0.0, 0.9997)
-# The paper does not give the kick period; the table's kick window (the paper's kicks settle in
-# about 50 ms, Fig. 5) is the shortest period at which kicks do not overlap.
-KICK_PERIOD_S = 0.06
 # A run counts as oscillating if it never settled and its last OSCILLATION_KICKS errors all stay
 # within OSCILLATION_BAND_WIDTHS full kick widths of the reference: it circles the reference.
 OSCILLATION_KICKS = 10
@@ -63,12 +59,6 @@ CATCH_UP_WIDTHS = 2.0
 # noise, and eq. (61) at alpha_sigma = 0.9 would adopt it. Used as the extended controller's
 # direction-learning threshold in the noise study (with and without the filter alike).
 NOISE_LEARNING_SIGMAS = 3.0
-
-
-class ControllerKind(enum.Enum):
-    BASIC = 'basic'
-    EXTENDED = 'extended'
-    PRELEARNED = 'pre-learned extended'
 
 
 class PhiMinScaling(enum.Enum):
@@ -103,7 +93,9 @@ class EvaluationConfig:
     seed : int
     """
 
-    kick_period_s: float = KICK_PERIOD_S
+    # The paper does not give the kick period; the table's kick window (the paper's kicks settle
+    # in about 50 ms, Fig. 5) is the shortest period at which kicks do not overlap.
+    kick_period_s: float = KICK_WINDOW_S
     kick_period_sweep_s: tuple = (0.03, 0.12)
     trajectory_periods: float = 1.0
     basic_phi_min_widths: tuple = (0.25, 0.5, 0.75, 1.0)
@@ -144,18 +136,15 @@ def phi_min_rad(paper_phi_min_rad, scaling, put):
     return paper_phi_min_rad * (put.kick_scale if scaling is PhiMinScaling.KICK_SCALED else 1.0)
 
 
-def make_controller(kind, phi_min, put, plant, config, directions_rad=None,
-                    direction_learning_min_rad=None):
+def study_controller(kind, phi_min, put, plant, config, directions_rad=None,
+                     direction_learning_min_rad=None):
     """A fresh controller of ``kind`` whose model is the nominal plant ``put``.
 
     The pre-learned one has first learned on ``plant`` (the device it will run on).
     """
-    directions = tuple(directions_rad or plant.directions_rad)
-    if kind is ControllerKind.BASIC:
-        return BasicController(BasicParams(phi_min, directions, put.full_width_rad))
-    controller = ExtendedController(ExtendedParams(
-        phi_min, put.full_width_rad, directions,
-        direction_learning_min_rad=direction_learning_min_rad))
+    controller = make_controller(kind, phi_min, put.full_width_rad,
+                                 directions_rad or plant.directions_rad,
+                                 direction_learning_min_rad)
     if kind is ControllerKind.PRELEARNED:
         prelearn(controller, plant, LEVEL_NORMAL, config.prelearn_kicks, config.seed)
     return controller
@@ -183,9 +172,9 @@ def setpoint_summary(history, full_width_rad):
 def setpoint_study(put, plant, reference_normal, phi_min, config, kinds=tuple(ControllerKind),
                    directions_rad=None):
     """One setpoint scenario for several controllers; dict kind -> LoopHistory."""
-    settings = LoopSettings(max_steps=config.setpoint_max_steps, kick_period_s=KICK_PERIOD_S)
+    settings = LoopSettings(max_steps=config.setpoint_max_steps, kick_period_s=KICK_WINDOW_S)
     reference = Setpoint.from_normal(reference_normal)
-    return {kind: run_closed_loop(make_controller(kind, phi_min, put, plant, config,
+    return {kind: run_closed_loop(study_controller(kind, phi_min, put, plant, config,
                                                   directions_rad),
                                   plant, LEVEL_NORMAL, reference, settings)
             for kind in kinds}
@@ -275,12 +264,12 @@ def tracking_study(put, plant, config, kick_period_s=None, directions_rad=None, 
         return run_closed_loop(controller, plant, LEVEL_NORMAL, trajectory, settings,
                                sensor, estimator)
 
-    extended = run(make_controller(ControllerKind.EXTENDED,
+    extended = run(study_controller(ControllerKind.EXTENDED,
                                    config.extended_phi_min_rad * put.kick_scale, put, plant,
                                    config, directions_rad, learning_min))
     widths = config.basic_phi_min_widths if basic_phi_min_widths is None else \
         basic_phi_min_widths
-    basics = [(f * W, run(make_controller(ControllerKind.BASIC, f * W, put, plant, config,
+    basics = [(f * W, run(study_controller(ControllerKind.BASIC, f * W, put, plant, config,
                                           directions_rad)))
               for f in widths]
     start = catch_up_step([extended] + [h for _, h in basics], W)
@@ -303,18 +292,18 @@ def continuous_study(table, put, config, continuous_plant=None):
     if config.continuous_kicks <= 0:
         return None
     if continuous_plant is None:
-        from sphere_control.plants import ContinuousKickPlant
+        from sphere_control.kick_plants import ContinuousKickPlant
 
-        continuous_plant = ContinuousKickPlant(table.spec.design, table.meta['parameter_set'])
+        continuous_plant = ContinuousKickPlant(table.spec.design, table.parameters())
     recorder = _RecordingPlant(continuous_plant)
     phi = PAPER_PHI_MIN_RAD[0] * put.kick_scale
-    settings = LoopSettings(max_steps=config.continuous_kicks, kick_period_s=KICK_PERIOD_S)
+    settings = LoopSettings(max_steps=config.continuous_kicks, kick_period_s=KICK_WINDOW_S)
     reference = Setpoint.from_normal(PAPER_SETPOINT_NORMAL)
     started = time.perf_counter()
-    cont = run_closed_loop(make_controller(ControllerKind.EXTENDED, phi, put, table, config),
+    cont = run_closed_loop(study_controller(ControllerKind.EXTENDED, phi, put, table, config),
                            recorder, LEVEL_NORMAL, reference, settings)
     wall_s = time.perf_counter() - started
-    disc = run_closed_loop(make_controller(ControllerKind.EXTENDED, phi, put, table, config),
+    disc = run_closed_loop(study_controller(ControllerKind.EXTENDED, phi, put, table, config),
                            table, LEVEL_NORMAL, reference, settings)
     one_step = []
     for k, action in enumerate(cont.actions):

@@ -1,14 +1,14 @@
 """Angular errors between the surface normal and its reference, eqs. (54)-(58), and Fig. 11.
 
 All directions are polar angles (rad) in the x-y plane, measured from the x axis towards y,
-the convention of :data:`sphere_sim.discrete.DIAGONAL_DIRECTIONS_RAD`.
+the convention of :data:`sphere_sim.kicks.discrete.DIAGONAL_DIRECTIONS_RAD`.
 """
 
 import math
 
 import numpy as np
 
-from sphere_sim.discrete import angle_between, normal_from_xy
+from sphere_sim.kicks.discrete import angle_between, normal_from_xy
 
 FULL_TURN_RAD = 2.0 * math.pi
 

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from sphere_sim.discrete import KickResult, normal_from_xy
+from sphere_sim.kicks.discrete import KickResult, normal_from_xy
 
 # Measured normals are kept strictly inside the unit disc so they stay unit vectors.
 MAX_MEASURED_XY_RADIUS = 0.999999

@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from sphere_sim.discrete import CONE_HALF_ANGLE_RAD, normal_from_xy
+from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD, normal_from_xy
 
 
 @dataclasses.dataclass(frozen=True)

@@ -7,8 +7,9 @@ reference beyond the reachable cone is clamped to its edge with a warning.
 from rclpy.node import Node
 
 from msg_defs.conversions import surface_normal_to_msg
-from msg_defs.ros_env import parameter_descriptor, run_node
+from msg_defs.device import NS_PER_S
 from msg_defs.topics import SPHERE_REFERENCE
+from node_runtime.ros_env import parameter_descriptor, run_node
 from sphere_control.reference import CircleTrajectory, Setpoint, sample
 
 DEFAULT_PUBLISH_RATE_HZ = 10.0
@@ -63,7 +64,7 @@ class ReferenceNode(Node):
         now = self.get_clock().now()
         if self._start_ns is None:
             self._start_ns = now.nanoseconds
-        elapsed_s = (now.nanoseconds - self._start_ns) * 1e-9
+        elapsed_s = (now.nanoseconds - self._start_ns) / NS_PER_S
         reference, _ = self.reference_at(elapsed_s)
         if reference.clamped and not self._warned_clamp:
             requested = reference.requested_xy

@@ -9,7 +9,7 @@ import argparse
 import importlib
 import sys
 
-from msg_defs.ros_env import ensure_localhost_discovery
+from node_runtime.ros_env import ensure_localhost_discovery
 
 # Modules under sphere_twin.commands, in the order `--help` lists them.
 COMMAND_MODULES = (

@@ -12,8 +12,8 @@ from rclpy.node import Node
 from rclpy.task import Future
 
 from msg_defs.conversions import surface_normal_from_msg
-from msg_defs.ros_env import run_node
 from msg_defs.topics import SURFACE_NORMAL
+from node_runtime.ros_env import run_node
 from sphere_twin.monitor_summary import summary_line
 
 REPORT_PERIOD_S = 1.0

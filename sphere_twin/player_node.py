@@ -22,12 +22,12 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from msg_defs.ros_env import parameter_descriptor, run_node
+from msg_defs.device import NS_PER_S
 from msg_defs.topics import ALL_TOPICS, CLOCK
+from node_runtime.ros_env import parameter_descriptor, run_node
 from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.reader import BagError, message_class, read_messages, read_metadata
 
-NS_PER_S = 1_000_000_000
 MAX_RATE = 1000.0
 MIN_RATE = 0.001
 # Longest single sleep, so that a stop signal is handled promptly.

@@ -26,8 +26,8 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
-from msg_defs.ros_env import ensure_localhost_discovery, parameter_descriptor
 from msg_defs.topics import ALL_TOPICS, topic_by_name
+from node_runtime.ros_env import ensure_localhost_discovery, parameter_descriptor
 from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.writer import COMPRESSIONS, DEFAULT_CHUNK_SIZE_BYTES, BagWriter
 

@@ -19,12 +19,12 @@ from msg_defs.conversions import (
     surface_normal_from_msg,
     voltages_from_msg,
 )
+from msg_defs.device import NS_PER_S
 from msg_defs.topics import PULSE_PROGRAM, SPHERE_REFERENCE, SURFACE_NORMAL, VOLTAGE_COMMAND
-from sphere_sim.discrete import angle_between
-from sphere_sim.plants import TIME_TOL_S
+from sphere_sim.kicks.discrete import angle_between
+from sphere_sim.twin.plants import TIME_TOL_S
 from sphere_twin.bag.reader import BagError, deserialize, read_messages
 
-NS_PER_S = 1_000_000_000
 DEFAULT_BAND_RAD = math.radians(0.05)  # Fig. 13's tighter resting band
 # A reference held at least this long counts as a setpoint whose settling time is reported.
 MIN_SETPOINT_S = 0.5
@@ -228,8 +228,8 @@ def replay(run, plant, start_index=0):
     see :func:`replay_start_index` for a bag whose recording began mid-kick); each programme
     starts at its stamp, each voltage command at its mapped receive time.
     """
-    from sphere_sim.plants import PlantError
-    from sphere_sim.programme import PulseProgramme
+    from sphere_sim.model.programme import PulseProgramme
+    from sphere_sim.twin.plants import PlantError
 
     t0 = run.normal_t_s[start_index]
     events = sorted([(t, 0, ('programme', times, volts)) for t, times, volts in run.kicks

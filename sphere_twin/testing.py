@@ -28,7 +28,8 @@ and in a test::
 import contextlib
 import time
 
-from msg_defs.ros_env import ensure_localhost_discovery
+from msg_defs.device import NS_PER_S
+from node_runtime.ros_env import ensure_localhost_discovery
 from sphere_twin.processes import fresh_domain_id, parameter_args, running_nodes
 
 DEFAULT_TIMEOUT_S = 30.0
@@ -42,7 +43,7 @@ class TwinTimeoutError(TimeoutError):
 def _sample_of(msg):
     from msg_defs.conversions import ns_from_time, surface_normal_from_msg
 
-    return ns_from_time(msg.header.stamp) * 1e-9, surface_normal_from_msg(msg)
+    return ns_from_time(msg.header.stamp) / NS_PER_S, surface_normal_from_msg(msg)
 
 
 class TopicProbe:
@@ -115,7 +116,7 @@ class TwinClient(TopicProbe):
     ----------
     process : sphere_twin.processes.NodeProcess
     domain_id : int
-    kicks : sphere_sim.lookup_table.LookupTable or CombinedKickPlant
+    kicks : sphere_sim.kicks.lookup_table.LookupTable or CombinedKickPlant
         The kicks :meth:`kick` sends (their programmes).
     window_s : float
         Kick window: the settled sample comes this long after the kick's start.
@@ -209,7 +210,7 @@ def lockstep_twin(plant='discrete', scene='rest', seed=0, noise_std_rad=0.0,
     extra_parameters : dict, optional
         More simulator parameters.
     """
-    from sphere_sim.twin_setup import load_kick_model
+    from sphere_sim.twin.plant_setup import load_kick_model
 
     ensure_localhost_discovery()
     domain_id = fresh_domain_id() if domain_id is None else domain_id

@@ -40,8 +40,8 @@ def twin():
 @pytest.fixture(scope='session')
 def model():
     """The shipped rest scene's model (calibrated parameters, four beams and the sphere)."""
-    from sphere_sim.model import assemble
-    from sphere_sim.scene import load_scene
+    from sphere_sim.model.assembly import assemble
+    from sphere_sim.model.scene import load_scene
 
     return assemble(load_scene('rest'))
 
@@ -49,7 +49,7 @@ def model():
 @pytest.fixture(scope='session')
 def x_rest(model):
     """The sphere resting level on the four tips."""
-    from sphere_sim.initial_state import rest_state
+    from sphere_sim.model.initial_state import rest_state
 
     return rest_state(model)
 
@@ -60,7 +60,7 @@ def context(monkeypatch):
     built and driven inside the test's process."""
     import rclpy
 
-    from msg_defs.ros_env import DISCOVERY_RANGE_VAR
+    from node_runtime.ros_env import DISCOVERY_RANGE_VAR
 
     monkeypatch.setenv(DISCOVERY_RANGE_VAR, 'LOCALHOST')
     context = rclpy.Context()
@@ -75,8 +75,8 @@ def kick_trajectory(model, x_rest):
     (pressed, released, bouncing, settling) for tests that need states along a real kick."""
     from pathlib import Path
 
-    from sphere_sim.kicks import KickDesign
-    from sphere_sim.solve import simulate
+    from sphere_sim.integrate.solve import simulate
+    from sphere_sim.kicks.design import KickDesign
 
     design = Path(__file__).parents[1] / 'bench' / 'results' / 'kick_optimization.json'
     return simulate(model, x_rest, 40e-3, KickDesign.load(design).programme(),

@@ -2,7 +2,7 @@
 
 import dataclasses
 
-from sphere_sim.scene import Effects, load_scene
+from sphere_sim.model.scene import Effects, load_scene
 
 
 def scene_with(base='rest', beams=None, sphere=None, programme=None, duration_s=None,

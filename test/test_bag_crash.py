@@ -21,8 +21,8 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 from sensor_msgs.msg import JointState
 
-from msg_defs.ros_env import DISCOVERY_RANGE_VAR
 from msg_defs.topics import BEAM_VOLTAGE, SURFACE_NORMAL
+from node_runtime.ros_env import DISCOVERY_RANGE_VAR
 from sphere_twin import cli
 from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.reader import (

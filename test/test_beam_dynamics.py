@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from physics_helpers import scene_with
 
-from sphere_sim.model import assemble
-from sphere_sim.scene import load_scene
+from sphere_sim.model.assembly import assemble
+from sphere_sim.model.scene import load_scene
 
 STEP = 1e-7  # relative central-difference step
 
@@ -99,10 +99,10 @@ def test_the_beams_own_centre_of_gravity_changes_little():
     """Table A1's L_cog (319 um) against the 402 um of the beam whose mass and inertia the table
     prints (docs/parameters.md): the pull-in threshold is the same to the bisection's 0.05 V and
     the optimised kick moves by less than 5 %, so the table's value is kept."""
-    from sphere_sim.calibration import threshold_v
-    from sphere_sim.initial_state import rest_state
-    from sphere_sim.kicks import KickDesign, simulate_kick
-    from sphere_sim.parameters import load_parameter_set
+    from sphere_sim.kicks.calibration import threshold_v
+    from sphere_sim.kicks.design import KickDesign, simulate_kick
+    from sphere_sim.model.initial_state import rest_state
+    from sphere_sim.model.parameters import load_parameter_set
 
     design = KickDesign.load(Path(__file__).parents[1] / 'bench' / 'results'
                              / 'kick_optimization.json')

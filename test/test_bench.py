@@ -110,7 +110,7 @@ def test_final_angle_error_is_the_largest_over_the_final_window(model):
     deviation before the window does not count."""
     from types import SimpleNamespace
 
-    from sphere_sim.initial_state import rest_state
+    from sphere_sim.model.initial_state import rest_state
 
     x_rest = rest_state(model)
     o = model.sphere_offset

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from sphere_sim import block_lu
-from sphere_sim import radau_compiled as rc
+from sphere_sim.integrate import block_lu
+from sphere_sim.integrate import radau_compiled as rc
 
 # Newton matrices mu / h I - J of the compiled Radau: its real eigenvalue and complex pair,
 # over the step sizes it takes (s).

@@ -7,12 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sphere_sim.calibration import KICK_TOLERANCE_DEG, TARGET_KICK_DEG, bisect, with_value
-from sphere_sim.initial_state import rest_state
-from sphere_sim.kicks import KickDesign, simulate_kick
-from sphere_sim.model import assemble
-from sphere_sim.parameters import UncertainParameter, load_parameter_set
-from sphere_sim.scene import load_scene
+from sphere_sim.kicks.calibration import KICK_TOLERANCE_DEG, TARGET_KICK_DEG, bisect, with_value
+from sphere_sim.kicks.design import KickDesign, simulate_kick
+from sphere_sim.model.assembly import assemble
+from sphere_sim.model.initial_state import rest_state
+from sphere_sim.model.parameters import UncertainParameter, load_parameter_set
+from sphere_sim.model.scene import load_scene
 
 RESULTS = Path(__file__).parents[1] / 'bench' / 'results'
 # Two parameters fitted to the two observations, and one held at an estimate.
@@ -67,8 +67,7 @@ def test_calibrate_fits_each_parameter_to_its_own_target(monkeypatch):
     """The whole procedure on stand-in observations: the threshold falls with k_phi and the
     kick falls with the friction coefficient, and each depends a little on the other parameter,
     so the first pass is checked and, if it moved, repeated."""
-    from sphere_sim import calibration
-
+    from sphere_sim.kicks import calibration
     def threshold_v(params):
         return 45.0 - 0.8e6 * params.beam.stiffness_phi_nm_per_rad + 0.5 * params.friction.coulomb
 
@@ -96,8 +95,7 @@ def test_calibrate_fits_each_parameter_to_its_own_target(monkeypatch):
 def test_calibrate_reports_a_target_its_range_cannot_reach(monkeypatch):
     """A target outside what the range gives ends the fit at the nearer end, marked unreached,
     and the other fit still runs: the range is never stretched."""
-    from sphere_sim import calibration
-
+    from sphere_sim.kicks import calibration
     monkeypatch.setattr(calibration, 'threshold_v',
                         lambda params: 43.0 - 1e5 * params.beam.stiffness_phi_nm_per_rad)
     monkeypatch.setattr(calibration, 'kick_deg',

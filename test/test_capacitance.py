@@ -6,7 +6,7 @@ from decimal import Decimal, localcontext
 import numpy as np
 import pytest
 
-from sphere_sim import capacitance as cap
+from sphere_sim.model import capacitance as cap
 
 LENGTH_M = 500e-6  # L_ES, Table A1
 WIDTH_M = 1300e-6  # w_ES, Table A1

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from sphere_control.estimator import KalmanParams, NormalKalmanFilter
+from sphere_control.kick_plants import AnalyticKickPlant, EightDirectionPlant
 from sphere_control.perturbations import Mismatch, NoisySensor, PerturbedPlant
-from sphere_control.plants import AnalyticKickPlant, EightDirectionPlant
-from sphere_sim.discrete import EIGHT_DIRECTIONS_RAD, normal_from_xy
+from sphere_sim.kicks.discrete import EIGHT_DIRECTIONS_RAD, normal_from_xy
 
 WIDTH_RAD = 0.01
 

@@ -5,10 +5,10 @@ import math
 import pytest
 
 from sphere_control.closed_loop import Outcome
+from sphere_control.controllers import ControllerKind
 from sphere_control.evaluation import (
     PAPER_PHI_MIN_RAD,
     PAPER_SETPOINT_NORMAL,
-    ControllerKind,
     EvaluationConfig,
     PlantUnderTest,
     oscillates,
@@ -16,9 +16,9 @@ from sphere_control.evaluation import (
     setpoint_study,
     tracking_study,
 )
+from sphere_control.kick_plants import AnalyticKickPlant
 from sphere_control.perturbations import Mismatch, PerturbedPlant
-from sphere_control.plants import AnalyticKickPlant
-from sphere_sim.discrete import PAPER_FULL_KICK_RAD
+from sphere_sim.kicks.discrete import PAPER_FULL_KICK_RAD
 
 
 @pytest.fixture(scope='module')

@@ -14,7 +14,7 @@ from sphere_control.geometry import (
     target_rotation_rad,
     wrap_angle_rad,
 )
-from sphere_sim.discrete import DIAGONAL_DIRECTIONS_RAD, normal_from_xy
+from sphere_sim.kicks.discrete import DIAGONAL_DIRECTIONS_RAD, normal_from_xy
 
 LEVEL = np.array([0.0, 0.0, 1.0])
 

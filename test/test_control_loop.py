@@ -8,10 +8,10 @@ import pytest
 from sphere_control.basic import BasicController, BasicParams
 from sphere_control.closed_loop import ConePolicy, LoopSettings, Outcome, run_closed_loop
 from sphere_control.extended import ExtendedController, ExtendedParams, prelearn
+from sphere_control.kick_plants import AnalyticKickPlant, EightDirectionPlant
 from sphere_control.perturbations import Mismatch, PerturbedPlant
-from sphere_control.plants import AnalyticKickPlant, EightDirectionPlant
 from sphere_control.reference import CircleTrajectory, Setpoint, clamp_to_cone
-from sphere_sim.discrete import CONE_HALF_ANGLE_RAD, EIGHT_DIRECTIONS_RAD, normal_from_xy
+from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD, EIGHT_DIRECTIONS_RAD, normal_from_xy
 
 WIDTH_RAD = math.radians(0.54)  # the paper's full kick
 PHI_MIN_RAD = math.radians(0.05)  # the paper's narrow resting band

@@ -17,7 +17,8 @@ from msg_defs.conversions import (
     voltages_from_msg,
     voltages_to_msg,
 )
-from msg_defs.topics import BEAM_STATE_JOINT_NAMES, MAX_ABS_VOLTAGE_V
+from msg_defs.device import VOLTAGE_LIMIT_V
+from msg_defs.topics import BEAM_NAMES, BEAM_STATE_JOINT_NAMES
 
 
 def _normal_msg(x, y, z, frame_id='world'):
@@ -85,7 +86,7 @@ def test_surface_normal_from_msg_checks_frame_and_length():
 # --- voltages ------------------------------------------------------------------------------
 
 def test_voltage_round_trip_keeps_beam_order_and_values():
-    voltages = np.array([0.0, 12.5, 40.0, MAX_ABS_VOLTAGE_V])
+    voltages = np.array([0.0, 12.5, 40.0, VOLTAGE_LIMIT_V])
     msg = voltages_to_msg(voltages, stamp=time_from_ns(7))
     assert list(msg.name) == ['beam_1', 'beam_2', 'beam_3', 'beam_4']
     assert list(msg.effort) == voltages.tolist()
@@ -108,18 +109,25 @@ def test_voltages_from_msg_reorders_joints_to_beam_order():
     (['beam_1', 'beam_2', 'beam_3', 'beam_4'], [], '4 joint names but 0 effort'),
     (['beam_1', 'beam_2', 'beam_3', 'beam_4'], [1, math.nan, 3, 4], 'finite'),
     (['beam_1', 'beam_2', 'beam_3', 'beam_4'], [1, 2, math.inf, 4], 'finite'),
-    (['beam_1', 'beam_2', 'beam_3', 'beam_4'], [1, 2, 3, 80.5], 'exceeds the limit 80 V'),
-    (['beam_1', 'beam_2', 'beam_3', 'beam_4'], [1, 2, 3, -0.5], 'must be >= 0 V'),
 ])
-def test_voltages_from_msg_rejects_bad_commands(names, effort, reason):
+def test_voltages_from_msg_rejects_bad_encodings(names, effort, reason):
     with pytest.raises(ValueError, match=reason):
         voltages_from_msg(_voltage_msg(names, effort))
 
 
-def test_voltage_limit_is_configurable_and_applies_both_ways():
-    msg = voltages_to_msg([5.0, 5.0, 5.0, 5.0])
+@pytest.mark.parametrize(('effort', 'reason'), [([1, 2, 3, 80.5], 'exceeds the limit 80 V'),
+                                                ([1, 2, 3, -0.5], 'must be >= 0 V')])
+def test_a_sender_cannot_put_a_command_beyond_the_rules_on_the_wire(effort, reason):
+    with pytest.raises(ValueError, match=reason):
+        voltages_to_msg(effort)
+    # The receiver reads it (the twin applies the same rules where it enters: test_plants).
+    msg = _voltage_msg(list(BEAM_NAMES), effort)
+    np.testing.assert_array_equal(voltages_from_msg(msg), effort)
+
+
+def test_voltage_limit_is_configurable():
     with pytest.raises(ValueError, match='exceeds the limit 4 V'):
-        voltages_from_msg(msg, max_abs_voltage_v=4.0)
+        voltages_to_msg([5.0, 5.0, 5.0, 5.0], max_abs_voltage_v=4.0)
     with pytest.raises(ValueError, match='exceeds the limit'):
         voltages_to_msg([0.0, 0.0, 0.0, 100.0])
     with pytest.raises(ValueError, match=r'shape \(4,\)'):

@@ -8,7 +8,7 @@ import subprocess
 
 import pytest
 
-from msg_defs.ros_env import DISCOVERY_RANGE_VAR, DOMAIN_ID_VAR
+from node_runtime.ros_env import DISCOVERY_RANGE_VAR, DOMAIN_ID_VAR
 from sphere_twin.commands import doctor
 from sphere_twin.processes import fresh_domain_id, resolve_executable
 

@@ -2,7 +2,7 @@
 
 import pytest
 
-from sphere_sim import validation
+from sphere_sim.studies import validation
 
 
 def test_energy_is_conserved_through_repeated_impacts_without_losses():
@@ -32,8 +32,8 @@ def test_restitution_of_an_impact_follows_the_contact_laws_closed_form():
 
     from scipy.integrate import solve_ivp
 
-    from sphere_sim.contact_law import contact_force
-    from sphere_sim.parameters import load_parameter_set
+    from sphere_sim.model.contact_law import contact_force
+    from sphere_sim.model.parameters import load_parameter_set
 
     c = load_parameter_set('calibrated').contact
     mass_kg = load_parameter_set('calibrated').sphere.mass_kg

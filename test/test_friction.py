@@ -4,15 +4,15 @@ import numpy as np
 import pytest
 from physics_helpers import scene_with
 
-from sphere_sim import dynamics
-from sphere_sim.friction import (
+from sphere_sim.model import dynamics
+from sphere_sim.model.assembly import assemble
+from sphere_sim.model.friction import (
     READING_ADDITIVE,
     READING_PRINTED,
     READING_STRUCTURE,
     friction_magnitude,
 )
-from sphere_sim.initial_state import rest_state
-from sphere_sim.model import assemble
+from sphere_sim.model.initial_state import rest_state
 
 
 def _generalised_friction_power(model, x):

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from sphere_sim.kernel_replay import RecordingModel, replay, replay_wall_s
-from sphere_sim.programme import Pulse, PulseProgramme
-from sphere_sim.solve import simulate
+from sphere_sim.integrate.kernel_replay import RecordingModel, replay, replay_wall_s
+from sphere_sim.integrate.solve import simulate
+from sphere_sim.model.programme import Pulse, PulseProgramme
 
 # Voltages on and off within the run: the recorded voltages must follow the segments.
 PROGRAMME = PulseProgramme((Pulse(3, 80.0, 0.0, 0.2e-3), Pulse(4, 80.0, 0.0, 0.2e-3)))

@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from sphere_sim.discrete import normal_from_xy
-from sphere_sim.kick_characteristics import KickEffect, compensating_beam, find_offset, offset_grid
-from sphere_sim.kicks import KickDesign
-from sphere_sim.symmetry import KICK_AXIS_MIRROR
+from sphere_sim.kicks.characteristics import KickEffect, compensating_beam, find_offset, offset_grid
+from sphere_sim.kicks.design import KickDesign
+from sphere_sim.kicks.discrete import normal_from_xy
+from sphere_sim.model.symmetry import KICK_AXIS_MIRROR
 
 
 def test_offset_search_finds_the_root_inside_the_bracket_of_a_non_monotone_error():

@@ -7,7 +7,7 @@ import pytest
 
 from sphere_control.command import Command
 from sphere_control.kick_cycle import KickCycle, Phase
-from sphere_sim.discrete import normal_from_xy
+from sphere_sim.kicks.discrete import normal_from_xy
 
 WINDOW_S = 0.06
 PERIOD_S = 0.02

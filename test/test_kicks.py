@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from physics_helpers import scene_with
 
-from sphere_sim.kicks import KickDesign, cardan_of_normal, displacement, simulate_kick
-from sphere_sim.model import assemble
-from sphere_sim.programme import ProgrammeError
-from sphere_sim.rotations import cardan_to_matrix
+from sphere_sim.kicks.design import KickDesign, cardan_of_normal, displacement, simulate_kick
+from sphere_sim.model.assembly import assemble
+from sphere_sim.model.programme import ProgrammeError
+from sphere_sim.model.rotations import cardan_to_matrix
 
 
 def test_intensity_scales_only_the_high_pair():
@@ -59,7 +59,7 @@ def test_hind_left_kick_gives_equal_positive_alpha_and_beta():
     """Beam numbering (clockwise, top view, y up): the hind-left kick, which §4.1 reports as
     alpha = beta > 0, drives beams 1-2 high and 3-4 low once the tips hold the sphere
     (docs/parameters.md: the high pair lifts its side and the face tilts away from it)."""
-    from sphere_sim.lookup_table import LookupTable
+    from sphere_sim.kicks.lookup_table import LookupTable
 
     table = LookupTable.load_current()
     assert table.spec.design.low_beams == (3, 4) and table.spec.design.high_beams == (1, 2)

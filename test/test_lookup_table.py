@@ -7,9 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from sphere_sim.discrete import normal_from_xy
-from sphere_sim.lookup_table import LookupTable, TableError, TableSpec
-from sphere_sim.table_build import build_table, direct_kick, jobs_of
+from sphere_sim.kicks.discrete import normal_from_xy
+from sphere_sim.kicks.lookup_table import LookupTable, TableError, TableSpec
+from sphere_sim.kicks.table_build import build_table, direct_kick, jobs_of
+from sphere_sim.model.parameters import load_parameter_set
 
 # A small table: a 6 deg cone, one intensity, a 5 ms window; enough to exercise every path.
 SMALL = TableSpec(grid_step=0.06, intensities=(1.0,), window_s=5e-3, rtol=1e-6,
@@ -58,7 +59,7 @@ def test_interrupted_build_resumes_without_redoing_entries(tmp_path, serial_buil
 
 
 def test_table_round_trips_and_refuses_other_parameters(tmp_path, serial_table):
-    from sphere_sim.parameters import load_parameter_set
+    from sphere_sim.model.parameters import load_parameter_set
 
     path = serial_table.save(tmp_path / 't.npz')
     params = load_parameter_set('calibrated')
@@ -87,7 +88,8 @@ def test_interpolation_is_exact_on_nodes_and_symmetric_images_match_simulation(s
     # a direct simulation of the turned programme agree.
     turned = np.array([-x, -y, normal[2]])
     predicted = serial_table.kick(turned, 2, 1.0).normal
-    simulated = direct_kick(SMALL, turned, 2, 1.0).normal
+    params = load_parameter_set(SMALL.parameter_set)
+    simulated = direct_kick(SMALL, params, turned, 2, 1.0).normal
     # Equal up to the integration error at the spec's rtol 1e-6 (measured 6e-9); a wrong image
     # would be off by the kick itself, ~1e-3.
     np.testing.assert_allclose(predicted, simulated, atol=1e-7)
@@ -115,7 +117,7 @@ def test_shipped_table_matches_the_committed_optimised_kick(shipped):
     """From rest, the table's full kick is the optimisation's result, turned for each action."""
     from pathlib import Path
 
-    from sphere_sim.discrete import angle_between
+    from sphere_sim.kicks.discrete import angle_between
 
     optimised = json.loads((Path(__file__).parents[1] / 'bench' / 'results' /
                             'kick_optimization.json').read_text())
@@ -151,9 +153,9 @@ def test_shipped_table_kick_needs_the_high_pairs_full_pull_in(shipped):
 
 
 def test_diagonal_and_axis_tables_combine_into_eight_directions(shipped):
-    from sphere_sim.discrete import EIGHT_DIRECTIONS_RAD
-    from sphere_sim.lookup_table import AXIS_TABLE_PATH, CombinedKickPlant
-    from sphere_sim.plants import decode_kick
+    from sphere_sim.kicks.discrete import EIGHT_DIRECTIONS_RAD
+    from sphere_sim.kicks.lookup_table import AXIS_TABLE_PATH, CombinedKickPlant
+    from sphere_sim.twin.plants import decode_kick
 
     axis = LookupTable.load_current(AXIS_TABLE_PATH)
     eight = CombinedKickPlant([shipped, axis])

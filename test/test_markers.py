@@ -7,8 +7,8 @@ from builtin_interfaces.msg import Time
 
 from msg_defs.markers import BEAM_LENGTH_M, SPHERE_RADIUS_M, twin_markers
 from msg_defs.topics import WORLD_FRAME
-from sphere_sim.discrete import normal_from_xy
-from sphere_sim.rotations import quat_to_matrix
+from sphere_sim.kicks.discrete import normal_from_xy
+from sphere_sim.model.rotations import quat_to_matrix
 
 
 def _quat(marker):

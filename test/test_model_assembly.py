@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from physics_helpers import scene_with
 
-from sphere_sim import dynamics
-from sphere_sim.model import assemble
+from sphere_sim.model import dynamics
+from sphere_sim.model.assembly import assemble
 
 
 def _raise(*args, **kwargs):
@@ -72,7 +72,7 @@ def test_compiled_and_python_kernels_agree():
     rng = np.random.default_rng(3)
     scene = scene_with()
     fast, slow = assemble(scene), assemble(scene, jit=False)
-    from sphere_sim.initial_state import rest_state
+    from sphere_sim.model.initial_state import rest_state
 
     x = rest_state(fast)
     x = x + 1e-9 * rng.normal(size=x.size) * (np.abs(x) > 0)

@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 from physics_helpers import scene_with
 
-from sphere_sim import block_lu, newton_system
-from sphere_sim import dynamics as dyn
-from sphere_sim import radau_compiled as rc
-from sphere_sim.initial_state import rest_state
-from sphere_sim.model import assemble
-from sphere_sim.scene import load_scene
-from sphere_sim.solve import state_scale
+from sphere_sim.integrate import block_lu, newton_system
+from sphere_sim.integrate import radau_compiled as rc
+from sphere_sim.model import dynamics as dyn
+from sphere_sim.model.assembly import assemble
+from sphere_sim.model.initial_state import rest_state
+from sphere_sim.model.scaling import state_scale
+from sphere_sim.model.scene import load_scene
 
 MU = (rc.MU_REAL, complex(rc.MU_COMPLEX_RE, rc.MU_COMPLEX_IM))
 STEPS_S = (1e-8, 1e-6, 1e-4)  # the step sizes the compiled Radau takes

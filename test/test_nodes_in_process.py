@@ -8,8 +8,8 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from msg_defs.conversions import programme_to_msg, surface_normal_to_msg, voltages_to_msg
-from sphere_sim.plants import PlantSnapshot
-from sphere_sim.simulator_node import SimulatorNode
+from sphere_sim.twin.plants import PlantSnapshot
+from sphere_sim.twin.simulator_node import SimulatorNode
 from sphere_twin.monitor_node import MonitorNode
 
 pytestmark = pytest.mark.ros

@@ -6,18 +6,18 @@ import numpy as np
 import pytest
 from physics_helpers import scene_with
 
-from sphere_sim import dynamics
-from sphere_sim.initial_state import explicit_state
-from sphere_sim.model import assemble
-from sphere_sim.programme import PulseProgramme
-from sphere_sim.rotations import (
+from sphere_sim.integrate.solve import simulate
+from sphere_sim.model import dynamics
+from sphere_sim.model.assembly import assemble
+from sphere_sim.model.initial_state import explicit_state
+from sphere_sim.model.programme import PulseProgramme
+from sphere_sim.model.rotations import (
     cardan_to_matrix,
     cardan_to_quat,
     matrix_to_cardan,
     quat_to_cardan,
     quat_to_matrix,
 )
-from sphere_sim.solve import simulate
 
 
 @pytest.mark.parametrize('angles', [(0.1, -0.2, 0.3), (-1.0, 0.5, 2.0), (0.0, 0.0, 0.0),

@@ -3,8 +3,8 @@ import math
 
 import pytest
 
-from sphere_sim.parameters import ParameterError, load_parameter_set
-from sphere_sim.scene import SceneError, load_scene, scene_from_dict
+from sphere_sim.model.parameters import ParameterError, load_parameter_set
+from sphere_sim.model.scene import SceneError, load_scene, scene_from_dict
 
 
 def test_table_a1_is_in_si_units():

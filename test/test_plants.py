@@ -6,19 +6,18 @@ import numpy as np
 import pytest
 
 from msg_defs.conversions import programme_from_msg, programme_to_msg
-from sphere_sim.discrete import angle_between, normal_from_xy
-from sphere_sim.kicks import simulate_kick
-from sphere_sim.lookup_table import LookupTable
-from sphere_sim.plants import (
+from sphere_sim.kicks.design import simulate_kick
+from sphere_sim.kicks.discrete import angle_between, normal_from_xy
+from sphere_sim.kicks.lookup_table import LookupTable
+from sphere_sim.model.programme import Pulse, PulseProgramme, VoltageSchedule
+from sphere_sim.twin.plant_setup import build_plant
+from sphere_sim.twin.plants import (
     ContinuousPlant,
     DiscretePlant,
     PlantError,
-    VoltageSchedule,
     decode_kick,
 )
-from sphere_sim.programme import Pulse, PulseProgramme
-from sphere_sim.twin import CommandError, TwinRunner
-from sphere_sim.twin_setup import build_plant
+from sphere_sim.twin.runner import CommandError, TwinRunner
 
 
 @pytest.fixture(scope='module')
@@ -34,7 +33,8 @@ def test_schedule_keeps_the_past_and_lets_the_latest_command_win():
     assert schedule.voltages_at(1.2e-3)[0] == 2
     assert schedule.voltages_at(1.5e-3)[0] == 7  # an edge belongs to the segment after it
     assert schedule.voltages_at(5e-3)[0] == 7
-    assert schedule.edges_between(0.0, 1.0) == [1e-3, 1.5e-3]
+    assert schedule.edges() == [0.0, 1e-3, 1.5e-3]
+    np.testing.assert_array_equal(schedule.voltages_at(1.2e-3, beams=(2, 4)), [2, 2])
 
 
 def test_every_kick_decodes_to_its_action_and_intensity_after_a_message_round_trip(table):
@@ -108,8 +108,16 @@ def test_rejected_programme_never_reaches_the_plant(table):
         runner.command_programme([0.0, 1e-3], [[90.0, 0, 0, 0], [0] * 4])
     with pytest.raises(CommandError, match='>= 0 V'):
         runner.command_programme([0.0, 1e-3], [[-5.0, 0, 0, 0], [0] * 4])
-    with pytest.raises(CommandError, match='in \\[0, 80'):
+    with pytest.raises(CommandError, match='finite'):
         runner.command_voltages([1.0, 2.0, float('nan'), 0.0])
+    with pytest.raises(CommandError, match='exceeds the limit 80 V'):
+        runner.command_voltages([1.0, 2.0, 3.0, 80.5])
+    with pytest.raises(CommandError, match='>= 0 V'):
+        runner.command_voltages([1.0, 2.0, 3.0, -0.5])
+    with pytest.raises(CommandError, match='last point must switch every beam off'):
+        runner.command_programme([0.0, 1e-3], [[5.0, 0, 0, 0], [5.0, 0, 0, 0]])
+    with pytest.raises(CommandError, match='increase strictly'):
+        runner.command_programme([0.0, 0.0], [[5.0, 0, 0, 0], [0] * 4])
     runner.tick()
     runner.tick()
     assert plant.kicks == 0

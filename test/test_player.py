@@ -22,7 +22,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from msg_defs.ros_env import DISCOVERY_RANGE_VAR
+from msg_defs.device import NS_PER_S
 from msg_defs.topics import (
     ALL_TOPICS,
     BEAM_VOLTAGE,
@@ -32,9 +32,10 @@ from msg_defs.topics import (
     SPHERE_STATE,
     SURFACE_NORMAL,
 )
+from node_runtime.ros_env import DISCOVERY_RANGE_VAR
 from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.reader import RecordedMessage, deserialize, read_messages
-from sphere_twin.player_node import NS_PER_S, playback_plan, played_line, recorded_qos
+from sphere_twin.player_node import playback_plan, played_line, recorded_qos
 from sphere_twin.processes import parameter_args, stop
 from sphere_twin.recorder_node import summary_line
 

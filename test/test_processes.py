@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from msg_defs.ros_env import DISCOVERY_RANGE_VAR, DOMAIN_ID_VAR
+from node_runtime.ros_env import DISCOVERY_RANGE_VAR, DOMAIN_ID_VAR
 from sphere_twin.processes import (
     MAX_DOMAIN_ID,
     MIN_DOMAIN_ID,

@@ -5,11 +5,11 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from sphere_sim.initial_state import rest_state
-from sphere_sim.model import assemble
-from sphere_sim.pullin import all_beams_pulse, pull_in
-from sphere_sim.scene import load_scene
-from sphere_sim.solve import simulate
+from sphere_sim.integrate.solve import simulate
+from sphere_sim.model.assembly import assemble
+from sphere_sim.model.initial_state import rest_state
+from sphere_sim.model.scene import load_scene
+from sphere_sim.studies.pullin import all_beams_pulse, pull_in
 
 # The dynamic threshold (a 5 ms step, slower than the beam periods of about 0.3 ms, with
 # strong torsional damping) must sit within this fraction of the quasi-static fold.

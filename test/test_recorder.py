@@ -36,7 +36,6 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from msg_defs.ros_env import DISCOVERY_RANGE_VAR
 from msg_defs.topics import (
     ALL_TOPICS,
     BEAM_VOLTAGE,
@@ -46,6 +45,7 @@ from msg_defs.topics import (
     SPHERE_STATE,
     SURFACE_NORMAL,
 )
+from node_runtime.ros_env import DISCOVERY_RANGE_VAR
 from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.reader import deserialize, read_messages, read_metadata
 from sphere_twin.bag.writer import BagWriter

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from msg_defs.topics import CONTROLLER_STATUS
-from sphere_sim.discrete import normal_from_xy
+from sphere_sim.kicks.discrete import normal_from_xy
+from sphere_twin.cli import build_parser
 from sphere_twin.processes import parameter_args
 from sphere_twin.run_analysis import RecordedRun, setpoint_segments, statistics
 from sphere_twin.testing import TopicProbe
@@ -74,8 +75,8 @@ def test_lockstep_recording_reports_and_replays_exactly(ros_nodes, tmp_path):
     assert data['kicks'] > 5 and data['final_error_deg'] < 0.05
     assert data['settle_times_s'][0] is not None
 
-    replay_args = type('Args', (), {'bag': bag, 'out': tmp_path, 'plant': 'discrete',
-                                    'tables': [], 'params': 'calibrated'})
+    replay_args = build_parser().parse_args(['replay-check', str(bag), '--out', str(tmp_path),
+                                             '--plant', 'discrete'])
     assert replay_check.run(replay_args) == 0
     replayed = json.loads((tmp_path / 'run_replay.json').read_text())
     # Lockstep: every programme ran at its stamp, so the table replays the run exactly.
@@ -100,8 +101,8 @@ def test_continuous_plant_replays_a_recording_to_the_integrator_tolerance(ros_no
     finally:
         probe.close()
     ros_nodes.stop_all()
-    args = type('Args', (), {'bag': bag, 'out': tmp_path, 'plant': 'continuous',
-                             'tables': [], 'params': 'calibrated'})
+    args = build_parser().parse_args(['replay-check', str(bag), '--out', str(tmp_path),
+                                      '--plant', 'continuous'])
     assert replay_check.run(args) == 0
     replayed = json.loads((tmp_path / 'continuous_replay.json').read_text())
     # The replay integrates from the rest state of the first recorded normal, sample by sample

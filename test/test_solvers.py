@@ -5,22 +5,22 @@ import itertools
 import numpy as np
 import pytest
 
-from sphere_sim import dynamics as dyn
-from sphere_sim.initial_state import rest_state
-from sphere_sim.model import assemble
-from sphere_sim.programme import Pulse, PulseProgramme
-from sphere_sim.scene import load_scene
-from sphere_sim.solve import (
+from sphere_sim.integrate.solve import (
     METHODS,
     SolverError,
     SolverStatus,
-    contact_gaps,
     default_onset_depth_m,
     segment_times,
     simulate,
     solve,
-    state_scale,
 )
+from sphere_sim.model import dynamics as dyn
+from sphere_sim.model import gaps as gap_kernels
+from sphere_sim.model.assembly import assemble
+from sphere_sim.model.initial_state import rest_state
+from sphere_sim.model.programme import Pulse, PulseProgramme
+from sphere_sim.model.scaling import state_scale
+from sphere_sim.model.scene import load_scene
 
 ASYMMETRIC = PulseProgramme((Pulse(1, 35.0, 0.5e-3, 1.0e-3), Pulse(2, 35.0, 0.5e-3, 1.0e-3),
                              Pulse(3, 80.0, 0.0, 0.8e-3), Pulse(4, 80.0, 0.0, 0.8e-3)))
@@ -75,7 +75,7 @@ def test_jacobian_at_contact_onset(model, x_rest):
 
 
 def test_contact_gaps_match_the_model(model, x_rest):
-    gaps = contact_gaps(model, x_rest)
+    gaps = model.contact_gaps(x_rest)
     rear, front = model.ground_gaps(x_rest)
     np.testing.assert_allclose(gaps, np.concatenate([rear, front, model.sphere_gaps(x_rest)]),
                                rtol=0, atol=1e-15)
@@ -97,30 +97,28 @@ def test_functions_at_held_voltages_equal_rhs_and_jacobian(model, x_rest):
 
 
 def test_library_onset_test_flags_only_open_contacts_closed_too_deep(model, x_rest):
-    from sphere_sim import radau_compiled as rc
-
     depth = default_onset_depth_m(model)
-    gaps_start = contact_gaps(model, x_rest)
+    gaps_start = model.contact_gaps(x_rest)
     assert np.any(gaps_start > 0.0) and np.any(gaps_start < 0.0)  # both kinds at rest
     gaps_end = np.empty_like(gaps_start)
     args = (model.p, model.flags, model.beam_directions, depth, gaps_end)
     # At rest: the closed tips stay closed, nothing open closes.
-    assert not rc.closed_too_deep(gaps_start, x_rest, *args)
+    assert not gap_kernels.closed_too_deep(gaps_start, x_rest, *args)
     np.testing.assert_array_equal(gaps_end, gaps_start)
     # Lift the sphere off the tips, then lower it back 0.9 and 1.1 allowed depths into them.
     o = model.sphere_offset
     lifted = x_rest.copy()
     lifted[o + 2] += np.max(-model.sphere_gaps(x_rest)) + 5e-9
-    gaps_lifted = contact_gaps(model, lifted)
+    gaps_lifted = model.contact_gaps(lifted)
     assert np.all(model.sphere_gaps(lifted) > 0.0)
     deepest = np.max(-model.sphere_gaps(x_rest))
     for fraction, expected in ((0.9, False), (1.1, True)):
         x = x_rest.copy()
         x[o + 2] += deepest - fraction * depth
-        assert rc.closed_too_deep(gaps_lifted, x, *args) is expected
-        np.testing.assert_allclose(gaps_end, contact_gaps(model, x), rtol=0, atol=1e-18)
+        assert gap_kernels.closed_too_deep(gaps_lifted, x, *args) is expected
+        np.testing.assert_allclose(gaps_end, model.contact_gaps(x), rtol=0, atol=1e-18)
     # The same state is no onset for contacts that were already closed at the step's start.
-    assert not rc.closed_too_deep(gaps_start, x, *args)
+    assert not gap_kernels.closed_too_deep(gaps_start, x, *args)
 
 
 def test_fast_radau_agrees_with_scipy_radau(model, x_rest):
@@ -279,9 +277,8 @@ def test_every_method_through_the_interface(beams_only, method):
     assert np.min(traj.x[0]) < x0[0] - 1e-6
 
 
-def test_solve_accepts_a_scene_and_starts_from_its_initial_state():
-    scene = load_scene('beams_only')
-    traj = solve(scene, (0.0, 1e-4), rtol=1e-6)
-    model = traj.model
+def test_solve_starts_from_the_scene_initial_state():
+    model = assemble(load_scene('beams_only'))
+    traj = solve(model, (0.0, 1e-4), rtol=1e-6)
     np.testing.assert_allclose(traj.x[:, 0], rest_state(model), atol=1e-15)
     assert traj.status is SolverStatus.SUCCESS

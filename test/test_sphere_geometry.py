@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from sphere_sim.parameters import load_parameter_set
-from sphere_sim.sphere_geometry import mass_properties
+from sphere_sim.model.parameters import load_parameter_set
+from sphere_sim.model.sphere_geometry import mass_properties
 
 STEEL_KG_M3 = 7850.0
 

@@ -18,21 +18,19 @@ import math
 import numpy as np
 import pytest
 
-from sphere_sim.capacitance import RbfCapacitance
-from sphere_sim.energy import energy_balance
-from sphere_sim.initial_state import RestError, explicit_state, rest_state
-from sphere_sim.model import assemble
-from sphere_sim.programme import Pulse, PulseProgramme
-from sphere_sim.rotations import cardan_to_quat, quat_to_cardan
-from sphere_sim.scene import InitialState, load_scene
-from sphere_sim.solve import (
+from sphere_sim.integrate.solve import (
     SolverError,
     SolverStatus,
-    contact_gaps,
-    electrode_gaps,
     simulate,
-    state_scale,
 )
+from sphere_sim.model.assembly import assemble
+from sphere_sim.model.capacitance import RbfCapacitance
+from sphere_sim.model.energy import energy_balance
+from sphere_sim.model.initial_state import RestError, explicit_state, rest_state
+from sphere_sim.model.programme import Pulse, PulseProgramme
+from sphere_sim.model.rotations import cardan_to_quat, quat_to_cardan
+from sphere_sim.model.scaling import state_scale
+from sphere_sim.model.scene import InitialState, load_scene
 
 PENETRATION_BOUND_M = 1e-6
 ENERGY_SLACK = 1e-3
@@ -48,7 +46,7 @@ def all_beams(amplitude_v, width_s, limit_v=80.0):
 
 def deepest_gap(traj):
     """Smallest gap (m) of any contact the model has, over the samples."""
-    return min(float(np.min(contact_gaps(traj.model, traj.x[:, i]), initial=math.inf))
+    return min(float(np.min(traj.model.contact_gaps(traj.x[:, i]), initial=math.inf))
                for i in range(traj.t.size))
 
 
@@ -58,7 +56,7 @@ def check_physics(traj, bound_m=PENETRATION_BOUND_M):
     The penetration bound applies beyond the deepest overlap of the start state.
     """
     assert np.all(np.isfinite(traj.x))
-    start = float(np.min(contact_gaps(traj.model, traj.x[:, 0]), initial=0.0))
+    start = float(np.min(traj.model.contact_gaps(traj.x[:, 0]), initial=0.0))
     assert deepest_gap(traj) > min(start, 0.0) - bound_m
     balance = energy_balance(traj)
     scale = max(np.max(np.abs(balance.electrical_work_j)),
@@ -86,13 +84,13 @@ def test_contact_stiffness_scaled(factor):
         exc = caught.value
         assert exc.status is SolverStatus.LEFT_MODEL_DOMAIN
         assert 0.1e-3 < exc.t_s < 0.2e-3  # during the 80 V pulse on beams 3 and 4
-        assert np.min(electrode_gaps(model, exc.state)) <= 0.0
+        assert np.min(model.electrode_gaps(exc.state)) <= 0.0
         assert np.all(np.isfinite(exc.state))
         return
     traj = simulate(model, rest_state(model), 1.5e-3, KICK, rtol=1e-6, method='fast',
                     sample_period_s=2e-5, max_wall_s=60.0)
     check_physics(traj)
-    assert np.min([electrode_gaps(model, x) for x in traj.x.T]) > 0.0
+    assert np.min([model.electrode_gaps(x) for x in traj.x.T]) > 0.0
     assert traj.stats.n_steps < 20_000
 
 
@@ -105,7 +103,7 @@ def test_strong_pulses_on_all_beams(model, x_rest, amplitude_v):
     # The beams end on the ground plate (pull-in): their rear gap closes from ~9 um.
     assert np.min(traj.x[0]) < x_rest[0] - 5e-6
     # ... and the insulation layer holds: the electrodes stay ~1.4 um apart (d_Iso = 1.5 um).
-    assert min(np.min(electrode_gaps(model, x)) for x in traj.x.T) > 1e-6
+    assert min(np.min(model.electrode_gaps(x)) for x in traj.x.T) > 1e-6
     assert traj.stats.n_steps < 20_000
 
 
@@ -155,7 +153,7 @@ def test_rbf_grid_edges(rbf_model, corner):
     traj = simulate(rbf_model, x0, 2e-4, all_beams(80.0, 1e-4), rtol=1e-6, method='fast',
                     sample_period_s=1e-5)
     assert np.all(np.isfinite(traj.x))
-    start = float(np.min(contact_gaps(rbf_model, x0)))
+    start = float(np.min(rbf_model.contact_gaps(x0)))
     assert deepest_gap(traj) > min(start, 0.0) - PENETRATION_BOUND_M
     assert traj.stats.n_steps < 20_000
 

@@ -7,28 +7,31 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from sphere_sim import block_lu, newton_system, validation
-from sphere_sim import dynamics as dyn
-from sphere_sim import radau_compiled as rc
-from sphere_sim.contact_law import contact_force
-from sphere_sim.friction import bristle_rate, plastic_speed, sliding_coefficient
-from sphere_sim.initial_state import rest_state
-from sphere_sim.kicks import KickDesign
-from sphere_sim.model import assemble
-from sphere_sim.parameters import load_parameter_set
-from sphere_sim.solve import simulate, state_scale
+from sphere_sim.integrate import block_lu, newton_system
+from sphere_sim.integrate import radau_compiled as rc
+from sphere_sim.integrate.solve import simulate
+from sphere_sim.kicks.design import KickDesign
+from sphere_sim.model import dynamics as dyn
+from sphere_sim.model.assembly import assemble
+from sphere_sim.model.contact_law import contact_force
+from sphere_sim.model.friction import bristle_rate, plastic_speed, sliding_coefficient
+from sphere_sim.model.initial_state import rest_state
+from sphere_sim.model.parameters import load_parameter_set
+from sphere_sim.model.scaling import state_scale
+from sphere_sim.studies import validation
 
 CREEP_LIMIT_DEG_PER_S = 1e-3  # the issue's bound for a resting sphere
 
 
 @pytest.fixture(scope='module')
 def stiction_model():
-    return assemble(validation.scene('calibrated'))
+    return validation.rest_model(load_parameter_set('calibrated'))
 
 
 @pytest.mark.parametrize('tilt_deg', [20.0, 35.0, 40.0])
 def test_a_tilted_resting_sphere_holds_for_ten_seconds(tilt_deg):
-    rate = validation.tilted_creep_rate(tilt_deg, duration_s=10.0, parameter_set='calibrated')
+    rate = validation.tilted_creep_rate(tilt_deg, duration_s=10.0,
+                                        params=load_parameter_set('calibrated'))
     assert abs(math.degrees(rate)) <= CREEP_LIMIT_DEG_PER_S
 
 
@@ -38,7 +41,7 @@ def test_the_regularised_readings_creep_where_the_bristle_holds(tmp_path, readin
     path = tmp_path / f'{reading}.yaml'
     path.write_text(f'name: {reading}\nbase: calibrated\noverrides:\n'
                     f'  friction.reading: {reading}\n  friction.coulomb: 2.0\n')
-    rate = validation.tilted_creep_rate(20.0, duration_s=0.2, parameter_set=str(path))
+    rate = validation.tilted_creep_rate(20.0, duration_s=0.2, params=load_parameter_set(path))
     assert math.degrees(rate) > 1.0
 
 
@@ -119,15 +122,16 @@ def test_the_static_limit_is_mu_c_f_n_r(stiction_model):
 
 
 def test_energy_never_rises_above_the_electrical_work_with_the_bristles():
-    peak, final = validation.lossy_kick(parameter_set='calibrated')
+    peak, final = validation.lossy_kick(params=load_parameter_set('calibrated'))
     assert peak < 1e-5
     assert final < -0.1
 
 
 def test_a_lossless_drop_keeps_its_energy_with_the_bristles_switched_off():
     # LOSSLESS switches friction off, so the bristles are not assembled at all.
-    assert not assemble(validation.scene('calibrated', **validation.LOSSLESS)).has_bristles
-    surplus, impacts = validation.lossless_drop(parameter_set='calibrated')
+    lossless = validation.rest_model(load_parameter_set('calibrated'), **validation.LOSSLESS)
+    assert not lossless.has_bristles
+    surplus, impacts = validation.lossless_drop(params=load_parameter_set('calibrated'))
     assert impacts >= 2 and surplus < 1e-4
 
 

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from physics_helpers import scene_with
 
-from sphere_sim.initial_state import rest_state
-from sphere_sim.model import assemble
-from sphere_sim.solve import simulate
-from sphere_sim.symmetry import KICK_AXIS_MIRROR, Symmetry, all_symmetries
-from sphere_sim.validation import all_beams
+from sphere_sim.integrate.solve import simulate
+from sphere_sim.model.assembly import assemble
+from sphere_sim.model.initial_state import rest_state
+from sphere_sim.model.symmetry import KICK_AXIS_MIRROR, Symmetry, all_symmetries
+from sphere_sim.studies.validation import all_beams
 
 
 def test_beam_maps_are_permutations_matching_the_paper_layout():

@@ -33,6 +33,8 @@ from pathlib import Path
 
 import yaml
 
+from msg_defs.device import NS_PER_S
+
 METADATA_FILENAME = 'metadata.yaml'
 METADATA_VERSION = 9
 STORAGE_IDENTIFIER = 'mcap'
@@ -47,7 +49,6 @@ DEFINITION_DELIMITER = '=' * 80
 # rosbag2 starts a bag at the latest representable time and lowers it with every message,
 # so a bag without messages keeps this starting time.
 EMPTY_BAG_STARTING_TIME_NS = 2**63 - 1
-NS_PER_S = 1_000_000_000
 
 QOS_KEYS = ('history', 'depth', 'reliability', 'durability', 'deadline', 'lifespan',
             'liveliness', 'liveliness_lease_duration', 'avoid_ros_namespace_conventions')

@@ -2,9 +2,8 @@
 
 from pathlib import Path
 
+from msg_defs.device import NS_PER_S
 from sphere_twin.bag.reader import BagError
-
-NS_PER_S = 1e9
 
 
 def register(subparsers):

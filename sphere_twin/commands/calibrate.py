@@ -7,8 +7,16 @@ import textwrap
 import yaml
 from tqdm import tqdm
 
-from sphere_sim.calibration import calibrate, evaluate, kick_deg, threshold_v, with_value
-from sphere_sim.parameters import (
+from sphere_sim.kicks.calibration import (
+    CALIBRATED_SET,
+    LITERAL_SET,
+    calibrate,
+    evaluate,
+    kick_deg,
+    threshold_v,
+    with_value,
+)
+from sphere_sim.model.parameters import (
     CALIBRATION_TARGETS,
     ESTIMATE_TARGET,
     PARAMS_DIR,
@@ -34,8 +42,8 @@ def register(subparsers):
 
 
 def run(args):
-    calibrated = load_parameter_set('calibrated')
-    base = load_parameter_set('table_a1')
+    calibrated = load_parameter_set(CALIBRATED_SET)
+    base = load_parameter_set(LITERAL_SET)
     specs = [s for s in calibrated.uncertain if args.target is None or s.target in args.target]
     if not specs:
         raise SystemExit('the calibrated set declares no uncertain parameter for that target')

@@ -1,7 +1,7 @@
 """``sphere-twin capacitance``: the closed form of eq. (8) against the RBF net of eq. (12).
 
 Fits the net the model would use for a parameter set, prints the largest differences between
-the two over the net's centre box (see :func:`sphere_sim.capacitance.compare_models`) and
+the two over the net's centre box (see :func:`sphere_sim.model.capacitance.compare_models`) and
 optionally plots both along a few slices.
 """
 
@@ -10,8 +10,8 @@ import time
 
 import numpy as np
 
-from sphere_sim import capacitance as cap
-from sphere_sim.parameters import DEFAULT_PARAMETER_SET, load_parameter_set
+from sphere_sim.model import capacitance as cap
+from sphere_twin.commands.options import add_params_option
 
 # Gaps g = z_S - z_G of the plotted slices (m): from near the contact (d_Iso = 1.5 um) to the
 # rest gap (10 um), all inside the fitted region for phi >= 0.
@@ -33,9 +33,8 @@ def register(subparsers):
         help='compare the closed-form capacitance (eq. 8) with the RBF net (eq. 12)',
         description=__doc__.splitlines()[0].replace('``', ''),
     )
-    parser.add_argument('--parameter-set', default=DEFAULT_PARAMETER_SET, metavar='NAME',
-                        help='parameter set giving the electrode geometry and fringe settings '
-                             f'(default: {DEFAULT_PARAMETER_SET})')
+    add_params_option(parser, help='parameter set giving the electrode geometry and fringe '
+                                   'settings: a name or a YAML file')
     parser.add_argument('--no-fringe', action='store_true',
                         help='leave out the fringe (second) term of eq. (8)')
     parser.add_argument('--fringe-angle-rad', type=_positive_float, default=None,
@@ -50,7 +49,7 @@ def register(subparsers):
 
 def run(args):
     """Print the comparison table (and write the plot); returns the exit status 0."""
-    params = load_parameter_set(args.parameter_set)
+    params = args.params
     beam = params.beam
     include_fringe = params.electrostatics.fringe and not args.no_fringe
     angle = (params.electrostatics.fringe_angle_rad if args.fringe_angle_rad is None

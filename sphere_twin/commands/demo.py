@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from msg_defs.ros_env import DISCOVERY_RANGE_VAR
+from msg_defs.device import NS_PER_S
+from node_runtime.ros_env import DISCOVERY_RANGE_VAR
 from sphere_twin.processes import NodeSpec, fresh_domain_id, parameter_args, running_nodes
 
 SETPOINT_XY = (0.01, 0.02)  # Fig. 13
@@ -73,7 +74,7 @@ class RunLog:
     def simulated_s(self):
         from msg_defs.conversions import ns_from_time
 
-        return ns_from_time(self.normals[-1].header.stamp) * 1e-9 if self.normals else 0.0
+        return ns_from_time(self.normals[-1].header.stamp) / NS_PER_S if self.normals else 0.0
 
     def controller_ready(self):
         """The controller has the reference and waits for the first sample."""

@@ -15,18 +15,18 @@ from pathlib import Path
 
 import numpy as np
 
+from sphere_control.controllers import ControllerKind
 from sphere_control.evaluation import (
     LEVEL_NORMAL,
     PAPER_PHI_MIN_RAD,
-    ControllerKind,
     EvaluationConfig,
     PhiMinScaling,
     PlantUnderTest,
     evaluate,
 )
-from sphere_control.plants import AnalyticKickPlant
-from sphere_sim.discrete import PAPER_FULL_KICK_RAD
-from sphere_sim.lookup_table import AXIS_TABLE_PATH
+from sphere_control.kick_plants import AnalyticKickPlant
+from sphere_sim.kicks.discrete import PAPER_FULL_KICK_RAD
+from sphere_sim.kicks.lookup_table import AXIS_TABLE_PATH
 
 RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
 # The analytic stand-in for the paper's plant: the 0.54 deg kick with a convex intensity
@@ -63,7 +63,7 @@ def register(subparsers):
 
 def load_table(path):
     """(table, note); TableError for a missing or stale table."""
-    from sphere_sim.lookup_table import DEFAULT_TABLE_PATH, LookupTable
+    from sphere_sim.kicks.lookup_table import DEFAULT_TABLE_PATH, LookupTable
 
     path = DEFAULT_TABLE_PATH if path is None else path
     return LookupTable.load_current(path), f'table {path}'
@@ -71,7 +71,7 @@ def load_table(path):
 
 def load_eight_directions(table, axis_path):
     """The diagonal table with the axis-parallel one, and a note."""
-    from sphere_sim.lookup_table import CombinedKickPlant, LookupTable
+    from sphere_sim.kicks.lookup_table import CombinedKickPlant, LookupTable
 
     axis = LookupTable.load_current(axis_path)
     return CombinedKickPlant([table, axis]), f'eight directions: {axis_path} added'
@@ -81,7 +81,7 @@ def run(args):
     config = EvaluationConfig.quick() if args.quick else EvaluationConfig()
     table = None
     if args.plant is PlantChoice.TABLE:
-        from sphere_sim.lookup_table import TableError
+        from sphere_sim.kicks.lookup_table import TableError
 
         try:
             table, note = load_table(args.table)

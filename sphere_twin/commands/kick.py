@@ -2,8 +2,9 @@
 
 import json
 
-from sphere_sim.runs import DEFAULT_RTOL, run_scene, summarize
-from sphere_sim.scene import load_scene
+from sphere_sim.model.scene import load_scene
+from sphere_sim.studies.runs import DEFAULT_RTOL, run_scene, summarize
+from sphere_twin.commands.options import add_params_option
 
 
 def register(subparsers):
@@ -13,8 +14,8 @@ def register(subparsers):
                     'for its duration and print the final Cardan angles (deg), surface normal '
                     'and rotation.')
     parser.add_argument('scene', help='scene name (see sphere_sim/scenes) or path to a YAML file')
-    parser.add_argument('--params',
-                        help='parameter set overriding the scene (table_a1, calibrated)')
+    add_params_option(parser, default=None,
+                      help="parameter set (name or YAML file) instead of the scene's own")
     parser.add_argument('--rtol', type=float, default=DEFAULT_RTOL, help='relative tolerance')
     parser.add_argument('--json', action='store_true', help='print the outcome as JSON')
     parser.set_defaults(func=run)
@@ -22,9 +23,8 @@ def register(subparsers):
 
 def run(args):
     scene = load_scene(args.scene)
-    if args.params:
-        scene = scene.replace(parameter_set=args.params)
-    outcome = summarize(run_scene(scene, rtol=args.rtol))
+    params = scene.parameters(args.params) if args.params is not None else None
+    outcome = summarize(run_scene(scene, params, rtol=args.rtol))
     if args.json:
         print(json.dumps(outcome.to_dict(), indent=2))
         return 0

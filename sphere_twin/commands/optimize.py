@@ -6,10 +6,10 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from sphere_sim.calibration import TARGET_KICK_DEG
-from sphere_sim.kick_optimization import optimise_kick
-from sphere_sim.kicks import KickDesign
-from sphere_sim.parameters import load_parameter_set
+from sphere_sim.kicks.calibration import TARGET_KICK_DEG
+from sphere_sim.kicks.design import KickDesign
+from sphere_sim.kicks.optimization import optimise_kick
+from sphere_twin.commands.options import add_params_option
 
 DEFAULT_OUTPUT = 'bench/results/kick_optimization.json'
 AXIS_OUTPUT = 'bench/results/kick_optimization_axis.json'
@@ -30,7 +30,7 @@ def register(subparsers):
                     'evolution, seeded, with parallel workers; writes the result as JSON.')
     parser.add_argument('--kick', choices=sorted(TEMPLATES), default='diagonal',
                         help='diagonal (hind-left, towards -45 deg) or axis (towards +x)')
-    parser.add_argument('--params', default='calibrated', help='parameter set')
+    add_params_option(parser)
     parser.add_argument('--seed', type=int, default=1)
     parser.add_argument('--popsize', type=int, default=8, help='population per parameter')
     parser.add_argument('--maxiter', type=int, default=12, help='generations')
@@ -50,9 +50,9 @@ def run(args):
                              popsize=args.popsize, maxiter=args.maxiter, workers=args.workers,
                              progress=progress)
     data = best.to_dict()
-    data['parameter_set'] = args.params
+    data['parameter_set'] = args.params.name
     # Which values the design was optimised for: a later recalibration makes it stale.
-    data['parameter_digest'] = load_parameter_set(args.params).digest()
+    data['parameter_digest'] = args.params.digest()
     path = Path(args.output or (AXIS_OUTPUT if args.kick == 'axis' else DEFAULT_OUTPUT))
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(data, indent=2) + '\n')

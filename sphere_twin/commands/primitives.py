@@ -7,13 +7,14 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from sphere_sim.kick_characteristics import (
+from sphere_sim.kicks.characteristics import (
     OFFSET_DIRECTION_TOL_RAD,
     rotation_width_curves,
     voltage_offsets,
 )
-from sphere_sim.kicks import KickDesign
+from sphere_sim.kicks.design import KickDesign
 from sphere_twin.commands.optimize import DEFAULT_OUTPUT as DEFAULT_DESIGN
+from sphere_twin.commands.options import add_params_option
 
 RESULTS = Path('bench/results')
 
@@ -35,7 +36,7 @@ def register(subparsers):
     offsets.add_argument('--grid-step', type=float, default=0.16, help='step in x_sn and y_sn')
     offsets.add_argument('--workers', type=int, default=2, help='local processes')
     for p in (width, offsets):
-        p.add_argument('--params', default='calibrated', help='parameter set')
+        add_params_option(p)
         p.add_argument('--design', default=DEFAULT_DESIGN,
                        help='kick optimisation JSON whose design to use')
         p.add_argument('--out', default=str(RESULTS), help='output directory')
@@ -59,7 +60,7 @@ def run_width(args):
                [f'alpha = {c.alpha_deg:.0f} deg' for c in curves], 'intensity $u_K$',
                'rotation width (deg)', png,
                title='Rotation width of the optimised kick, cf. Fig. 10')
-    data = {'parameter_set': args.params, 'design': design.to_dict(),
+    data = {'parameter_set': args.params.name, 'design': design.to_dict(),
             'curves': [{'alpha_deg': c.alpha_deg, 'intensities': c.intensities.tolist(),
                         'width_deg': np.degrees(c.width_rad).tolist(),
                         'direction_deg': np.degrees(c.direction_rad).tolist()}
@@ -80,13 +81,13 @@ def run_offsets(args):
 
     design = KickDesign.load(args.design)
     with tqdm(desc='states', unit='state') as bar:
-        solutions = voltage_offsets(design, args.grid_step, parameter_set=args.params,
+        solutions = voltage_offsets(design, args.grid_step, params=args.params,
                                     workers=args.workers, progress=bar.update)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     png = plot_offsets(solutions, out / 'voltage_offsets.png')
     (out / 'voltage_offsets.json').write_text(json.dumps(
-        {'parameter_set': args.params, 'design': design.to_dict(),
+        {'parameter_set': args.params.name, 'design': design.to_dict(),
          'direction_tolerance_deg': math.degrees(OFFSET_DIRECTION_TOL_RAD),
          'states': [s.__dict__ for s in solutions]}, indent=2) + '\n')
     before = np.degrees([abs(s.direction_error_without_rad) for s in solutions])

@@ -5,10 +5,11 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from sphere_sim.initial_state import rest_state
-from sphere_sim.model import assemble
-from sphere_sim.pullin import dynamic_threshold, pulse_sweep, quasi_static_threshold
-from sphere_sim.scene import load_scene
+from sphere_sim.model.assembly import assemble
+from sphere_sim.model.initial_state import rest_state
+from sphere_sim.model.scene import load_scene
+from sphere_sim.studies.pullin import dynamic_threshold, pulse_sweep, quasi_static_threshold
+from sphere_twin.commands.options import add_params_option
 from sphere_twin.plots import plot_pulse_sweep
 
 SWEEP_V = (30.0, 35.0, 40.0, 45.0, 50.0, 55.0, 60.0, 65.0, 70.0)  # Fig. 4's range
@@ -20,7 +21,7 @@ def register(subparsers):
         description='Bisection to 0.1 V on the amplitude of a 5 ms pulse on all four beams that '
                     'pulls the beams in, beside the quasi-static estimate of the same model, and '
                     'a Fig. 4-like PNG of the 30-70 V sweep.')
-    parser.add_argument('--params', default='calibrated', help='parameter set (default calibrated)')
+    add_params_option(parser)
     parser.add_argument('--no-sphere', action='store_true', help='beams alone')
     parser.add_argument('--plot', default=None,
                         help='PNG path (default bench/results/fig4_pullin_<params>.png)')
@@ -29,19 +30,18 @@ def register(subparsers):
 
 
 def run(args):
-    scene = load_scene('four_beam_pulse').replace(parameter_set=args.params,
-                                                  sphere=not args.no_sphere)
-    model = assemble(scene)
+    scene = load_scene('four_beam_pulse').replace(sphere=not args.no_sphere)
+    model = assemble(scene, args.params)
     x_rest = rest_state(model)
     with tqdm(desc='bisection', unit='run', leave=False) as bar:
         dynamic, runs = dynamic_threshold(model, x_rest, progress=lambda lo, hi: bar.update())
     static = quasi_static_threshold(model, x_rest)
-    print(f'parameters: {args.params}; sphere: {"off" if args.no_sphere else "on"}')
+    print(f'parameters: {args.params.name}; sphere: {"off" if args.no_sphere else "on"}')
     print(f'dynamic threshold (5 ms pulse, {runs} runs): {dynamic:.2f} V')
     print(f'quasi-static threshold (end of the static branch): {static:.2f} V '
           f'({100 * (dynamic - static) / static:+.1f} %)')
     if not args.no_plot:
-        path = Path(args.plot or f'bench/results/fig4_pullin_{args.params}.png')
+        path = Path(args.plot or f'bench/results/fig4_pullin_{args.params.name}.png')
         path.parent.mkdir(parents=True, exist_ok=True)
         with tqdm(total=len(SWEEP_V), desc='Fig. 4 sweep', unit='pulse', leave=False) as bar:
             trajs = pulse_sweep(model, x_rest, SWEEP_V, progress=lambda v: bar.update())

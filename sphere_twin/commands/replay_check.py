@@ -4,7 +4,9 @@ import json
 import math
 from pathlib import Path
 
+from msg_defs.device import KICK_WINDOW_S
 from sphere_twin.bag.reader import BagError
+from sphere_twin.commands.options import add_params_option
 
 
 def register(subparsers):
@@ -18,36 +20,34 @@ def register(subparsers):
     parser.add_argument('--plant', choices=('discrete', 'continuous'), default='discrete')
     parser.add_argument('--tables', nargs='*', default=[],
                         help='kick tables of the discrete plant (default: the shipped one)')
-    parser.add_argument('--params', default='calibrated', help='parameter set')
+    add_params_option(parser)
     parser.add_argument('--out', type=Path, default=None,
                         help='output directory (default: beside the bag)')
     parser.set_defaults(func=run)
 
 
-def build_replay_plant(kind, normal0, time0_s, tables=(), parameter_set='calibrated'):
-    """A plant resting at ``normal0`` at ``time0_s``."""
-    from sphere_sim.kicks import cardan_of_normal
-    from sphere_sim.plants import ContinuousPlant, DiscretePlant
-    from sphere_sim.scene import load_scene
+def build_replay_plant(kind, normal0, time0_s, params, tables=()):
+    """A plant of parameter set ``params`` resting at ``normal0`` at ``time0_s``."""
+    from sphere_sim.kicks.design import cardan_of_normal
+    from sphere_sim.model.scene import load_scene
+    from sphere_sim.twin.plants import ContinuousPlant, DiscretePlant
 
-    scene = load_scene('rest').replace(parameter_set=parameter_set)
     if kind == 'discrete':
-        from sphere_sim.twin_setup import load_kick_model
+        from sphere_sim.twin.plant_setup import load_kick_model
 
-        kicks = load_kick_model(tables, scene.parameters())
+        kicks = load_kick_model(tables, params)
         plant = DiscretePlant(kicks, normal0, kicks.spec.window_s)
     else:
-        from sphere_sim.initial_state import rest_state
-        from sphere_sim.model import assemble
+        from sphere_sim.model.assembly import assemble
+        from sphere_sim.model.initial_state import rest_state
 
-        model = assemble(scene)
+        model = assemble(load_scene('rest'), params)
         plant = ContinuousPlant(model, rest_state(model, cardan_of_normal(normal0)))
     plant.time_s = time0_s
     return plant
 
 
 def run(args):
-    from sphere_sim.kicks import KICK_WINDOW_S
     from sphere_twin.plots import plot_lines
     from sphere_twin.run_analysis import load_run, replay, replay_start_index
 
@@ -61,7 +61,7 @@ def run(args):
         print('error: the recording ends before a kick that began before it settles')
         return 1
     plant = build_replay_plant(args.plant, recorded.normals[start],
-                               float(recorded.normal_t_s[start]), args.tables, args.params)
+                               float(recorded.normal_t_s[start]), args.params, args.tables)
     result = replay(recorded, plant, start)
     out = args.out or args.bag.parent
     out.mkdir(parents=True, exist_ok=True)

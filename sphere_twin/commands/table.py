@@ -7,10 +7,11 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from sphere_sim.kicks import KickDesign
-from sphere_sim.lookup_table import DEFAULT_TABLE_PATH, LookupTable, TableSpec
-from sphere_sim.table_build import build_table, check_table
+from sphere_sim.kicks.design import KickDesign
+from sphere_sim.kicks.lookup_table import DEFAULT_TABLE_PATH, LookupTable, TableSpec
+from sphere_sim.kicks.table_build import build_table, check_table
 from sphere_twin.commands.optimize import DEFAULT_OUTPUT as DEFAULT_DESIGN
+from sphere_twin.commands.options import add_params_option
 
 
 def register(subparsers):
@@ -22,7 +23,7 @@ def register(subparsers):
                            description='Simulate every grid kick with a process pool or Dask; '
                                        'an interrupted build resumes from its partial file.')
     build.add_argument('--output', default=str(DEFAULT_TABLE_PATH), help='table .npz path')
-    build.add_argument('--params', default='calibrated', help='parameter set')
+    add_params_option(build)
     build.add_argument('--grid-step', type=float, default=TableSpec.grid_step,
                        help='grid step in x_sn and y_sn')
     build.add_argument('--intensities', type=float, nargs='+',
@@ -45,7 +46,7 @@ def register(subparsers):
 
 def run_build(args):
     spec = TableSpec(grid_step=args.grid_step, intensities=tuple(args.intensities),
-                     window_s=args.window_s, parameter_set=args.params)
+                     window_s=args.window_s, parameter_set=args.params.name)
     if args.design:
         spec = TableSpec(**{**spec.__dict__, 'design': KickDesign.load(args.design)})
     output = Path(args.output)
@@ -60,7 +61,7 @@ def run_build(args):
             bar.n = done
             bar.refresh()
 
-        table = build_table(spec, workers=args.workers, scheduler=args.scheduler,
+        table = build_table(spec, args.params, workers=args.workers, scheduler=args.scheduler,
                             partial_path=partial, progress=progress)
     wall_s = time.perf_counter() - started
     table.save(output)
@@ -68,7 +69,7 @@ def run_build(args):
     engine = f'Dask at {args.scheduler}' if args.scheduler else f'{args.workers} local workers'
     simulated = len(spec.nodes()) * len(spec.intensities) - first_done[0]
     print(f'wrote {output}: {len(spec.nodes())} states x {len(spec.intensities)} intensities, '
-          f'parameters {args.params} (digest {table.meta["params_digest"]})')
+          f'parameters {args.params.name} (digest {table.meta["params_digest"]})')
     print(f'{simulated} kicks simulated in {wall_s:.1f} s with {engine} '
           f'({simulated / wall_s:.2f} kicks/s)')
     return 0

@@ -2,7 +2,8 @@
 
 import math
 
-from sphere_sim import validation
+from sphere_sim.studies import validation
+from sphere_twin.commands.options import add_params_option
 
 
 def register(subparsers):
@@ -10,8 +11,7 @@ def register(subparsers):
         'validate', help='print the rest, symmetry and energy figures of the physics model',
         description='Rest equilibrium (§4.1), symmetry of equal and mirrored pulses, and the '
                     'energy balance with and without losses; the same functions the tests use.')
-    parser.add_argument('--params', default='calibrated',
-                        help='parameter set (name or YAML file) of every figure')
+    add_params_option(parser)
     parser.set_defaults(func=run)
 
 
@@ -20,25 +20,25 @@ def run(args):
     on_edge = 'yes' if (rest.front_gaps_m < 0).all() else 'no'
     front_nm = rest.front_gaps_m.min() * 1e9
     rear_um = rest.rear_gaps_m.min() * 1e6
-    print(f'rest ({args.params}): largest force imbalance {rest.force_imbalance:.2e} of the weight '
-          f'per tip; tips on the front edge: {on_edge} (front gap {front_nm:+.2f} nm, rear gap '
-          f'{rear_um:.2f} um)')
+    print(f'rest ({args.params.name}): largest force imbalance {rest.force_imbalance:.2e} of the '
+          f'weight per tip; tips on the front edge: {on_edge} (front gap {front_nm:+.2f} nm, '
+          f'rear gap {rear_um:.2f} um)')
     print(f'rest drift over {rest.duration_s:.0f} s: tilt {rest.tilt_drift_rad:.2e} rad, '
           f'position {rest.position_drift_m:.2e} m')
     params = args.params
-    tilt, lift = validation.symmetric_pulse_tilt(parameter_set=params)
+    tilt, lift = validation.symmetric_pulse_tilt(params=params)
     print(f'equal 50 V pulses: largest tilt {tilt:.2e} rad (sphere lifted {lift * 1e6:.1f} um)')
-    mismatch, excursion = validation.mirror_mismatch(parameter_set=params)
+    mismatch, excursion = validation.mirror_mismatch(params=params)
     print(f'mirrored programme: normals differ by {mismatch:.2e} (largest x-y excursion '
           f'{excursion:.2e})')
-    surplus, impacts = validation.lossless_drop(parameter_set=params)
+    surplus, impacts = validation.lossless_drop(params=params)
     print(f'lossless drop: {impacts} impacts, energy error {surplus:.2e} of m g h')
-    surplus, work = validation.lossless_pulse(parameter_set=params)
+    surplus, work = validation.lossless_pulse(params=params)
     print(f'lossless pulse: energy error {surplus:.2e} of the electrical work ({work:.3e} J)')
-    peak, final = validation.lossy_kick(parameter_set=params)
+    peak, final = validation.lossy_kick(params=params)
     print(f'kick with losses: energy surplus at most {peak:+.2e}, finally {final:+.2e} of the '
           'electrical work')
     for tilt_deg in (20.0, 35.0):
-        rate = validation.tilted_creep_rate(tilt_deg, parameter_set=params)
+        rate = validation.tilted_creep_rate(tilt_deg, params=params)
         print(f'tilted rest at {tilt_deg:.0f} deg creeps back at {math.degrees(rate):.2g} deg/s')
     return 0

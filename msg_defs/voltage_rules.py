@@ -1,0 +1,71 @@
+"""The rules a beam command obeys, written once: held voltages and zero-order-hold segments.
+
+The drivers are unipolar and limited (§4.1), a programme's segments start at 0 or later and
+increase, and its last segment switches every beam off (it holds for ever). Whoever lets a
+command in applies these: a sender before it goes on the wire (:mod:`msg_defs.conversions`),
+the twin where a command enters it (:class:`~sphere_sim.twin.runner.TwinRunner`, through
+:meth:`~sphere_sim.model.programme.PulseProgramme.from_segments`). No ROS here.
+"""
+
+import math
+
+import numpy as np
+
+from msg_defs.device import BEAM_COUNT, VOLTAGE_LIMIT_V
+
+
+class VoltageRuleError(ValueError):
+    """A beam command that breaks a rule; the message says which."""
+
+
+def check_voltages(voltages_v, limit_v=VOLTAGE_LIMIT_V, what='voltages'):
+    """``voltages_v`` as a float array of shape (BEAM_COUNT,) within [0, limit_v] V."""
+    if not (math.isfinite(limit_v) and limit_v > 0):
+        raise VoltageRuleError(f'voltage limit must be a positive number, got {limit_v}')
+    try:
+        volts = np.asarray(voltages_v, dtype=float)
+    except (TypeError, ValueError) as error:
+        raise VoltageRuleError(f'{what}: not numeric ({error})') from None
+    if volts.shape != (BEAM_COUNT,):
+        raise VoltageRuleError(f'{what}: expected shape ({BEAM_COUNT},), got {volts.shape}')
+    if not np.all(np.isfinite(volts)):
+        raise VoltageRuleError(f'{what}: values must be finite, got {volts.tolist()}')
+    # The electrostatic force goes with V^2, so a negative command is a sign error upstream,
+    # not a request.
+    if np.any(volts < 0.0):
+        raise VoltageRuleError(f'{what}: must be >= 0 V, got {volts.tolist()}')
+    worst = float(np.max(volts))
+    if worst > limit_v:
+        raise VoltageRuleError(f'{what}: |V| = {worst:g} V exceeds the limit {limit_v:g} V')
+    return volts
+
+
+def check_segments(times_s, voltages_v, limit_v=VOLTAGE_LIMIT_V):
+    """Zero-order-hold segments as arrays ``(times (n,), voltages (n, BEAM_COUNT))``.
+
+    Times are the segments' starts from the programme's start (s): finite, >= 0, strictly
+    increasing; each row obeys :func:`check_voltages`; the last row is all 0 V.
+    """
+    try:
+        times = np.asarray(times_s, dtype=float)
+    except (TypeError, ValueError) as error:
+        raise VoltageRuleError(f'pulse programme times: not numeric ({error})') from None
+    if times.ndim != 1 or times.size == 0:
+        raise VoltageRuleError(f'pulse programme: expected n >= 1 times, got shape {times.shape}')
+    if not np.all(np.isfinite(times)):
+        raise VoltageRuleError(f'pulse programme: times must be finite, got {times.tolist()}')
+    if times[0] < 0.0:
+        raise VoltageRuleError(f'pulse programme: times must be >= 0 s, got {times[0]:g} s')
+    if np.any(np.diff(times) <= 0.0):
+        raise VoltageRuleError(
+            f'pulse programme: times must increase strictly, got {times.tolist()}')
+    rows = list(voltages_v)
+    if len(rows) != times.size:
+        raise VoltageRuleError(
+            f'pulse programme: {times.size} times but {len(rows)} voltage rows')
+    volts = np.array([check_voltages(row, limit_v, f'pulse programme row {i}')
+                      for i, row in enumerate(rows)])
+    if np.any(volts[-1] != 0.0):
+        raise VoltageRuleError(
+            'pulse programme: the last point must switch every beam off (0 V)')
+    return times, volts

@@ -1,0 +1,249 @@
+"""Characteristics of a kick design: rotation width against intensity (Fig. 10) and the voltage
+offsets that keep a kick on its nominal direction from tilted states (Fig. 8).
+
+Both measure the *kick effect*: the resting normal's displacement over the kick window. The
+contacts' friction holds a resting sphere (docs/parameters.md, "Friction that holds"), so the
+displacement is the kick's alone: there is no drift to subtract.
+"""
+
+import concurrent.futures
+import dataclasses
+import itertools
+import math
+
+import numpy as np
+
+from msg_defs.device import KICK_WINDOW_S
+from sphere_sim.kicks.design import KickDesign, cardan_of_normal, simulate_kick
+from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD, normal_from_cardan, normal_from_xy
+from sphere_sim.model.assembly import assemble
+from sphere_sim.model.initial_state import rest_state
+from sphere_sim.model.scene import load_scene
+
+CHARACTERISTIC_RTOL = 1e-6
+# The offset search stops once the kick's direction is this close to the nominal one; below it
+# the direction is set by the interpolation of the table rather than by the offset.
+OFFSET_DIRECTION_TOL_RAD = math.radians(1.0)
+# Offsets scanned on the compensating beam before refining. The low pair sits at 35 V and the
+# threshold with the sphere on is near 42.6 V, so the scan is dense around +7.6 V.
+OFFSET_SCAN_V = (-20.0, -10.0, -5.0, 5.0, 7.5, 10.0, 20.0, 45.0)
+OFFSET_REFINEMENTS = 3
+
+
+@dataclasses.dataclass(frozen=True)
+class KickEffect:
+    """The kick's own displacement of the resting normal.
+
+    Attributes
+    ----------
+    displacement : ndarray, shape (2,)
+        x-y displacement of the unit normal over the kick window.
+    """
+
+    displacement: np.ndarray
+
+    @property
+    def width_rad(self):
+        """Rotation width: the length of the displacement (small-angle, rad)."""
+        return float(np.hypot(*self.displacement))
+
+    @property
+    def direction_rad(self):
+        return float(math.atan2(self.displacement[1], self.displacement[0]))
+
+
+class KickBench:
+    """A model and cached rest states for many kicks of one parameter set (one per process).
+
+    ``params`` is a :class:`~sphere_sim.model.parameters.ParameterSet`, None for the default.
+    """
+
+    def __init__(self, params=None, window_s=KICK_WINDOW_S, rtol=CHARACTERISTIC_RTOL):
+        self.model = assemble(load_scene('rest'), params)
+        self.window_s = window_s
+        self.rtol = rtol
+        self._rest = {}
+
+    def rest(self, normal):
+        key = tuple(np.round(normal, 12))
+        if key not in self._rest:
+            self._rest[key] = rest_state(self.model, cardan_of_normal(normal))
+        return self._rest[key]
+
+    def final_normal(self, normal, programme):
+        result, _ = simulate_kick(self.model, normal, programme, window_s=self.window_s,
+                                  rtol=self.rtol, x_rest=self.rest(normal))
+        return result.normal
+
+    def effect(self, normal, design, intensity, offset_v=0.0, offset_beam=None):
+        """The :class:`KickEffect` of ``design`` at ``intensity`` from rest at ``normal``."""
+        moved = self.final_normal(normal, design.programme(intensity, offset_v, offset_beam))
+        return KickEffect(moved[:2] - normal[:2])
+
+
+@dataclasses.dataclass(frozen=True)
+class WidthCurve:
+    """Rotation width (rad) over intensities for one initial tilt."""
+
+    alpha_deg: float
+    intensities: np.ndarray
+    width_rad: np.ndarray
+    direction_rad: np.ndarray
+
+
+def rotation_width_curves(design=None, alphas_deg=(0.0, 20.0, 35.0), intensities=None,
+                          params=None, progress=None):
+    """Fig. 10: rotation width against u_K for initial tilts alpha (about x).
+
+    Returns
+    -------
+    list of WidthCurve
+    """
+    design = KickDesign() if design is None else design
+    intensities = np.linspace(0.0, 1.0, 11) if intensities is None else np.asarray(intensities)
+    bench = KickBench(params)
+    curves = []
+    for alpha in alphas_deg:
+        normal = normal_from_cardan(alpha)
+        effects = []
+        for u in intensities:
+            effects.append(bench.effect(normal, design, float(u)))
+            if progress is not None:
+                progress()
+        curves.append(WidthCurve(float(alpha), intensities,
+                                 np.array([e.width_rad for e in effects]),
+                                 np.array([e.direction_rad for e in effects])))
+    return curves
+
+
+def compensating_beam(design, normal):
+    """The low beam that takes the offset: the first in the upper-right half-space of the kick
+    line (through the origin along the kick direction), the second in the other half (§4.1)."""
+    d = design.direction_rad
+    # Left of the kick direction is the half-space the paper calls upper right for d = -45 deg.
+    side = -math.sin(d) * normal[0] + math.cos(d) * normal[1]
+    return design.low_beams[0] if side >= 0.0 else design.low_beams[1]
+
+
+def direction_error(effect, design):
+    return math.remainder(effect.direction_rad - design.direction_rad, 2.0 * math.pi)
+
+
+@dataclasses.dataclass(frozen=True)
+class OffsetSolution:
+    x_sn: float
+    y_sn: float
+    beam: int
+    offset_v: float
+    direction_error_rad: float  # remaining after the search
+    direction_error_without_rad: float
+    width_rad: float
+    evaluations: int  # kicks simulated by the search
+
+
+def find_offset(error_of_offset, candidates_v, tol_rad=OFFSET_DIRECTION_TOL_RAD,
+                refinements=OFFSET_REFINEMENTS):
+    """Offset whose kick goes closest to the nominal direction: a scan, then regula falsi.
+
+    The error is not monotone in the offset (an offset above the pull-in threshold turns the
+    low beam into a kicking one), so a scan over ``candidates_v`` finds the sign changes first;
+    the bracket around the best scanned point is then refined.
+
+    Parameters
+    ----------
+    error_of_offset : callable
+        Offset (V) -> signed direction error (rad), in (-pi, pi].
+    candidates_v : sequence of float
+        Offsets to scan; 0 is always included.
+
+    Returns
+    -------
+    (offset_v, error_rad, evaluations)
+    """
+    points = [(v, error_of_offset(v)) for v in sorted({0.0, *map(float, candidates_v)})]
+    evaluations = len(points)
+    best = min(points, key=lambda p: abs(p[1]))
+    brackets = [(a, b) for a, b in itertools.pairwise(points)
+                if a[1] * b[1] < 0.0 and abs(a[1] - b[1]) < math.pi]  # not a wrap at +-pi
+    if abs(best[1]) <= tol_rad or not brackets:
+        return best[0], best[1], evaluations
+    (va, ea), (vb, eb) = min(brackets, key=lambda ab: min(abs(ab[0][1]), abs(ab[1][1])))
+    for _ in range(refinements):
+        v = vb - eb * (vb - va) / (eb - ea)
+        e = error_of_offset(v)
+        evaluations += 1
+        best = min(best, (v, e), key=lambda p: abs(p[1]))
+        if abs(e) <= tol_rad:
+            break
+        if e * ea < 0.0:
+            vb, eb = v, e
+        else:
+            va, ea = v, e
+    return best[0], best[1], evaluations
+
+
+def _offset_job(args):
+    params, design, intensity, x_sn, y_sn = args
+    bench = _bench(params)
+    normal = normal_from_xy(x_sn, y_sn)
+    beam = compensating_beam(design, normal)
+    high = design.voltage_limit_v - design.low_v
+    candidates = [v for v in OFFSET_SCAN_V if -design.low_v <= v <= high]
+
+    effects = {}
+
+    def effect(offset_v):
+        if offset_v not in effects:
+            effects[offset_v] = bench.effect(normal, design, intensity, offset_v, beam)
+        return effects[offset_v]
+
+    def error(offset_v):
+        return direction_error(effect(offset_v), design)
+
+    error_at_zero = error(0.0)
+    offset_v, residual, evaluations = find_offset(error, candidates)
+    return OffsetSolution(x_sn, y_sn, beam, offset_v, residual, error_at_zero,
+                          effect(offset_v).width_rad, evaluations)
+
+
+_BENCHES = {}
+
+
+def _bench(params):
+    if params not in _BENCHES:
+        _BENCHES[params] = KickBench(params)
+    return _BENCHES[params]
+
+
+def offset_grid(grid_step, cone_half_angle_rad):
+    """(x_sn, y_sn) nodes inside the cone."""
+    half = math.floor(math.sin(cone_half_angle_rad) / grid_step)
+    axis = grid_step * np.arange(-half, half + 1)
+    return [(float(x), float(y)) for x in axis for y in axis
+            if math.hypot(x, y) <= math.sin(cone_half_angle_rad) + 1e-12]
+
+
+def voltage_offsets(design=None, grid_step=0.16, cone_half_angle_rad=CONE_HALF_ANGLE_RAD,
+                    intensity=1.0, params=None, workers=1, progress=None):
+    """Fig. 8: the offset on the compensating beam for every grid state.
+
+    Returns
+    -------
+    list of OffsetSolution
+    """
+    design = KickDesign() if design is None else design
+    jobs = [(params, design, intensity, x, y)
+            for x, y in offset_grid(grid_step, cone_half_angle_rad)]
+    out = []
+    if workers > 1:
+        with concurrent.futures.ProcessPoolExecutor(max_workers=workers) as pool:
+            for solution in pool.map(_offset_job, jobs):
+                out.append(solution)
+                if progress is not None:
+                    progress()
+    else:
+        for job in jobs:
+            out.append(_offset_job(job))
+            if progress is not None:
+                progress()
+    return out

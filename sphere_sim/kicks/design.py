@@ -1,0 +1,131 @@
+"""Kicks as motion primitives: a pulse design, its intensity scaling, and one simulated kick.
+
+The reference design is the paper's hind-left kick (§4.1): ``low_v`` on beams 1-2 and
+``high_v`` on beams 3-4, rectangular, with free widths and a delay between the two rising edges.
+The intensity u_K in [0, 1] scales the high pair from ``low_v`` (no kick: the same voltage on
+all beams stays below pull-in) to ``high_v`` (§4.2, Fig. 10). The other kick directions are
+images of a design under the device's symmetry (``sphere_sim.model.symmetry``).
+"""
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from msg_defs.device import KICK_WINDOW_S, VOLTAGE_LIMIT_V
+from sphere_sim.integrate.solve import simulate
+from sphere_sim.kicks.discrete import KickResult, angle_between
+from sphere_sim.model.initial_state import rest_state
+from sphere_sim.model.programme import Pulse, PulseProgramme
+
+SETTLE_BAND_RAD = math.radians(0.005)  # "settled": within 0.005 deg of the final normal
+KICK_SAMPLE_PERIOD_S = 2e-4
+
+
+@dataclasses.dataclass(frozen=True)
+class KickDesign:
+    """Pulse parameters of one kick in its reference direction.
+
+    Attributes
+    ----------
+    direction_rad : float
+        Nominal polar angle of the normal's displacement (the hind-left kick: -45 deg).
+    low_beams, high_beams : tuple of int
+        The hind-left kick drives the hind-left pair (beams 1-2) high: with tips that stick,
+        the high pair lifts its side of the sphere and the face tilts away from it, towards
+        the front right (docs/parameters.md, "Friction that holds").
+    low_v, high_v : float
+        Amplitudes (V) at full intensity.
+    width_low_s, width_high_s : float
+    delay_s : float
+        Rising edge of the high pair minus that of the low pair (either sign).
+    """
+
+    direction_rad: float = math.radians(-45.0)
+    low_beams: tuple = (3, 4)
+    high_beams: tuple = (1, 2)
+    low_v: float = 35.0
+    high_v: float = VOLTAGE_LIMIT_V
+    width_low_s: float = 4e-3
+    width_high_s: float = 4e-3
+    delay_s: float = -2e-3
+    voltage_limit_v: float = VOLTAGE_LIMIT_V
+
+    def programme(self, intensity=1.0, offset_v=0.0, offset_beam=None):
+        """The pulse programme at intensity u_K with an optional offset on one beam.
+
+        Raises
+        ------
+        ValueError
+            For an intensity outside [0, 1]; ProgrammeError for voltages above the limit.
+        """
+        if not 0.0 <= intensity <= 1.0 or not math.isfinite(intensity):
+            raise ValueError(f'intensity must lie in [0, 1], got {intensity}')
+        start_low = max(0.0, -self.delay_s)
+        start_high = max(0.0, self.delay_s)
+        high = self.low_v + intensity * (self.high_v - self.low_v)
+        pulses = []
+        for beam in self.low_beams:
+            amp = self.low_v + (offset_v if beam == offset_beam else 0.0)
+            pulses.append(Pulse(beam, amp, start_low, self.width_low_s))
+        for beam in self.high_beams:
+            amp = high + (offset_v if beam == offset_beam else 0.0)
+            pulses.append(Pulse(beam, amp, start_high, self.width_high_s))
+        return PulseProgramme(tuple(p for p in pulses if p.amplitude_v != 0.0),
+                              self.voltage_limit_v)
+
+    def to_dict(self):
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def load(cls, path):
+        """The design saved by ``sphere-twin optimize-kick`` (its JSON's ``design``)."""
+        data = dict(json.loads(Path(path).read_text())['design'])
+        data.pop('direction_deg', None)
+        data['low_beams'] = tuple(data['low_beams'])
+        data['high_beams'] = tuple(data['high_beams'])
+        return cls(**data)
+
+
+def cardan_of_normal(normal):
+    """(alpha, beta, 0) in degrees whose surface normal (eq. 53) is ``normal``."""
+    nx, ny, nz = normal
+    beta = math.asin(max(-1.0, min(1.0, nx)))
+    alpha = math.atan2(-ny, nz)
+    return (math.degrees(alpha), math.degrees(beta), 0.0)
+
+
+def simulate_kick(model, normal, programme, window_s=KICK_WINDOW_S, rtol=1e-6, x_rest=None,
+                  method='fast'):
+    """One kick from rest at ``normal``; returns the KickResult and the trajectory.
+
+    Parameters
+    ----------
+    model : Model
+        With sphere and all four beams.
+    normal : ndarray, shape (3,)
+        Resting surface normal before the kick.
+    programme : PulseProgramme
+    window_s : float
+        The outcome is the normal at the end of this window.
+    x_rest : ndarray, optional
+        A precomputed rest state for ``normal``.
+    """
+    if x_rest is None:
+        x_rest = rest_state(model, cardan_of_normal(normal))
+    traj = simulate(model, x_rest, window_s, programme, rtol=rtol,
+                    sample_period_s=KICK_SAMPLE_PERIOD_S, method=method)
+    normals = traj.surface_normal()
+    final = normals[:, -1]
+    deviation = np.array([angle_between(n, final) for n in normals.T])
+    outside = np.flatnonzero(deviation > SETTLE_BAND_RAD)
+    settle = float(traj.t[outside[-1] + 1] if outside.size else traj.t[0])
+    return KickResult(final, float(np.max(deviation)), settle), traj
+
+
+def displacement(normal_before, normal_after):
+    """(rotation angle in rad, polar direction in rad) of the normal's x-y displacement."""
+    d = np.asarray(normal_after[:2]) - np.asarray(normal_before[:2])
+    return angle_between(normal_before, normal_after), math.atan2(d[1], d[0])

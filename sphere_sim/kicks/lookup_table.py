@@ -1,0 +1,258 @@
+"""The discrete model x_{t+1} = f(x_t, a_t, u_K) as a lookup table over the kick's outcomes (§5).
+
+The table holds, for the reference kick (the hind-left design) at resting normals on a grid of
+(x_sn, y_sn) inside the cone and intensities u_K, the normal's displacement at the end of the
+kick window, the transient peak and the settling time; it is linearly interpolated. Other kick
+directions and the other half of the cone are images under the device's symmetry (Fig. 7): the
+grid covers only y_sn >= -x_sn (plus one band of nodes beyond it, for interpolation).
+
+A table is a ``.npz`` file carrying its format version and the digests of the parameter set and
+of the kick it was built from; loading it for other parameters is refused.
+"""
+
+import dataclasses
+import hashlib
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+from scipy.interpolate import RegularGridInterpolator
+
+from msg_defs.device import DEFAULT_PARAMETER_SET, KICK_WINDOW_S
+from sphere_sim.kicks.design import KickDesign
+from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD, KickResult
+from sphere_sim.model.parameters import load_parameter_set
+from sphere_sim.model.symmetry import Symmetry, kick_axis_mirror
+
+TABLE_FORMAT_VERSION = 1
+DEFAULT_TABLE_PATH = Path(__file__).parents[1] / 'tables' / 'default_kick_table.npz'
+# The axis-parallel kick's table: with the default one, the eight directions of §6.
+AXIS_TABLE_PATH = Path(__file__).parents[1] / 'tables' / 'axis_kick_table.npz'
+CONE_MARGIN = 1.05  # nodes slightly beyond the cone keep interpolation inside it linear
+
+
+class TableError(ValueError):
+    """A table file that is missing, malformed, of another version or for other parameters."""
+
+
+@dataclasses.dataclass(frozen=True)
+class TableSpec:
+    """What a table is built from: grid, intensities, kick design, window and parameters."""
+
+    # About 4.6 deg. With 0.12 and six intensities the check found 0.067 deg against direct
+    # simulation, most of it along u_K, where the pull-in threshold bends the outcome.
+    grid_step: float = 0.08
+    # Denser towards full intensity, where the optimised kicks' width rises steeply and smoothly
+    # (0.12 deg at u_K = 0.9, 0.73 deg at 1; docs/motion_primitives.md): a uniform 0.1 step
+    # left 0.14 deg of interpolation error there, 0.01 steps leave about 1e-3 deg.
+    intensities: tuple = (0.0, 0.2, 0.4, 0.5, 0.6, 0.65, 0.7, 0.75, 0.8, 0.84, 0.87, 0.9, 0.92,
+                          0.94, 0.95, 0.96, 0.97, 0.98, 0.99, 1.0)
+    window_s: float = KICK_WINDOW_S
+    rtol: float = 1e-6
+    parameter_set: str = DEFAULT_PARAMETER_SET
+    design: KickDesign = dataclasses.field(default_factory=KickDesign)
+    cone_half_angle_rad: float = CONE_HALF_ANGLE_RAD
+
+    def axis(self):
+        """Grid nodes (shape (n,)) of x_sn and of y_sn, symmetric about 0."""
+        half = math.ceil(CONE_MARGIN * math.sin(self.cone_half_angle_rad) / self.grid_step)
+        return self.grid_step * np.arange(-half, half + 1)
+
+    def nodes(self):
+        """(i, j, x, y) of the nodes to simulate: within the cone and not deep below y = -x."""
+        axis = self.axis()
+        out = []
+        for i, x in enumerate(axis):
+            for j, y in enumerate(axis):
+                reach = CONE_MARGIN * math.sin(self.cone_half_angle_rad) + self.grid_step
+                in_cone = math.hypot(x, y) <= reach
+                if in_cone and self.side(x, y) >= -1.5 * self.grid_step:
+                    out.append((i, j, float(x), float(y)))
+        return out
+
+    def side(self, x, y):
+        """Signed distance of (x, y) from the kick's own axis, > 0 on the simulated side."""
+        d = self.design.direction_rad
+        return -math.sin(d) * x + math.cos(d) * y
+
+    def to_dict(self):
+        return json.loads(json.dumps(_jsonable(self)))
+
+    @classmethod
+    def from_dict(cls, data):
+        data = dict(data)
+        design = dict(data.pop('design'))
+        design['low_beams'] = tuple(design['low_beams'])
+        design['high_beams'] = tuple(design['high_beams'])
+        data['intensities'] = tuple(data['intensities'])
+        return cls(design=KickDesign(**design), **data)
+
+    def digest(self, params_digest):
+        text = json.dumps({'spec': _jsonable(self), 'params': params_digest}, sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _jsonable(obj):
+    if dataclasses.is_dataclass(obj):
+        return {k: _jsonable(v) for k, v in dataclasses.asdict(obj).items()}
+    if isinstance(obj, dict):
+        return {k: _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    return obj
+
+
+@dataclasses.dataclass(frozen=True)
+class LookupTable:
+    """A built table; implements the :class:`~sphere_sim.kicks.discrete.KickPlant` interface.
+
+    Attributes
+    ----------
+    axis : ndarray, shape (n,)
+    intensities : ndarray, shape (m,)
+    displacement : ndarray, shape (n, n, m, 2)
+        Normal's x-y displacement of the reference kick (NaN where not simulated).
+    peak_rad, settle_s : ndarray, shape (n, n, m)
+    meta : dict
+    """
+
+    axis: np.ndarray
+    intensities: np.ndarray
+    displacement: np.ndarray
+    peak_rad: np.ndarray
+    settle_s: np.ndarray
+    meta: dict
+
+    @property
+    def directions_rad(self):
+        """Nominal direction of each action: the design's kick and its quarter turns."""
+        d = self.spec.design.direction_rad
+        return tuple(d + q * 0.5 * math.pi for q in range(4))
+
+    def __post_init__(self):
+        spec = TableSpec.from_dict(self.meta['spec'])
+        object.__setattr__(self, '_spec', spec)
+        object.__setattr__(self, '_mirror', kick_axis_mirror(spec.design.direction_rad))
+        grid = (self.axis, self.axis, self.intensities)
+        values = np.concatenate([self.displacement, self.peak_rad[..., None],
+                                 self.settle_s[..., None]], axis=-1)
+        object.__setattr__(self, '_interp', RegularGridInterpolator(
+            grid, values, method='linear', bounds_error=False, fill_value=np.nan))
+
+    # --- the KickPlant interface -----------------------------------------------------------
+    def kick(self, normal, action, intensity):
+        """Interpolated outcome of kick ``action`` (0..3) at ``intensity`` from ``normal``."""
+        g = Symmetry(int(action) % 4)
+        local = g.inverse().apply_vector(normal)
+        mirror = self._spec.side(local[0], local[1]) < 0.0
+        if mirror:
+            local = self._mirror.apply_vector(local)
+        values = self._interp([[local[0], local[1], float(np.clip(intensity, 0.0, 1.0))]])[0]
+        if np.any(np.isnan(values)):
+            raise TableError(f'normal {np.round(normal, 4).tolist()} lies outside the table')
+        moved = np.array([local[0] + values[0], local[1] + values[1], 0.0])
+        moved[2] = math.sqrt(max(0.0, 1.0 - moved[0] ** 2 - moved[1] ** 2))
+        if mirror:
+            moved = self._mirror.apply_vector(moved)
+        return KickResult(g.apply_vector(moved), float(values[2]), float(values[3]))
+
+    def design(self, action):
+        """The kick design whose turned image ``action`` is."""
+        return self.spec.design
+
+    def programme(self, action, intensity):
+        """The pulse programme of kick ``action`` at ``intensity`` (the design turned)."""
+        return Symmetry(int(action) % 4).apply_programme(self.spec.design.programme(intensity))
+
+    # --- files -----------------------------------------------------------------------------
+    def save(self, path):
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(path, axis=self.axis, intensities=self.intensities,
+                            displacement=self.displacement, peak_rad=self.peak_rad,
+                            settle_s=self.settle_s, meta=json.dumps(self.meta, sort_keys=True))
+        return path
+
+    @classmethod
+    def load(cls, path=DEFAULT_TABLE_PATH, params=None):
+        """Load a table; with ``params`` given, refuse one built for other parameters."""
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                meta = json.loads(str(data['meta']))
+                arrays = {k: data[k] for k in ('axis', 'intensities', 'displacement', 'peak_rad',
+                                               'settle_s')}
+        except FileNotFoundError as exc:
+            raise TableError(f'no table at {path}; build one with `sphere-twin table build`') \
+                from exc
+        except (KeyError, ValueError, OSError) as exc:
+            raise TableError(f'{path} is not a sphere_twin kick table: {exc}') from exc
+        if meta.get('format_version') != TABLE_FORMAT_VERSION:
+            raise TableError(f'{path} has table format {meta.get("format_version")}, this '
+                             f'version reads {TABLE_FORMAT_VERSION}; rebuild it')
+        if params is not None and meta.get('params_digest') != params.digest():
+            raise TableError(
+                f'{path} was built for parameter set {meta.get("parameter_set")!r} (digest '
+                f'{meta.get("params_digest")}), not for {params.name!r} (digest '
+                f'{params.digest()}); rebuild it with `sphere-twin table build`')
+        return cls(meta=meta, **arrays)
+
+    @property
+    def spec(self):
+        """The :class:`TableSpec` the table was built from."""
+        return self._spec
+
+    def parameters(self):
+        """The parameter set the table names, refused if its values changed since the build."""
+        params = load_parameter_set(self.meta['parameter_set'])
+        if params.digest() != self.meta['params_digest']:
+            raise TableError(
+                f'the table was built for parameter set {params.name!r} with digest '
+                f'{self.meta["params_digest"]}; its values now give {params.digest()}: '
+                f'rebuild it with `sphere-twin table build`')
+        return params
+
+    @classmethod
+    def load_current(cls, path=DEFAULT_TABLE_PATH):
+        """Load a table and refuse it unless its parameter set still has the values it had."""
+        table = cls.load(path)
+        table.parameters()
+        return table
+
+
+class CombinedKickPlant:
+    """The actions of several tables as one action set, ordered by direction.
+
+    With the diagonal and the axis-parallel tables this is the eight-direction action set of
+    §6; it implements the same interface as :class:`LookupTable`.
+
+    Parameters
+    ----------
+    tables : sequence of LookupTable
+        Built for the same parameters and window.
+    """
+
+    def __init__(self, tables):
+        digests = {t.meta['params_digest'] for t in tables}
+        if len(digests) != 1:
+            raise TableError('the tables were built for different parameter sets')
+        entries = [(math.remainder(d, 2 * math.pi), table, a)
+                   for table in tables for a, d in enumerate(table.directions_rad)]
+        # Counter-clockwise from the hind-left kick's -45 deg, as DIAGONAL_/EIGHT_DIRECTIONS_RAD.
+        entries.sort(key=lambda e: round((e[0] + 0.25 * math.pi) % (2 * math.pi), 9))
+        self._entries = [(table, a) for _, table, a in entries]
+        self.directions_rad = tuple(d for d, _, _ in entries)
+        self.tables = tuple(tables)
+        self.spec = tables[0].spec
+
+    def kick(self, normal, action, intensity):
+        table, local = self._entries[action]
+        return table.kick(normal, local, intensity)
+
+    def design(self, action):
+        return self._entries[action][0].spec.design
+
+    def programme(self, action, intensity):
+        table, local = self._entries[action]
+        return table.programme(local, intensity)

@@ -1,0 +1,247 @@
+"""Building the kick lookup table: independent kicks, a local process pool or Dask.
+
+Every table entry is one simulated kick, independent of all others, computed by the pure
+function :func:`run_kick_job`; the result does not depend on the engine or the worker count.
+Finished entries are appended to a partial file as they arrive, so an interrupted build resumes
+where it stopped.
+"""
+
+import concurrent.futures
+import dataclasses
+import json
+import math
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from sphere_sim.kicks.design import cardan_of_normal, simulate_kick
+from sphere_sim.kicks.discrete import angle_between, normal_from_xy
+from sphere_sim.kicks.lookup_table import TABLE_FORMAT_VERSION, LookupTable, TableSpec
+from sphere_sim.model.assembly import assemble
+from sphere_sim.model.initial_state import rest_state
+from sphere_sim.model.parameters import load_parameter_set
+from sphere_sim.model.scene import load_scene
+from sphere_sim.model.symmetry import Symmetry
+
+
+@dataclasses.dataclass(frozen=True)
+class KickJob:
+    """One table entry: grid indices (i, j, k) and the state and intensity they stand for."""
+
+    i: int
+    j: int
+    k: int
+    x_sn: float
+    y_sn: float
+    intensity: float
+
+    @property
+    def key(self):
+        return (self.i, self.j, self.k)
+
+
+def jobs_of(spec):
+    return [KickJob(i, j, k, x, y, float(u)) for i, j, x, y in spec.nodes()
+            for k, u in enumerate(spec.intensities)]
+
+
+def spec_to_dict(spec):
+    return spec.to_dict()
+
+
+def spec_from_dict(data):
+    return TableSpec.from_dict(data)
+
+
+@lru_cache(maxsize=4)
+def _model(params):
+    return assemble(load_scene('rest'), params)
+
+
+@lru_cache(maxsize=256)
+def _rest(params, x_sn, y_sn):
+    model = _model(params)
+    return rest_state(model, cardan_of_normal(normal_from_xy(x_sn, y_sn)))
+
+
+# LAPACK's LU gives results that differ in the last bits with the BLAS thread count, and a kick
+# through contacts amplifies them to ~1e-9 rad; Dask workers default to one thread, a local
+# process to all cores. One thread everywhere makes a table bit-identical across engines.
+BLAS_THREADS_PER_KICK = 1
+
+
+def run_kick_job(spec_data, params, job):
+    """Simulate one entry; returns a JSON-able dict (pure: same inputs, same output)."""
+    with threadpool_limits(limits=BLAS_THREADS_PER_KICK):
+        return _run_kick_job(spec_data, params, job)
+
+
+def _run_kick_job(spec_data, params, job):
+    spec = spec_from_dict(spec_data)
+    model = _model(params)
+    normal = normal_from_xy(job.x_sn, job.y_sn)
+    result, _ = simulate_kick(model, normal, spec.design.programme(job.intensity),
+                              window_s=spec.window_s, rtol=spec.rtol,
+                              x_rest=_rest(params, job.x_sn, job.y_sn))
+    return {'key': list(job.key), 'dx': float(result.normal[0] - normal[0]),
+            'dy': float(result.normal[1] - normal[1]), 'peak_rad': result.peak_deviation_rad,
+            'settle_s': result.settle_time_s}
+
+
+def _read_partial(path, digest):
+    done = {}
+    if path is None or not Path(path).exists():
+        return done
+    with open(path) as stream:
+        header = json.loads(stream.readline() or '{}')
+        if header.get('digest') != digest:
+            return done  # built for something else: start afresh
+        for line in stream:
+            try:
+                entry = json.loads(line)
+            except json.JSONDecodeError:
+                break  # a line cut short by the interruption
+            done[tuple(entry['key'])] = entry
+    return done
+
+
+def run_kick_jobs(spec_data, params, jobs):
+    """The entries of several jobs, in order (one task: the jobs of one resting state)."""
+    return [run_kick_job(spec_data, params, job) for job in jobs]
+
+
+def _by_state(jobs):
+    """Jobs grouped by grid node: one task per resting state, whose rest state (the costly
+    relaxation) is then computed once, in one process."""
+    groups = {}
+    for job in jobs:
+        groups.setdefault((job.i, job.j), []).append(job)
+    return list(groups.values())
+
+
+def _engine_map(jobs, spec_data, params, workers, scheduler):
+    """Yield results as they complete, from Dask, a process pool or this process."""
+    groups = _by_state(jobs)
+    if scheduler is not None:
+        from distributed import Client, as_completed
+
+        with Client(scheduler) as client:
+            futures = client.map(run_kick_jobs, [spec_data] * len(groups),
+                                 [params] * len(groups), groups, pure=False)
+            for future in as_completed(futures):
+                yield from future.result()
+    elif workers > 1:
+        with concurrent.futures.ProcessPoolExecutor(max_workers=workers) as pool:
+            futures = [pool.submit(run_kick_jobs, spec_data, params, group) for group in groups]
+            for future in concurrent.futures.as_completed(futures):
+                yield from future.result()
+    else:
+        for group in groups:
+            yield from run_kick_jobs(spec_data, params, group)
+
+
+def build_table(spec, params=None, workers=1, scheduler=None, partial_path=None,
+                progress=None):
+    """Simulate every entry of ``spec`` (resuming from ``partial_path``) into a LookupTable.
+
+    Parameters
+    ----------
+    spec : TableSpec
+    params : ParameterSet, optional
+        The set named by ``spec.parameter_set`` unless given (the workers receive it whole).
+    workers : int
+        Local processes (ignored with ``scheduler``).
+    scheduler : str, optional
+        Address of a Dask scheduler, e.g. ``tcp://127.0.0.1:8786``.
+    partial_path : path, optional
+        File of finished entries, appended as they arrive.
+    progress : callable, optional
+        Called with the number of entries finished so far and the total.
+    """
+    params = load_parameter_set(spec.parameter_set) if params is None else params
+    digest = spec.digest(params.digest())
+    spec_data = spec_to_dict(spec)
+    jobs = jobs_of(spec)
+    done = _read_partial(partial_path, digest)
+    todo = [job for job in jobs if job.key not in done]
+    stream = None
+    if partial_path is not None:
+        fresh = not done
+        stream = open(partial_path, 'w' if fresh else 'a')  # noqa: SIM115 - closed below
+        if fresh:
+            stream.write(json.dumps({'digest': digest}) + '\n')
+    try:
+        if progress is not None:
+            progress(len(done), len(jobs))
+        for entry in _engine_map(todo, spec_data, params, workers, scheduler):
+            done[tuple(entry['key'])] = entry
+            if stream is not None:
+                stream.write(json.dumps(entry) + '\n')
+                stream.flush()
+            if progress is not None:
+                progress(len(done), len(jobs))
+    finally:
+        if stream is not None:
+            stream.close()
+    return _assemble(spec, params, digest, done)
+
+
+def _assemble(spec, params, digest, entries):
+    axis = spec.axis()
+    n, m = axis.size, len(spec.intensities)
+    displacement = np.full((n, n, m, 2), np.nan)
+    peak = np.full((n, n, m), np.nan)
+    settle = np.full((n, n, m), np.nan)
+    for (i, j, k), entry in entries.items():
+        displacement[i, j, k] = (entry['dx'], entry['dy'])
+        peak[i, j, k] = entry['peak_rad']
+        settle[i, j, k] = entry['settle_s']
+    meta = {'format_version': TABLE_FORMAT_VERSION, 'params_digest': params.digest(),
+            'parameter_set': params.name, 'table_digest': digest, 'spec': spec_to_dict(spec),
+            'reference_direction_deg': math.degrees(spec.design.direction_rad)}
+    return LookupTable(axis, np.array(spec.intensities, dtype=float), displacement, peak, settle,
+                       meta)
+
+
+def random_check_points(n_points, seed, cone_half_angle_rad, n_actions=4):
+    """Seeded random (normal, action, intensity) inside the cone."""
+    rng = np.random.default_rng(seed)
+    points = []
+    while len(points) < n_points:
+        x, y = rng.uniform(-1, 1, 2) * math.sin(cone_half_angle_rad)
+        if math.hypot(x, y) <= math.sin(cone_half_angle_rad):
+            points.append((normal_from_xy(float(x), float(y)), int(rng.integers(n_actions)),
+                           float(rng.uniform(0.0, 1.0))))
+    return points
+
+
+def direct_kick(spec, params, normal, action, intensity):
+    """The continuous model's outcome for the same kick the table interpolates."""
+    model = _model(params)
+    programme = Symmetry(action % 4).apply_programme(spec.design.programme(intensity))
+    with threadpool_limits(limits=BLAS_THREADS_PER_KICK):
+        x_rest = rest_state(model, cardan_of_normal(normal))
+        result, _ = simulate_kick(model, normal, programme, window_s=spec.window_s,
+                                  rtol=spec.rtol, x_rest=x_rest)
+    return result
+
+
+def check_table(table, n_points=8, seed=0, progress=None):
+    """Largest angle (rad) between interpolated and simulated final normals, and all errors.
+
+    The simulations use the parameter set the table names; a set whose values changed since
+    the build is refused (:meth:`LookupTable.load_current`'s rule).
+    """
+    spec = spec_from_dict(table.meta['spec'])
+    params = table.parameters()
+    errors = []
+    for normal, action, intensity in random_check_points(n_points, seed,
+                                                         spec.cone_half_angle_rad):
+        predicted = table.kick(normal, action, intensity).normal
+        simulated = direct_kick(spec, params, normal, action, intensity).normal
+        errors.append(angle_between(predicted, simulated))
+        if progress is not None:
+            progress(len(errors), n_points)
+    return max(errors), errors

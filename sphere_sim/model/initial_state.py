@@ -1,0 +1,275 @@
+"""Initial states: explicit values or static rest, found by Newton on the accelerations."""
+
+import dataclasses
+import math
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from sphere_sim.model.assembly import assemble
+from sphere_sim.model.rotations import cardan_to_quat, quat_to_matrix
+from sphere_sim.model.scaling import state_scale
+from sphere_sim.model.sphere_geometry import mass_properties
+
+REST_TOLERANCE = 1e-6  # largest force imbalance left at rest, relative to the weight per tip
+NEWTON_ITERATIONS = 40
+NEWTON_BACKTRACKS = 30
+NEWTON_FD_STEP = 1e-6  # in the scaled coordinates (um, mrad)
+RELAX_TIME_S = 0.06  # several decay times of the sphere's bounce on the tips
+REST_SCALE_Z_M = 1e-6  # Newton works on positions in um and angles in mrad
+REST_SCALE_PHI_RAD = 1e-3
+
+
+class RestError(RuntimeError):
+    """No static rest state was found."""
+
+
+def explicit_state(model, sphere_position_m=None):
+    """State from the scene's explicit values (zeros where not given), shape (n_states,)."""
+    init = model.scene.initial
+    n = model.n_beams
+    x = np.zeros(model.n_states)
+    if init.beam_z_m is not None:
+        x[0:2 * n:2] = init.beam_z_m
+    if init.beam_phi_rad is not None:
+        x[1:2 * n:2] = init.beam_phi_rad
+    if model.has_sphere:
+        o = model.sphere_offset
+        x[o + 3:o + 7] = cardan_to_quat(*np.radians(init.sphere_angles_deg))
+        position = sphere_position_m if sphere_position_m is not None else init.sphere_position_m
+        if position is None:
+            position = _touching_position(model, x)
+        x[o:o + 3] = position
+        x[o + 7:o + 10] = init.sphere_velocity_m_per_s
+        x[o + 10:o + 13] = init.sphere_omega_rad_per_s
+    return x
+
+
+def _touching_position(model, x):
+    """Centre of gravity of a sphere resting on undeflected tips at the origin's vertical."""
+    b, s = model.params.beam, model.params.sphere
+    tip_radius = b.suspension_radius_m - b.length_m
+    centre_z = math.sqrt(s.radius_m**2 - tip_radius**2)
+    R = quat_to_matrix(np.ascontiguousarray(x[model.sphere_offset + 3:model.sphere_offset + 7]))
+    return np.array([0.0, 0.0, centre_z]) - R[:, 2] * s.cog_offset_m
+
+
+def rest_state(model, sphere_angles_deg=None):
+    """Static equilibrium of beams and sphere position for a fixed sphere orientation.
+
+    The sphere is first let down onto the tips and relaxed by integrating the model with its
+    orientation held (the contact stiffness makes a cold Newton start diverge), then Newton's
+    method polishes the positions until the accelerations vanish. For a tilted sphere the
+    orientation stays as given: the remaining torque is what friction and the kicks act on.
+
+    Returns
+    -------
+    ndarray, shape (n_states,)
+        All rates zero.
+
+    Raises
+    ------
+    RestError
+        When no equilibrium is found.
+    """
+    x = explicit_state(model)
+    n = model.n_beams
+    if sphere_angles_deg is not None and model.has_sphere:
+        o = model.sphere_offset
+        x[o + 3:o + 7] = cardan_to_quat(*np.radians(sphere_angles_deg))
+        x[o:o + 3] = _touching_position(model, x)
+    return polish_equilibrium(model, _relax(_dissipative_twin(model), x), np.zeros(n))
+
+
+def _dissipative_twin(model):
+    """The same model with damping and contact losses on: same rest states, and it settles."""
+    effects = model.scene.effects
+    if effects.damping and effects.contact_losses:
+        return model
+    scene = model.scene.replace(effects=dataclasses.replace(effects, damping=True,
+                                                            contact_losses=True))
+    return assemble(scene, model.params, jit=model.jit)
+
+
+def polish_equilibrium(model, x, u):
+    """Newton on the positions of beams and sphere (orientation held) under voltages ``u``.
+
+    With friction bristles (the ``stiction`` reading) a second Newton follows from the first's
+    equilibrium with their deflections as unknowns too and the sphere's angular accelerations
+    in the residual: the bristles then hold whatever torque the tilted sphere's weight exerts
+    (the least-squares step picks the smallest deflections that do, since four tips can share
+    a torque in many ways); a level sphere needs none. A bristle that would have to pass its
+    static limit (|b| = delta) is left there instead, and the state returned is not at rest:
+    the friction cannot hold that tilt.
+
+    Raises
+    ------
+    RestError
+        When the largest force imbalance stays above ``REST_TOLERANCE`` of the weight per tip.
+    """
+    n = model.n_beams
+    free = list(range(2 * n))
+    if model.has_sphere:
+        free += [model.sphere_offset + i for i in range(3)]
+    free = np.array(free)
+    scale = np.where(free % 2 == 0, REST_SCALE_Z_M, REST_SCALE_PHI_RAD)
+    if model.has_sphere:
+        scale[-3:] = REST_SCALE_Z_M
+    accel_index = _acceleration_index(model, free)
+    force_scale = _generalised_masses(model, free) / _weight_per_tip_n(model)
+    x = np.array(x, dtype=float)
+    x[2 * n:4 * n] = 0.0
+    if model.has_sphere:
+        x[model.sphere_offset + 7:model.sphere_offset + 13] = 0.0
+    x = _polish(model, x, u, free, scale, accel_index, force_scale)
+    if model.has_bristles:
+        o, s = model.sphere_offset, model.params.sphere
+        bristles = np.arange(model.bristle_offset, model.n_states)
+        inertia = mass_properties(s.radius_m, s.cut_angle_rad, mass_kg=s.mass_kg).inertia_cog_kg_m2
+        free = np.concatenate([free, bristles])
+        scale = np.concatenate([scale, np.full(bristles.size, model.params.friction.presliding_m)])
+        x = _polish(model, x, u, free, scale, np.concatenate([accel_index, o + 10 + np.arange(3)]),
+                    np.concatenate([force_scale,
+                                    inertia / (s.radius_m * _weight_per_tip_n(model))]),
+                    limit=lambda v: _clip_to_static_limit(model, v, scale, free))
+    return x
+
+
+def _polish(model, x, u, free, scale, accel_index, force_scale, limit=None):
+    """``x`` with ``free`` moved by Newton until the accelerations at ``accel_index`` vanish.
+
+    ``limit(v)``, if given, bounds the solution in place and returns True when it had to: the
+    state is then returned out of balance, without the imbalance check.
+    """
+    x = x.copy()
+
+    def residual(v):
+        y = x.copy()
+        y[free] = v * scale
+        return model.rhs(0.0, y, u)[accel_index] * force_scale
+
+    v = _newton(residual, x[free] / scale)
+    res = np.max(np.abs(residual(v)))
+    if limit is not None and np.all(np.isfinite(v)) and limit(v):
+        res = 0.0  # friction cannot hold this tilt: the sphere slides from the state returned
+    if not np.all(np.isfinite(v)) or res > REST_TOLERANCE:
+        raise RestError(f'no equilibrium found: largest force imbalance {res:.3g} of the weight '
+                        'per tip')
+    x[free] = v * scale
+    return x
+
+
+def _clip_to_static_limit(model, v, scale, free):
+    """Shorten, in ``v``, any bristle deflected past the static limit (|b| = delta, where its
+    force is mu_c F_n); True if one was. Such a tilt is more than friction can hold."""
+    delta = model.params.friction.presliding_m
+    first = np.flatnonzero(free == model.bristle_offset)[0]
+    bristles = (v[first:] * scale[first:]).reshape(-1, 3)
+    length = np.linalg.norm(bristles, axis=1)
+    over = length > delta
+    bristles[over] *= (delta / length[over])[:, None]
+    v[first:] = bristles.ravel() / scale[first:]
+    return bool(np.any(over))
+
+
+def _newton(residual, v, iterations=NEWTON_ITERATIONS, step=NEWTON_FD_STEP):
+    """Damped Newton with a central-difference Jacobian.
+
+    The step is halved until the residual shrinks: a contact that engages during an update is
+    invisible to the Jacobian taken before it, and a full step would overshoot into it.
+    """
+    r = residual(v)
+    norm = np.linalg.norm(r)
+    eye = np.eye(v.size)
+    for _ in range(iterations):
+        J = np.column_stack([(residual(v + step * e) - residual(v - step * e)) / (2 * step)
+                             for e in eye])
+        delta = np.linalg.lstsq(J, r, rcond=None)[0]
+        for _ in range(NEWTON_BACKTRACKS):
+            trial = v - delta
+            r_trial = residual(trial)
+            norm_trial = np.linalg.norm(r_trial)
+            if np.isfinite(norm_trial) and norm_trial < norm:
+                break
+            delta = 0.5 * delta
+        else:
+            break
+        v, r, norm = trial, r_trial, norm_trial
+        if np.max(np.abs(r)) < 1e-3 * REST_TOLERANCE:
+            break
+    return v
+
+
+def _weight_per_tip_n(model):
+    if model.has_sphere:
+        return model.params.sphere.mass_kg * model.params.gravity_m_per_s2 / 4.0
+    return model.params.beam.mass_kg * model.params.gravity_m_per_s2
+
+
+def _generalised_masses(model, free):
+    """Mass (kg) or inertia over beam length (kg m) per free coordinate, for force units."""
+    b = model.params.beam
+    out = []
+    for i in free:
+        if i < 2 * model.n_beams:
+            out.append(b.mass_kg if i % 2 == 0 else b.inertia_suspension_kg_m2 / b.length_m)
+        else:
+            out.append(model.params.sphere.mass_kg)
+    return np.array(out)
+
+
+def _relax(model, x):
+    """Integrate with all rates damped out and the sphere's orientation held."""
+    frozen = np.zeros(model.n_states, dtype=bool)
+    if model.has_sphere:
+        o = model.sphere_offset
+        frozen[o + 3:o + 7] = True
+        frozen[o + 10:o + 13] = True
+    u = np.zeros(model.n_beams)
+
+    def fun(t, y):
+        dydt = model.rhs(t, y, u)
+        dydt[frozen] = 0.0
+        return dydt
+
+    def jac(t, y):
+        dfdy = model.jacobian(t, y, u)
+        dfdy[frozen] = 0.0
+        return dfdy
+
+    sol = solve_ivp(fun, (0.0, RELAX_TIME_S), x, method='Radau', rtol=1e-6,
+                    atol=1e-6 * state_scale(model), jac=jac)
+    if not sol.success:
+        raise RestError(f'relaxation towards rest failed: {sol.message}')
+    y = sol.y[:, -1].copy()
+    y[2 * model.n_beams:4 * model.n_beams] = 0.0
+    if model.has_sphere:
+        y[model.sphere_offset + 7:model.sphere_offset + 13] = 0.0
+    return y
+
+
+def _acceleration_index(model, free):
+    """Indices in dx/dt of the accelerations conjugate to the free positions."""
+    n = model.n_beams
+    index = []
+    for i in free:
+        if i < 2 * n:
+            index.append(2 * n + i)
+        else:
+            index.append(i + 7)
+    return np.array(index)
+
+
+def initial_state(model):
+    """The scene's initial state, shape (n_states,)."""
+    init = model.scene.initial
+    if init.mode == 'explicit':
+        return explicit_state(model)
+    x = rest_state(model)
+    if model.has_sphere and init.sphere_lift_m:
+        x[model.sphere_offset + 2] += init.sphere_lift_m
+    if model.has_sphere:
+        o = model.sphere_offset
+        x[o + 7:o + 10] = init.sphere_velocity_m_per_s
+        x[o + 10:o + 13] = init.sphere_omega_rad_per_s
+    return x

@@ -1,0 +1,177 @@
+"""Voltage programmes: rectangular pulses per beam (:class:`PulseProgramme`), and the voltages a
+running device holds over time (:class:`VoltageSchedule`); both held constant between edges."""
+
+import dataclasses
+import math
+
+import numpy as np
+
+from msg_defs.device import BEAM_IDS, VOLTAGE_LIMIT_V
+from msg_defs.voltage_rules import VoltageRuleError, check_segments
+
+
+class ProgrammeError(ValueError):
+    """A pulse programme that cannot be applied to the device."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Pulse:
+    """A rectangular voltage pulse on one beam (beams are numbered 1..4)."""
+
+    beam: int
+    amplitude_v: float
+    start_s: float
+    width_s: float
+
+    @property
+    def end_s(self):
+        return self.start_s + self.width_s
+
+
+@dataclasses.dataclass(frozen=True)
+class PulseProgramme:
+    """A set of pulses, validated on construction.
+
+    Overlapping pulses on the same beam add their amplitudes; the sum must stay within the
+    voltage limit too.
+    """
+
+    pulses: tuple = ()
+    voltage_limit_v: float = VOLTAGE_LIMIT_V
+
+    def __post_init__(self):
+        object.__setattr__(self, 'pulses', tuple(self.pulses))
+        if not (math.isfinite(self.voltage_limit_v) and self.voltage_limit_v > 0):
+            raise ProgrammeError(
+                f'voltage limit must be a positive number, got {self.voltage_limit_v}')
+        for i, pulse in enumerate(self.pulses):
+            where = f'pulse {i} (beam {pulse.beam})'
+            if pulse.beam not in (1, 2, 3, 4):
+                raise ProgrammeError(f'{where}: beam must be 1..4')
+            for name in ('amplitude_v', 'start_s', 'width_s'):
+                if not math.isfinite(getattr(pulse, name)):
+                    raise ProgrammeError(
+                        f'{where}: {name} must be finite, got {getattr(pulse, name)}')
+            if pulse.width_s < 0:
+                raise ProgrammeError(f'{where}: width_s must be >= 0, got {pulse.width_s}')
+            if pulse.start_s < 0:
+                raise ProgrammeError(f'{where}: start_s must be >= 0, got {pulse.start_s}')
+            if abs(pulse.amplitude_v) > self.voltage_limit_v:
+                raise ProgrammeError(
+                    f'{where}: |amplitude_v| = {abs(pulse.amplitude_v)} V exceeds the limit '
+                    f'{self.voltage_limit_v} V')
+        for t in self.edges():
+            peak = np.max(np.abs(self.voltages_at(t, beams=(1, 2, 3, 4))))
+            if peak > self.voltage_limit_v * (1 + 1e-12):
+                raise ProgrammeError(f'overlapping pulses reach {peak} V at t = {t} s, '
+                                     f'above {self.voltage_limit_v} V')
+
+    @classmethod
+    def from_dicts(cls, items, voltage_limit_v=VOLTAGE_LIMIT_V):
+        pulses = []
+        for i, item in enumerate(items):
+            allowed = {f.name for f in dataclasses.fields(Pulse)}
+            if not isinstance(item, dict) or set(item) != allowed:
+                raise ProgrammeError(f'pulse {i} must have exactly the keys {sorted(allowed)}, '
+                                     f'got {item!r}')
+            try:
+                pulses.append(Pulse(beam=int(item['beam']), amplitude_v=float(item['amplitude_v']),
+                                    start_s=float(item['start_s']), width_s=float(item['width_s'])))
+            except (TypeError, ValueError) as exc:
+                raise ProgrammeError(f'pulse {i}: {exc}') from exc
+        return cls(tuple(pulses), voltage_limit_v)
+
+    def edges(self):
+        """Sorted times (s) at which any voltage changes."""
+        times = {p.start_s for p in self.pulses} | {p.end_s for p in self.pulses}
+        return sorted(times)
+
+    def voltages_at(self, t_s, beams=(1, 2, 3, 4)):
+        """Voltages (V) on ``beams`` at ``t_s``; an edge belongs to the segment after it."""
+        out = np.zeros(len(beams))
+        for pulse in self.pulses:
+            if pulse.beam in beams and pulse.start_s <= t_s < pulse.end_s:
+                out[beams.index(pulse.beam)] += pulse.amplitude_v
+        return out
+
+    def segments(self, beams=(1, 2, 3, 4)):
+        """The programme as zero-order-hold segments.
+
+        Returns
+        -------
+        times_s : ndarray, shape (n,)
+            Start of each segment, from 0, increasing; the last segment (all pulses over)
+            lasts for ever.
+        voltages_v : ndarray, shape (n, len(beams))
+        """
+        times = sorted({0.0, *self.edges()})
+        return np.array(times), np.array([self.voltages_at(t, beams) for t in times])
+
+    @property
+    def duration_s(self):
+        """End of the last pulse (s)."""
+        return max((p.end_s for p in self.pulses), default=0.0)
+
+    @classmethod
+    def from_segments(cls, times_s, voltages_v, voltage_limit_v=VOLTAGE_LIMIT_V):
+        """Inverse of :meth:`segments` for beams 1..4, the device's command rules applied.
+
+        Raises
+        ------
+        ProgrammeError
+            For segments that break :func:`msg_defs.voltage_rules.check_segments`: times not
+            finite, negative or strictly increasing, voltages negative or over the limit,
+            shapes that do not match, or a last segment that is not zero (it would hold for
+            ever).
+        """
+        try:
+            times, volts = check_segments(times_s, voltages_v, voltage_limit_v)
+        except VoltageRuleError as error:
+            raise ProgrammeError(str(error)) from None
+        pulses = [Pulse(beam, float(v), float(t0), float(t1 - t0))
+                  for t0, t1, row in zip(times[:-1], times[1:], volts[:-1], strict=True)
+                  for beam, v in zip((1, 2, 3, 4), row, strict=True) if v != 0.0]
+        return cls(tuple(pulses), voltage_limit_v)
+
+    def mirrored(self, beam_map):
+        """The same programme with beams renamed by ``beam_map`` (dict old -> new)."""
+        return PulseProgramme(tuple(dataclasses.replace(p, beam=beam_map[p.beam])
+                                    for p in self.pulses), self.voltage_limit_v)
+
+
+class VoltageSchedule:
+    """Piecewise-constant beam voltages over absolute simulated time: what a running device
+    holds on its beams.
+
+    A new command replaces whatever the schedule held from its start time on, so the most
+    recent command always wins, as on the device's drivers. Like a :class:`PulseProgramme`
+    it offers ``edges()`` and ``voltages_at(t_s, beams)``, so the solvers take either.
+    """
+
+    def __init__(self):
+        self.times_s = [0.0]
+        self.voltages_v = [np.zeros(len(BEAM_IDS))]
+
+    def replace_from(self, t_s, times_s, voltages_v):
+        """From ``t_s`` on, the segments ``times_s`` (relative, from 0) and ``voltages_v``."""
+        keep = [i for i, t in enumerate(self.times_s) if t < t_s]
+        self.times_s = [self.times_s[i] for i in keep] + [t_s + float(t) for t in times_s]
+        self.voltages_v = [self.voltages_v[i] for i in keep] + [np.array(v, dtype=float)
+                                                                for v in voltages_v]
+
+    def voltages_at(self, t_s, beams=BEAM_IDS):
+        """Voltages (V) on ``beams`` at ``t_s``; an edge belongs to the segment after it."""
+        i = int(np.searchsorted(self.times_s, t_s, side='right')) - 1
+        held = self.voltages_v[max(i, 0)]
+        return np.array([held[b - 1] for b in beams])
+
+    def edges(self):
+        """Times (s) at which the held voltages change, as :meth:`PulseProgramme.edges`."""
+        return list(self.times_s)
+
+    def forget_before(self, t_s):
+        """Drop segments that ended before ``t_s`` (the schedule stays short in long runs)."""
+        i = int(np.searchsorted(self.times_s, t_s, side='right')) - 1
+        if i > 0:
+            del self.times_s[:i]
+            del self.voltages_v[:i]

@@ -1,0 +1,208 @@
+"""Plants the simulator node runs: the continuous model or the discrete kick model.
+
+A plant holds simulated time and takes the two commands the device takes, voltages held on the
+beams and a timed pulse programme, then advances to a later time and reports a
+:class:`PlantSnapshot`. The node neither knows nor cares which plant it drives; a plant that
+cannot carry out a command raises :class:`PlantError` and stays as it was.
+"""
+
+import dataclasses
+from typing import Protocol
+
+import numpy as np
+
+from msg_defs.device import BEAM_COUNT, KICK_WINDOW_S
+from sphere_sim.integrate.solve import simulate
+from sphere_sim.model.initial_state import initial_state
+from sphere_sim.model.programme import VoltageSchedule
+
+LIVE_RTOL = 1e-6  # the tolerance the kicks and the table were computed with
+# A decoded programme matches a kick of the design if its edges agree to this (a message
+# carries times in whole nanoseconds) and its voltages to this.
+DECODE_TIME_TOL_S = 1e-8
+DECODE_VOLTAGE_TOL_V = 1e-6
+# Times built from sums of periods differ from products in the last bits; events this close
+# count as simultaneous.
+TIME_TOL_S = 1e-9
+
+
+class PlantError(ValueError):
+    """A command the plant cannot carry out (it is left unchanged)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class PlantSnapshot:
+    """What a plant reports at one instant.
+
+    Attributes
+    ----------
+    time_s : float
+    normal : ndarray, shape (3,)
+        Unit surface normal in ``world``.
+    voltages_v : ndarray, shape (4,)
+        Voltages applied to beams 1..4 (V).
+    sphere : tuple or None
+        (position_m (3,), quaternion_wxyz (4,), velocity_m_per_s (3,), omega_body_rad_per_s
+        (3,)) where the plant has a rigid-body sphere.
+    beams : tuple or None
+        (z_m (4,), phi_rad (4,), zdot_m_per_s (4,), phidot_rad_per_s (4,)) where it has beams.
+    """
+
+    time_s: float
+    normal: np.ndarray
+    voltages_v: np.ndarray
+    sphere: tuple = None
+    beams: tuple = None
+
+
+class TwinPlant(Protocol):
+    """What the simulator node drives."""
+
+    time_s: float
+    busy_until_s: float  # when the last command's effect is over (programme end + settling)
+
+    def hold(self, voltages_v):
+        """Hold ``voltages_v`` (V, shape (4,)) on the beams from now on."""
+
+    def run_programme(self, programme):
+        """Start ``programme`` (a PulseProgramme, times from now)."""
+
+    def advance(self, t_end_s):
+        """Advance simulated time to ``t_end_s`` (s)."""
+
+    def snapshot(self):
+        """The :class:`PlantSnapshot` now."""
+
+
+class ContinuousPlant:
+    """The physics model of §3, integrated between commands and sample times.
+
+    Parameters
+    ----------
+    model : sphere_sim.model.assembly.Model
+        With a sphere (its surface normal is the plant's output).
+    x0 : ndarray, shape (n_states,), optional
+        Initial state; the scene's initial state by default.
+    rtol : float
+    settle_window_s : float
+        Time after a programme's last edge until its effect counts as over.
+    """
+
+    def __init__(self, model, x0=None, rtol=LIVE_RTOL, settle_window_s=KICK_WINDOW_S):
+        if not model.has_sphere:
+            raise PlantError('the continuous plant needs a scene with the sphere')
+        self.model = model
+        self.x = np.array(initial_state(model) if x0 is None else x0, dtype=float)
+        self.rtol = rtol
+        self.settle_window_s = settle_window_s
+        self.time_s = 0.0
+        self.busy_until_s = 0.0
+        self.schedule = VoltageSchedule()
+        self.stats_nfev = 0
+
+    def hold(self, voltages_v):
+        self.schedule.replace_from(self.time_s, [0.0], [voltages_v])
+
+    def run_programme(self, programme):
+        times, volts = programme.segments()
+        self.schedule.replace_from(self.time_s, times, volts)
+        self.busy_until_s = self.time_s + programme.duration_s + self.settle_window_s
+
+    def advance(self, t_end_s):
+        if t_end_s > self.time_s:
+            # The held segments go to the solver as they are; it stops at each edge. One
+            # sample per segment: only the end state is kept.
+            traj = simulate(self.model, self.x, t_end_s, self.schedule, rtol=self.rtol,
+                            sample_period_s=t_end_s - self.time_s, t_start_s=self.time_s)
+            self.x = traj.final_state.copy()
+            self.stats_nfev += traj.stats.nfev
+        self.time_s = max(self.time_s, t_end_s)
+        self.schedule.forget_before(self.time_s)
+
+    def snapshot(self):
+        m, x = self.model, self.x
+        o = m.sphere_offset
+        sphere = (x[o:o + 3].copy(), x[o + 3:o + 7].copy(), x[o + 7:o + 10].copy(),
+                  x[o + 10:o + 13].copy())
+        beams = tuple(np.array(c, dtype=float) for c in m.beam_coordinates(x))
+        return PlantSnapshot(self.time_s, m.surface_normal(x), self.schedule.voltages_at(
+            self.time_s), sphere, beams)
+
+
+def decode_kick(kick_plant, programme):
+    """(action, intensity) of the kick of ``kick_plant`` that ``programme`` is, or PlantError.
+
+    ``kick_plant`` offers ``design(action)``, ``programme(action, intensity)`` and
+    ``directions_rad``. The
+    intensity follows from the largest voltage; the action from which kick has the same
+    segments at that intensity.
+    """
+    times, volts = programme.segments()
+    for action in range(len(kick_plant.directions_rad)):
+        design = kick_plant.design(action)
+        span = design.high_v - design.low_v
+        intensity = float(np.clip((volts.max() - design.low_v) / span, 0.0, 1.0)) if span \
+            else 1.0
+        c_times, c_volts = kick_plant.programme(action, intensity).segments()
+        if (c_times.shape == times.shape and np.allclose(c_times, times, rtol=0.0,
+                                                         atol=DECODE_TIME_TOL_S)
+                and np.allclose(c_volts, volts, rtol=0.0, atol=DECODE_VOLTAGE_TOL_V)):
+            return action, intensity
+    raise PlantError('the discrete plant executes only the kicks of its table (any action, '
+                     'any intensity); this programme is none of them')
+
+
+class DiscretePlant:
+    """The discrete model x_{t+1} = f(x_t, a_t, u_K) behind the device's interface.
+
+    A pulse programme is decoded into the kick (action, intensity) it is, and the resting
+    normal jumps to the kick's outcome at the end of the kick window; voltages other than
+    0 V held on the beams are refused, since the table knows only kicks.
+
+    Parameters
+    ----------
+    kick_plant : LookupTable or CombinedKickPlant
+        The kicks it knows: outcomes (``kick``) and programmes (``programme``).
+    normal0 : ndarray, shape (3,), optional
+    window_s : float
+        Delay from the programme's start to the new resting normal.
+    """
+
+    def __init__(self, kick_plant, normal0=None, window_s=KICK_WINDOW_S):
+        self.kick_plant = kick_plant
+        self.normal = np.array([0.0, 0.0, 1.0] if normal0 is None else normal0, dtype=float)
+        self.window_s = window_s
+        self.time_s = 0.0
+        self.busy_until_s = 0.0
+        self.schedule = VoltageSchedule()
+        self._pending = None  # (time_s, normal)
+        self.kicks = 0
+
+    def hold(self, voltages_v):
+        if np.any(np.asarray(voltages_v) != 0.0):
+            raise PlantError('the discrete plant models kicks only: send a pulse programme, '
+                             'or 0 V on every beam')
+        self.schedule.replace_from(self.time_s, [0.0], [np.zeros(BEAM_COUNT)])
+
+    def run_programme(self, programme):
+        if self._pending is not None:
+            raise PlantError(f'a kick is still running until t = {self._pending[0]:.4f} s')
+        action, intensity = decode_kick(self.kick_plant, programme)
+        result = self.kick_plant.kick(self.normal, action, intensity)
+        times, volts = programme.segments()
+        self.schedule.replace_from(self.time_s, times, volts)
+        done = self.time_s + max(self.window_s, programme.duration_s)
+        self._pending = (done, np.asarray(result.normal, dtype=float))
+        self.busy_until_s = done
+        self.kicks += 1
+
+    def advance(self, t_end_s):
+        if self._pending is not None and t_end_s >= self._pending[0] - TIME_TOL_S:
+            self.normal = self._pending[1]
+            self._pending = None
+        self.time_s = max(self.time_s, t_end_s)
+        self.schedule.forget_before(self.time_s)
+
+    def snapshot(self):
+        return PlantSnapshot(self.time_s, self.normal.copy(),
+                             self.schedule.voltages_at(self.time_s))

@@ -1,0 +1,170 @@
+"""The simulator's clock and command handling, free of ROS.
+
+:class:`TwinRunner` owns a plant, the simulated time grid, the queue of commands, the
+measurement noise and the lockstep rule; the simulator node only converts messages and calls
+it. Every command is checked here against the device's rules (:mod:`msg_defs.voltage_rules`),
+where it enters the twin, and a rejected one leaves the plant untouched.
+"""
+
+import dataclasses
+
+import numpy as np
+
+from msg_defs.device import VOLTAGE_LIMIT_V
+from msg_defs.voltage_rules import VoltageRuleError, check_voltages
+from sphere_sim.model.programme import ProgrammeError, PulseProgramme
+from sphere_sim.twin.plants import TIME_TOL_S, PlantError
+
+
+class CommandError(ValueError):
+    """A command that breaks the contract or the plant's limits; nothing was changed."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Sample:
+    """One published instant: the true snapshot and the measured (noisy) normal."""
+
+    snapshot: object
+    measured_normal: np.ndarray
+
+
+@dataclasses.dataclass
+class TwinCounters:
+    samples: int = 0
+    accepted: int = 0
+    rejected: int = 0
+    programmes: int = 0
+    late: int = 0  # programmes whose start time had passed when they arrived
+
+
+class TwinRunner:
+    """Advance a plant on a fixed grid of sample times and apply commands between samples.
+
+    Parameters
+    ----------
+    plant : sphere_sim.twin.plants.TwinPlant
+    period_s : float
+        Simulated time between samples.
+    noise_std_rad : float
+        Standard deviation of the measured normal's error, per tangential axis (rad).
+    seed : int
+        Seed of the measurement noise.
+    lockstep : bool
+        If true, time advances only while a command is in effect (until the plant's
+        ``busy_until_s``): each command is answered by the samples of its effect and the
+        settled sample, and the run is the same whatever the wall-clock timing.
+    voltage_limit_v : float
+    """
+
+    def __init__(self, plant, period_s, noise_std_rad=0.0, seed=0, lockstep=False,
+                 voltage_limit_v=VOLTAGE_LIMIT_V):
+        if not (np.isfinite(period_s) and period_s > 0):
+            raise ValueError(f'period_s must be a positive number, got {period_s}')
+        if not (np.isfinite(noise_std_rad) and noise_std_rad >= 0):
+            raise ValueError(f'noise_std_rad must be >= 0, got {noise_std_rad}')
+        self.plant = plant
+        self.period_s = period_s
+        self.noise_std_rad = noise_std_rad
+        self.rng = np.random.default_rng(seed)
+        self.lockstep = lockstep
+        self.voltage_limit_v = voltage_limit_v
+        self.counters = TwinCounters()
+        self._queued = []  # (start_s, kind, payload), applied at the next sample boundary
+        self._step = 0
+        self._idle_published = False
+
+    @property
+    def time_s(self):
+        return self._step * self.period_s
+
+    # --- commands ----------------------------------------------------------------------
+    def command_voltages(self, voltages_v):
+        """Queue voltages to hold from the next sample on.
+
+        Raises
+        ------
+        CommandError
+            For anything :func:`msg_defs.voltage_rules.check_voltages` refuses.
+        """
+        try:
+            volts = check_voltages(voltages_v, self.voltage_limit_v)
+        except VoltageRuleError as error:
+            raise CommandError(str(error)) from None
+        self._queue(self.time_s, 'hold', volts)
+
+    def command_programme(self, times_s, voltages_v, start_s=0.0):
+        """Queue a programme (segments relative to its start) starting at ``start_s``
+        (simulated s; 0 or a past time: at the next sample).
+
+        Raises
+        ------
+        CommandError
+            For a programme that PulseProgramme refuses (see ``from_segments``).
+        """
+        try:
+            programme = PulseProgramme.from_segments(times_s, voltages_v, self.voltage_limit_v)
+        except ProgrammeError as error:
+            raise CommandError(str(error)) from None
+        if 0.0 < start_s < self.time_s - 1e-9:
+            self.counters.late += 1  # started now instead
+        self._queue(max(start_s, self.time_s), 'programme', programme)
+
+    def _queue(self, start_s, kind, payload):
+        self._queued.append((start_s, kind, payload))
+        self._queued.sort(key=lambda item: item[0])
+        self._idle_published = False
+
+    def _apply_due(self):
+        """Apply queued commands due now; returns the reasons of those the plant refused."""
+        refused = []
+        while self._queued and self._queued[0][0] <= self.time_s + TIME_TOL_S:
+            _, kind, payload = self._queued.pop(0)
+            try:
+                if kind == 'hold':
+                    self.plant.hold(payload)
+                else:
+                    self.plant.run_programme(payload)
+                    self.counters.programmes += 1
+                self.counters.accepted += 1
+            except (PlantError, ProgrammeError) as error:
+                self.counters.rejected += 1
+                refused.append(str(error))
+        return refused
+
+    # --- time ----------------------------------------------------------------------------
+    def idle(self):
+        """In lockstep: nothing in effect or queued, and the settled sample already out."""
+        return (self.lockstep and not self._queued and self._idle_published
+                and self.plant.time_s >= self.plant.busy_until_s - TIME_TOL_S)
+
+    def tick(self):
+        """Advance one period unless idle; returns (Sample or None, refused reasons).
+
+        The first tick publishes the initial state without advancing.
+        """
+        refused = self._apply_due()
+        if self.idle():
+            return None, refused
+        if self.counters.samples > 0:
+            self._step += 1
+            self.plant.advance(self.time_s)
+            refused += self._apply_due()
+        snapshot = self.plant.snapshot()
+        self.counters.samples += 1
+        if (self.lockstep and self.plant.time_s >= self.plant.busy_until_s - TIME_TOL_S
+                and not self._queued):
+            self._idle_published = True
+        return Sample(snapshot, self.measure(snapshot.normal)), refused
+
+    def measure(self, normal):
+        """The sensor's reading: the normal tilted by seeded Gaussian noise."""
+        if self.noise_std_rad == 0.0:
+            return np.array(normal, dtype=float)
+        # Two orthonormal tangents of the normal carry the error; the result stays a unit vector.
+        helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0, 1.0, 0])
+        t1 = np.cross(normal, helper)
+        t1 /= np.linalg.norm(t1)
+        t2 = np.cross(normal, t1)
+        e1, e2 = self.rng.normal(0.0, self.noise_std_rad, 2)
+        noisy = normal + e1 * t1 + e2 * t2
+        return noisy / np.linalg.norm(noisy)

@@ -1,0 +1,227 @@
+"""The simulator node: the twin behind the device's topics.
+
+Takes ``/beams/voltage_command`` and ``/beams/pulse_program``, runs the continuous or the
+discrete plant, and publishes ``/sphere/surface_normal`` (what the device's sensor measures,
+with optional seeded noise), ``/sphere/state``, ``/beams/state`` and ``/beams/voltage`` (the
+truth), markers, ``/clock`` and ``/diagnostics``. A command that breaks the contract is
+rejected with a logged error and a diagnostics entry; it never reaches the plant.
+"""
+
+import os
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+
+from msg_defs.conversions import (
+    beam_state_to_msg,
+    ns_from_time,
+    programme_from_msg,
+    sphere_state_to_msg,
+    surface_normal_to_msg,
+    time_from_ns,
+    voltages_from_msg,
+    voltages_to_msg,
+)
+from msg_defs.device import NS_PER_S
+from msg_defs.markers import twin_markers
+from msg_defs.topics import (
+    BEAM_STATE,
+    BEAM_VOLTAGE,
+    CLOCK,
+    DIAGNOSTICS,
+    MARKERS,
+    PULSE_PROGRAM,
+    SPHERE_STATE,
+    SURFACE_NORMAL,
+    VOLTAGE_COMMAND,
+)
+from node_runtime.ros_env import DISCOVERY_RANGE_VAR, parameter_descriptor, run_node
+from sphere_sim.twin.plant_setup import PLANT_KINDS
+
+# The physics (scipy, numba, the kick table) is imported when the node is built, not with this
+# module, so that main() installs its signal handlers first: a SIGINT during the seconds of
+# start-up is then a clean shutdown like any other.
+
+DEFAULT_PUBLISH_RATE_HZ = 50.0
+MAX_PUBLISH_RATE_HZ = 1000.0
+MARKER_EVERY_N_SAMPLES = 5
+# As-fast-as-possible and lockstep runs still yield to the executor between samples, so
+# commands are taken in between.
+FAST_TIMER_PERIOD_S = 1e-4
+# While idle in lockstep, the last sample is repeated at this wall-clock period so that a
+# subscriber that joined late still receives the state.
+IDLE_REPEAT_PERIOD_S = 0.2
+
+
+
+class SimulatorNode(Node):
+    """Runs a plant (``sphere_sim.twin.plants``) through :class:`sphere_sim.twin.runner.TwinRunner`.
+
+    Parameters
+    ----------
+    plant : sphere_sim.twin.plants.TwinPlant, optional
+        Overrides the ``plant``/``scene``/``table`` parameters (for tests).
+    **node_kwargs
+        Passed to ``rclpy.node.Node`` (e.g. ``context``).
+    """
+
+    def __init__(self, plant=None, **node_kwargs):
+        from sphere_sim.twin.plant_setup import build_plant
+        from sphere_sim.twin.runner import TwinRunner
+
+        super().__init__('simulator', **node_kwargs)
+        p = self._declare_parameters()
+        self.publish_rate_hz = p['publish_rate_hz']
+        self.period_s = 1.0 / self.publish_rate_hz
+        self.real_time_factor = p['real_time_factor']
+        if plant is None:
+            plant = build_plant(p['plant'], p['scene'], [t for t in p['tables'] if t])
+        self.runner = TwinRunner(plant, self.period_s, p['noise_std_rad'], p['seed'],
+                                 p['lockstep'])
+        self._topic_publishers = {topic.name: self.create_publisher(
+            topic.msg_type, topic.name, topic.qos.to_profile())
+            for topic in (SURFACE_NORMAL, SPHERE_STATE, BEAM_STATE, BEAM_VOLTAGE, MARKERS,
+                          CLOCK, DIAGNOSTICS)}
+        self.create_subscription(VOLTAGE_COMMAND.msg_type, VOLTAGE_COMMAND.name,
+                                 self.on_voltage_command, VOLTAGE_COMMAND.qos.to_profile())
+        self.create_subscription(PULSE_PROGRAM.msg_type, PULSE_PROGRAM.name,
+                                 self.on_pulse_program, PULSE_PROGRAM.qos.to_profile())
+        paced = self.real_time_factor > 0 and not p['lockstep']
+        period = self.period_s / self.real_time_factor if paced else FAST_TIMER_PERIOD_S
+        self.create_timer(period, self.on_timer)
+        self.wait_for_subscribers = p['wait_for_subscribers']
+        self._last_sample = None
+        self._last_repeat_wall_s = 0.0
+        self._wall_start_s = time.perf_counter()
+        self.get_logger().info(
+            f'{DISCOVERY_RANGE_VAR}={os.environ.get(DISCOVERY_RANGE_VAR, "(unset)")}, domain id '
+            f'{self.context.get_domain_id()}; {p["plant"]} plant, scene {p["scene"]}, '
+            f'{self.publish_rate_hz:g} Hz, real-time factor {self.real_time_factor:g}'
+            f'{", lockstep" if p["lockstep"] else ""}; publishing {SURFACE_NORMAL.name}')
+
+    def _declare_parameters(self):
+        specs = {
+            'plant': ('discrete', parameter_descriptor(
+                f'Plant to run: {" or ".join(PLANT_KINDS)} (the lookup table of kicks).')),
+            'scene': ('rest', parameter_descriptor('Scene (shipped name or YAML path): parameters, '
+                                          'beams, sphere and initial state.')),
+            'tables': ([''], parameter_descriptor(
+                'Kick tables (.npz) of the discrete plant, their actions combined (the '
+                'diagonal and the axis-parallel tables give 8 directions); [""] for the '
+                'shipped default.')),
+            'publish_rate_hz': (DEFAULT_PUBLISH_RATE_HZ, parameter_descriptor(
+                'Samples per simulated second (Hz).',
+                float_range=(1.0, MAX_PUBLISH_RATE_HZ))),
+            'real_time_factor': (1.0, parameter_descriptor(
+                'Simulated seconds per wall second; 0 runs as fast as possible.',
+                float_range=(0.0, 1000.0))),
+            'seed': (0, parameter_descriptor('Seed of the measurement noise.',
+                                             int_range=(0, 2**31 - 1))),
+            'noise_std_rad': (0.0, parameter_descriptor(
+                'Standard deviation of the measured normal per tangential axis (rad).',
+                float_range=(0.0, 0.1))),
+            'wait_for_subscribers': (0, parameter_descriptor(
+                f'Hold simulated time at 0 until {SURFACE_NORMAL.name} has this many '
+                'subscribers (DDS discovery takes seconds; a scenario should not start before '
+                'its controller listens).', int_range=(0, 100))),
+            'lockstep': (False, parameter_descriptor(
+                'Advance simulated time only while a command is in effect: runs are then '
+                'identical whatever the wall-clock timing.')),
+        }
+        return {name: self.declare_parameter(name, default, descriptor).value
+                for name, (default, descriptor) in specs.items()}
+
+    # --- commands ----------------------------------------------------------------------
+    def on_voltage_command(self, msg):
+        # ValueError covers both the contract (conversions) and the runner's CommandError.
+        try:
+            self.runner.command_voltages(voltages_from_msg(msg))
+        except ValueError as error:
+            self.runner.counters.rejected += 1
+            self._report_rejection(VOLTAGE_COMMAND.name, str(error))
+
+    def on_pulse_program(self, msg):
+        try:
+            times, volts = programme_from_msg(msg)
+            start_s = ns_from_time(msg.header.stamp) / NS_PER_S
+            self.runner.command_programme(times, volts, start_s)
+        except ValueError as error:
+            self.runner.counters.rejected += 1
+            self._report_rejection(PULSE_PROGRAM.name, str(error))
+
+    def _report_rejection(self, topic, reason):
+        """Log and publish a rejection (already counted)."""
+        self.get_logger().error(f'rejected {topic}: {reason}')
+        self._publish_diagnostics(DiagnosticStatus.ERROR, f'rejected {topic}: {reason}')
+
+    def _publish_diagnostics(self, level, message):
+        c = self.runner.counters
+        status = DiagnosticStatus(level=level, name='simulator: commands',
+                                  hardware_id='sphere_twin', message=message)
+        status.values = [KeyValue(key=k, value=str(v)) for k, v in (
+            ('accepted', c.accepted), ('rejected', c.rejected), ('programmes', c.programmes),
+            ('samples', c.samples), ('simulated_time_s', f'{self.runner.time_s:.6f}'))]
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = time_from_ns(round(self.runner.time_s * NS_PER_S))
+        self._topic_publishers[DIAGNOSTICS.name].publish(array)
+
+    # --- time --------------------------------------------------------------------------
+    def on_timer(self):
+        normal_pub = self._topic_publishers[SURFACE_NORMAL.name]
+        if self.wait_for_subscribers:
+            if normal_pub.get_subscription_count() < self.wait_for_subscribers:
+                return
+            self.get_logger().info(f'{self.wait_for_subscribers} subscribers on '
+                                   f'{SURFACE_NORMAL.name}: simulated time starts')
+            self.wait_for_subscribers = 0
+            self._wall_start_s = time.perf_counter()
+        sample, refused = self.runner.tick()
+        for reason in refused:
+            self._report_rejection('plant', reason)
+        if sample is None:
+            now = time.perf_counter()
+            if self._last_sample is not None and \
+                    now - self._last_repeat_wall_s > IDLE_REPEAT_PERIOD_S:
+                self._last_repeat_wall_s = now
+                self._publish(self._last_sample, markers=False)
+            return
+        self._last_sample = sample
+        self._publish(sample, markers=self.runner.counters.samples % MARKER_EVERY_N_SAMPLES == 1)
+
+    def _publish(self, sample, markers):
+        snap = sample.snapshot
+        stamp = time_from_ns(round(snap.time_s * NS_PER_S))
+        pub = self._topic_publishers
+        pub[CLOCK.name].publish(Clock(clock=stamp))
+        pub[SURFACE_NORMAL.name].publish(surface_normal_to_msg(sample.measured_normal, stamp))
+        pub[BEAM_VOLTAGE.name].publish(voltages_to_msg(snap.voltages_v, stamp))
+        if snap.sphere is not None:
+            pub[SPHERE_STATE.name].publish(sphere_state_to_msg(*snap.sphere, stamp=stamp))
+        if snap.beams is not None:
+            pub[BEAM_STATE.name].publish(beam_state_to_msg(*snap.beams, stamp=stamp))
+        if markers:
+            beams = snap.beams if snap.beams is not None else (None, None)
+            position = snap.sphere[0] if snap.sphere is not None else None
+            pub[MARKERS.name].publish(twin_markers(snap.normal, stamp, position, beams[0],
+                                                   beams[1]))
+
+    def summary(self):
+        """The final line: simulated time, samples, programmes, rejections, real-time factor."""
+        c = self.runner.counters
+        return (f'simulator: simulated {self.runner.time_s:.3f} s, {c.samples} samples, '
+                f'{c.programmes} programmes ({c.late} late), {c.rejected} rejected; '
+                f'real-time factor {self.achieved_real_time_factor():.3f}')
+
+    def achieved_real_time_factor(self):
+        wall = time.perf_counter() - self._wall_start_s
+        return self.runner.time_s / wall if wall > 0 else 0.0
+
+
+def main(args=None):
+    run_node(SimulatorNode, args, farewell=SimulatorNode.summary)
+
+
+if __name__ == '__main__':
+    main()

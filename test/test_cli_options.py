@@ -1,0 +1,63 @@
+"""The options the subcommands share: one --params, resolved once, errors as usage errors."""
+
+import argparse
+
+import pytest
+
+from sphere_sim.model.parameters import ParameterSet, load_parameter_set
+from sphere_twin.cli import build_parser
+from sphere_twin.commands.options import parameter_set
+
+
+def subcommand_parsers(parser):
+    """(name, parser) of every subcommand, nested ones included."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield name, sub
+                for inner, subsub in subcommand_parsers(sub):
+                    yield f'{name} {inner}', subsub
+
+
+def params_actions():
+    out = {}
+    for name, sub in subcommand_parsers(build_parser()):
+        for action in sub._actions:
+            if any('param' in option for option in action.option_strings):
+                out[name] = action
+    return out
+
+
+def test_every_command_that_takes_a_parameter_set_takes_it_the_same_way():
+    actions = params_actions()
+    assert {'kick', 'pullin', 'capacitance', 'validate', 'optimize-kick', 'table build',
+            'primitives width', 'primitives offsets', 'replay-check'} <= set(actions)
+    for name, action in actions.items():
+        assert action.option_strings == ['--params'], name
+        assert action.type is parameter_set, name
+
+
+def test_the_option_hands_down_a_loaded_set_and_reads_files(tmp_path):
+    args = build_parser().parse_args(['validate'])
+    assert isinstance(args.params, ParameterSet)
+    assert args.params == load_parameter_set()
+    override = tmp_path / 'stiffer.yaml'
+    override.write_text('base: calibrated\nname: stiffer\n'
+                        'overrides:\n  contact.stiffness_n_per_m: 2.0e5\n')
+    args = build_parser().parse_args(['pullin', '--params', str(override)])
+    assert args.params.name == 'stiffer'
+    assert args.params.contact.stiffness_n_per_m == 2.0e5
+    # kick leaves the choice to the scene unless told.
+    assert build_parser().parse_args(['kick', 'rest']).params is None
+
+
+@pytest.mark.parametrize('argv', [['validate', '--params', 'nosuch'],
+                                  ['capacitance', '--params', 'nosuch.yaml'],
+                                  ['table', 'build', '--params', 'nosuch']])
+def test_a_bad_parameter_set_is_a_one_line_usage_error(argv, capsys):
+    with pytest.raises(SystemExit) as exc:
+        build_parser().parse_args(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith(f'sphere-twin {argv[0]}') and 'error: argument --params:' in err
+    assert 'nosuch' in err and 'Traceback' not in err

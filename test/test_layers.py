@@ -1,0 +1,186 @@
+"""The import rules of ARCHITECTURE.md, read from the source (ast; nothing is imported).
+
+* Packages depend one way: ``msg_defs`` and ``node_runtime`` ← ``sphere_sim`` ←
+  ``sphere_control`` ← ``sphere_twin``.
+* Inside ``sphere_sim`` the rooms do too: ``model`` ← ``integrate`` ← ``studies`` ← ``kicks`` ←
+  ``twin``.
+* No two modules import each other, directly or round a circle, counting the imports inside
+  functions (a circle hidden in a function is still a circle).
+* rclpy only in the node modules and the few places that say why.
+"""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# Rank of each top-level package: a module may import its own rank and below.
+PACKAGE_RANK = {'msg_defs': 0, 'node_runtime': 0, 'sphere_sim': 1, 'sphere_control': 2,
+                'sphere_twin': 3}
+ROOM_RANK = {'model': 0, 'integrate': 1, 'studies': 2, 'kicks': 3, 'twin': 4}
+# Modules other than ``*_node.py`` that may import rclpy, and why.
+RCLPY_ALLOWED = {
+    'node_runtime.ros_env': 'the shared main() of every node',
+    'msg_defs.topics': 'turns its QoS specs into rclpy profiles, inside that one method',
+    'sphere_twin.testing': "the tests' probe node that watches a running twin",
+    'sphere_twin.bag.reader': "rclpy's CDR deserialiser reads recorded messages; no graph",
+}
+
+
+def module_name(path):
+    parts = list(path.relative_to(ROOT).with_suffix('').parts)
+    if parts[-1] == '__init__':
+        parts.pop()
+    return '.'.join(parts)
+
+
+def project_modules():
+    modules = {}
+    for package in PACKAGE_RANK:
+        for path in sorted((ROOT / package).rglob('*.py')):
+            modules[module_name(path)] = path
+    return modules
+
+
+MODULES = project_modules()
+
+
+def imports_of(name, path):
+    """Every module that ``name`` imports, at top level or inside functions."""
+    found = set()
+    is_package = path.name == '__init__.py'
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = name.split('.')
+                base = base[:len(base) - node.level + (1 if is_package else 0)]
+                target = '.'.join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module
+            # ``from package import module`` imports the module; anything else, the target.
+            submodules = {f'{target}.{alias.name}' for alias in node.names} & set(MODULES)
+            found.update(submodules or {target})
+    return found
+
+
+IMPORTS = {name: imports_of(name, path) for name, path in MODULES.items()}
+
+
+def project_target(target):
+    """The project module an import names (the longest known prefix), or None."""
+    parts = target.split('.')
+    for n in range(len(parts), 0, -1):
+        candidate = '.'.join(parts[:n])
+        if candidate in MODULES:
+            return candidate
+    return None
+
+
+def rank(name):
+    parts = name.split('.')
+    package = PACKAGE_RANK[parts[0]]
+    room = ROOM_RANK.get(parts[1], -1) if parts[0] == 'sphere_sim' and len(parts) > 1 else -1
+    return package, room
+
+
+def upward_imports():
+    bad = []
+    for name, targets in IMPORTS.items():
+        mine_package, mine_room = rank(name)
+        for target in filter(None, map(project_target, targets)):
+            package, room = rank(target)
+            if package > mine_package:
+                bad.append(f'{name} -> {target} (package above)')
+            # Inside sphere_sim, its own __init__ is room -1: importable from every room.
+            elif package == mine_package == PACKAGE_RANK['sphere_sim'] and room > mine_room:
+                bad.append(f'{name} -> {target} (room above)')
+    return bad
+
+
+def circles():
+    graph = {name: {t for t in map(project_target, targets) if t and t != name}
+             for name, targets in IMPORTS.items()}
+    # A package's __init__ is imported on the way to its modules; only edges between modules
+    # that hold code count, and the __init__ files here hold only docstrings.
+    found, state = [], {}
+
+    def visit(node, stack):
+        state[node] = 'open'
+        stack.append(node)
+        for nxt in sorted(graph[node]):
+            if state.get(nxt) == 'open':
+                found.append(' -> '.join([*stack[stack.index(nxt):], nxt]))
+            elif nxt not in state:
+                visit(nxt, stack)
+        stack.pop()
+        state[node] = 'done'
+
+    for name in sorted(graph):
+        if name not in state:
+            visit(name, [])
+    return found
+
+
+def test_the_source_tree_is_what_the_rules_read():
+    # The rules below hold only if they see the code: every package and room is found.
+    assert {'sphere_sim.model.dynamics', 'sphere_sim.integrate.radau_compiled',
+            'sphere_sim.studies.pullin', 'sphere_sim.kicks.lookup_table',
+            'sphere_sim.twin.simulator_node', 'sphere_control.controller_node',
+            'sphere_twin.cli', 'msg_defs.topics', 'node_runtime.ros_env'} <= set(MODULES)
+    rooms = {name.split('.')[1] for name in MODULES if name.startswith('sphere_sim.')}
+    assert rooms == set(ROOM_RANK), 'a module of sphere_sim sits outside the rooms'
+
+
+def test_no_package_or_room_imports_upward():
+    assert upward_imports() == []
+
+
+def test_no_modules_import_each_other_in_a_circle():
+    assert circles() == []
+
+
+def test_rclpy_only_in_node_modules():
+    bad = [name for name, targets in IMPORTS.items()
+           if any(t == 'rclpy' or t.startswith('rclpy.') for t in targets)
+           and not name.endswith('_node') and name not in RCLPY_ALLOWED]
+    assert bad == []
+
+
+def test_message_packages_only_in_the_contract_and_the_ros_side():
+    """The cores (sphere_sim but its twin room, sphere_control but its nodes) use no ROS types."""
+    ros_packages = ('rclpy', 'std_msgs', 'geometry_msgs', 'sensor_msgs', 'nav_msgs',
+                    'trajectory_msgs', 'visualization_msgs', 'diagnostic_msgs', 'rosgraph_msgs',
+                    'rcl_interfaces', 'builtin_interfaces')
+    cores = [name for name in MODULES
+             if (name.startswith('sphere_sim.') and not name.startswith('sphere_sim.twin'))
+             or (name.startswith('sphere_control.') and not name.endswith('_node'))]
+    bad = [name for name in cores
+           if any(t.split('.')[0] in ros_packages for t in IMPORTS[name])]
+    assert bad == []
+
+
+@pytest.mark.parametrize('source, expected', [
+    ('from sphere_twin.cli import main\n',
+     ['sphere_sim.model.fake -> sphere_twin.cli (package above)']),
+    ('from sphere_sim.kicks import design\n',
+     ['sphere_sim.model.fake -> sphere_sim.kicks.design (room above)']),
+    ('def f():\n    from sphere_sim.twin.plants import ContinuousPlant\n',
+     ['sphere_sim.model.fake -> sphere_sim.twin.plants (room above)']),
+    ('from sphere_sim.model.parameters import ParameterSet\nimport msg_defs.device\n', []),
+])
+def test_the_rules_catch_an_upward_import(tmp_path, monkeypatch, source, expected):
+    fake = tmp_path / 'fake.py'
+    fake.write_text(source)
+    monkeypatch.setitem(IMPORTS, 'sphere_sim.model.fake', imports_of('sphere_sim.model.fake', fake))
+    assert [b for b in upward_imports() if 'fake' in b] == expected
+
+
+def test_the_rules_catch_a_circle(monkeypatch):
+    monkeypatch.setitem(IMPORTS, 'sphere_sim.model.parameters',
+                        IMPORTS['sphere_sim.model.parameters'] | {'sphere_sim.model.scene'})
+    assert any('sphere_sim.model.parameters' in c and 'sphere_sim.model.scene' in c
+               for c in circles())
