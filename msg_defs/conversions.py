@@ -19,7 +19,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from msg_defs.device import BEAM_COUNT, NS_PER_S, VOLTAGE_LIMIT_V
 from msg_defs.topics import BEAM_NAMES, BEAM_STATE_JOINT_NAMES, SPHERE_FRAME, WORLD_FRAME
-from msg_defs.voltage_rules import check_segments, check_voltages
+from msg_defs.voltage_rules import check_segments, check_voltages, finite_vector
 
 # A published normal is a float64 unit vector; anything further from length 1 than this did
 # not come from a normalised rotation and is rejected.
@@ -41,21 +41,8 @@ def ns_from_time(stamp):
     return stamp.sec * NS_PER_S + stamp.nanosec
 
 
-def _finite_vector(values, length, what):
-    """``values`` as a float array of shape (length,), or ValueError."""
-    try:
-        array = np.asarray(values, dtype=float)
-    except (TypeError, ValueError) as error:
-        raise ValueError(f'{what}: not numeric ({error})') from None
-    if array.shape != (length,):
-        raise ValueError(f'{what}: expected shape ({length},), got {array.shape}')
-    if not np.all(np.isfinite(array)):
-        raise ValueError(f'{what}: values must be finite, got {array.tolist()}')
-    return array
-
-
 def _unit_vector(values, what):
-    vector = _finite_vector(values, 3, what)
+    vector = finite_vector(values, 3, what)
     norm = float(np.linalg.norm(vector))
     if abs(norm - 1.0) > UNIT_NORM_TOLERANCE:
         raise ValueError(f'{what}: expected a unit vector, got length {norm:.9g}')
@@ -182,7 +169,7 @@ def voltages_from_msg(msg):
     if len(effort) != len(names):
         raise ValueError(f'voltages: {len(names)} joint names but {len(effort)} effort values')
     by_name = dict(zip(names, effort, strict=True))
-    return _finite_vector([by_name[name] for name in BEAM_NAMES], BEAM_COUNT, 'voltages')
+    return finite_vector([by_name[name] for name in BEAM_NAMES], BEAM_COUNT, 'voltages')
 
 
 # --- beam state (sensor_msgs/JointState, joints beam_k_z and beam_k_phi) ------------------
@@ -237,14 +224,14 @@ def beam_state_from_msg(msg):
     if tuple(msg.name) != BEAM_STATE_JOINT_NAMES:
         raise ValueError(f'beam state: expected joint names {list(BEAM_STATE_JOINT_NAMES)}, '
                          f'got {list(msg.name)}')
-    position = _finite_vector(msg.position, 2 * BEAM_COUNT, 'beam position')
+    position = finite_vector(msg.position, 2 * BEAM_COUNT, 'beam position')
     return position[0::2].copy(), position[1::2].copy()
 
 
 def _interleave(z_values, phi_values, what):
     joined = np.empty(2 * BEAM_COUNT)
-    joined[0::2] = _finite_vector(z_values, BEAM_COUNT, f'{what} z')
-    joined[1::2] = _finite_vector(phi_values, BEAM_COUNT, f'{what} phi')
+    joined[0::2] = finite_vector(z_values, BEAM_COUNT, f'{what} z')
+    joined[1::2] = finite_vector(phi_values, BEAM_COUNT, f'{what} phi')
     return joined
 
 
@@ -312,7 +299,7 @@ def programme_from_msg(msg):
                              f'{len(names)} joints')
         times.append(point.time_from_start.sec
                      + point.time_from_start.nanosec / NS_PER_S)
-        rows.append(_finite_vector([effort[k] for k in order], BEAM_COUNT,
+        rows.append(finite_vector([effort[k] for k in order], BEAM_COUNT,
                                    f'pulse programme point {i}'))
     return np.array(times), np.array(rows)
 
@@ -335,14 +322,14 @@ def sphere_state_to_msg(position_m, quaternion_wxyz, velocity_m_per_s, omega_bod
     omega_body_rad_per_s : array_like, shape (3,)
         Angular velocity in ``sphere`` (rad/s).
     """
-    q = _finite_vector(quaternion_wxyz, 4, 'quaternion')
+    q = finite_vector(quaternion_wxyz, 4, 'quaternion')
     norm = float(np.linalg.norm(q))
     if norm == 0.0:
         raise ValueError('quaternion: zero length')
     q = q / norm
-    p = _finite_vector(position_m, 3, 'position')
-    v_world = _finite_vector(velocity_m_per_s, 3, 'velocity')
-    w = _finite_vector(omega_body_rad_per_s, 3, 'angular velocity')
+    p = finite_vector(position_m, 3, 'position')
+    v_world = finite_vector(velocity_m_per_s, 3, 'velocity')
+    w = finite_vector(omega_body_rad_per_s, 3, 'angular velocity')
     # v_body = R(q)^T v_world, with R(q) v = v + 2 u x (u x v + w v) for q = (w, u).
     u = -q[1:]  # the conjugate rotates world vectors into the body
     v_body = v_world + 2.0 * np.cross(u, np.cross(u, v_world) + q[0] * v_world)
@@ -366,7 +353,7 @@ def sphere_state_from_msg(msg):
         raise ValueError(f'sphere state: expected frames {WORLD_FRAME!r} -> {SPHERE_FRAME!r}, '
                          f'got {msg.header.frame_id!r} -> {msg.child_frame_id!r}')
     pose = msg.pose.pose
-    position = _finite_vector((pose.position.x, pose.position.y, pose.position.z), 3,
+    position = finite_vector((pose.position.x, pose.position.y, pose.position.z), 3,
                               'position')
     o = pose.orientation
-    return position, _finite_vector((o.w, o.x, o.y, o.z), 4, 'quaternion')
+    return position, finite_vector((o.w, o.x, o.y, o.z), 4, 'quaternion')

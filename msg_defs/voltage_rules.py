@@ -18,18 +18,24 @@ class VoltageRuleError(ValueError):
     """A beam command that breaks a rule; the message says which."""
 
 
+def finite_vector(values, length, what, error=ValueError):
+    """``values`` as a float array of shape (length,) of finite numbers, or ``error``."""
+    try:
+        array = np.asarray(values, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise error(f'{what}: not numeric ({exc})') from None
+    if array.shape != (length,):
+        raise error(f'{what}: expected shape ({length},), got {array.shape}')
+    if not np.all(np.isfinite(array)):
+        raise error(f'{what}: values must be finite, got {array.tolist()}')
+    return array
+
+
 def check_voltages(voltages_v, limit_v=VOLTAGE_LIMIT_V, what='voltages'):
     """``voltages_v`` as a float array of shape (BEAM_COUNT,) within [0, limit_v] V."""
     if not (math.isfinite(limit_v) and limit_v > 0):
         raise VoltageRuleError(f'voltage limit must be a positive number, got {limit_v}')
-    try:
-        volts = np.asarray(voltages_v, dtype=float)
-    except (TypeError, ValueError) as error:
-        raise VoltageRuleError(f'{what}: not numeric ({error})') from None
-    if volts.shape != (BEAM_COUNT,):
-        raise VoltageRuleError(f'{what}: expected shape ({BEAM_COUNT},), got {volts.shape}')
-    if not np.all(np.isfinite(volts)):
-        raise VoltageRuleError(f'{what}: values must be finite, got {volts.tolist()}')
+    volts = finite_vector(voltages_v, BEAM_COUNT, what, VoltageRuleError)
     # The electrostatic force goes with V^2, so a negative command is a sign error upstream,
     # not a request.
     if np.any(volts < 0.0):

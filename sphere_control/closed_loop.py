@@ -152,10 +152,9 @@ def run_closed_loop(controller, plant, start_normal, reference, settings=LoopSet
     LoopHistory
     """
     true_normal = np.asarray(start_normal, dtype=float)
-    times, normals, used, refs, clamped = [], [], [], [], []
-    actions, intensities = [], []
-    outcome, settle_step = None, None
-    rest_streak, best_error, kicks_since_best = 0, math.inf, 0
+    trace = _Trace()
+    stall = _StallWatch(settings)
+    outcome, settle_step, rest_streak = None, None, 0
     pending = None  # (normal used before the kick, command) awaiting its outcome
 
     def measure():
@@ -168,37 +167,19 @@ def run_closed_loop(controller, plant, start_normal, reference, settings=LoopSet
         seen = measure()
         if pending is not None:
             controller.observe(pending[0], pending[1], seen)
-        times.append(time_s)
-        normals.append(true_normal.copy())
-        used.append(seen)
-        refs.append(sample.normal)
-        clamped.append(sample.clamped)
-        if sample.clamped and settings.cone_policy is ConePolicy.REFUSE:
-            outcome = Outcome.UNREACHABLE
-            break
-        if reference.is_constant:
-            error = error_angle_rad(true_normal, sample.normal)
-            if error < best_error - settings.stall_progress_rad:
-                best_error, kicks_since_best = error, 0
-            elif kicks_since_best >= settings.stall_kicks:
-                outcome = Outcome.STALLED
-                break
-        if step == settings.max_steps:
+        trace.state(time_s, true_normal, seen, sample)
+        outcome = _stop(settings, reference, sample, stall, true_normal)
+        if outcome is not None or step == settings.max_steps:
             break
         command = controller.decide(seen, sample.normal)
         if command is None:
             pending = None
             rest_streak += 1
-            actions.append(NO_ACTION)
-            intensities.append(0.0)
+            trace.action(NO_ACTION, 0.0)
             if reference.is_constant and rest_streak >= settings.settle_rest_steps:
                 outcome, settle_step = Outcome.SETTLED, step + 1 - rest_streak
                 # the state is the last one recorded; close the history there
-                times.append((step + 1) * settings.kick_period_s)
-                normals.append(true_normal.copy())
-                used.append(seen)
-                refs.append(sample.normal)
-                clamped.append(sample.clamped)
+                trace.state((step + 1) * settings.kick_period_s, true_normal, seen, sample)
                 break
             continue
         rest_streak = 0
@@ -210,14 +191,63 @@ def run_closed_loop(controller, plant, start_normal, reference, settings=LoopSet
         if estimator is not None:
             estimator.predict(controller.expected_displacement_xy(seen, command))
         true_normal = result.normal
-        actions.append(command.action)
-        intensities.append(command.intensity)
-        kicks_since_best += 1
+        trace.action(command.action, command.intensity)
+        stall.kicked()
         pending = (seen, command)
     if outcome is None:
         outcome = Outcome.NOT_SETTLED if reference.is_constant else Outcome.COMPLETED
-    n = len(actions)
-    keep = n + 1
-    return LoopHistory(np.array(times[:keep]), np.array(normals[:keep]), np.array(used[:keep]),
-                       np.array(refs[:keep]), np.array(actions, dtype=int),
-                       np.array(intensities), np.array(clamped[:keep]), outcome, settle_step)
+    return trace.history(outcome, settle_step)
+
+
+def _stop(settings, reference, sample, stall, true_normal):
+    """The outcome that ends a run before its next decision, or None."""
+    if sample.clamped and settings.cone_policy is ConePolicy.REFUSE:
+        return Outcome.UNREACHABLE
+    if reference.is_constant and stall.stalled(error_angle_rad(true_normal, sample.normal)):
+        return Outcome.STALLED
+    return None
+
+
+class _Trace:
+    """A loop's history as it grows: one state per step, one action between two states."""
+
+    def __init__(self):
+        self.times, self.normals, self.used, self.refs, self.clamped = [], [], [], [], []
+        self.actions, self.intensities = [], []
+
+    def state(self, time_s, true_normal, seen, sample):
+        self.times.append(time_s)
+        self.normals.append(np.array(true_normal, dtype=float))
+        self.used.append(seen)
+        self.refs.append(sample.normal)
+        self.clamped.append(sample.clamped)
+
+    def action(self, action, intensity):
+        self.actions.append(action)
+        self.intensities.append(intensity)
+
+    def history(self, outcome, settle_step):
+        keep = len(self.actions) + 1  # a run that stopped mid-step has one state too many
+        return LoopHistory(np.array(self.times[:keep]), np.array(self.normals[:keep]),
+                           np.array(self.used[:keep]), np.array(self.refs[:keep]),
+                           np.array(self.actions, dtype=int), np.array(self.intensities),
+                           np.array(self.clamped[:keep]), outcome, settle_step)
+
+
+class _StallWatch:
+    """A setpoint run stalls when ``stall_kicks`` kicks bring no progress of more than
+    ``stall_progress_rad`` on its best error."""
+
+    def __init__(self, settings):
+        self.settings = settings
+        self.best_error = math.inf
+        self.kicks_since_best = 0
+
+    def stalled(self, error):
+        if error < self.best_error - self.settings.stall_progress_rad:
+            self.best_error, self.kicks_since_best = error, 0
+            return False
+        return self.kicks_since_best >= self.settings.stall_kicks
+
+    def kicked(self):
+        self.kicks_since_best += 1

@@ -11,7 +11,7 @@ import numpy as np
 
 from sphere_control.basic import BasicController, BasicParams
 from sphere_control.extended import ExtendedController, ExtendedParams
-from sphere_sim.kicks.discrete import angle_between
+from sphere_sim.model.rotations import angle_between
 
 DEFAULT_PHI_MIN_RAD = math.radians(0.05)  # Fig. 13's tighter resting band
 

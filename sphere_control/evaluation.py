@@ -32,7 +32,8 @@ from sphere_control.extended import (
 from sphere_control.kick_plants import EightDirectionPlant
 from sphere_control.perturbations import Mismatch, NoisySensor, PerturbedPlant
 from sphere_control.reference import CircleTrajectory, Setpoint
-from sphere_sim.kicks.discrete import PAPER_FULL_KICK_RAD, angle_between
+from sphere_sim.kicks.discrete import PAPER_FULL_KICK_RAD
+from sphere_sim.model.rotations import angle_between
 
 # The paper's numbers (§4.1, §5).
 PAPER_SETPOINT_NORMAL = (0.01, 0.02, 0.9997)
@@ -379,9 +380,23 @@ def evaluate(put, config=EvaluationConfig(), table=None, progress=print, continu
                'paper_full_kick_deg': math.degrees(PAPER_FULL_KICK_RAD),
                'kick_scale': put.kick_scale, 'kick_period_s': config.kick_period_s}
     rows, histories = [], {}
-    W = put.full_width_rad
+    _setpoint_figures(put, config, figures, rows, histories, progress)
+    main = _trajectory_figures(put, config, figures, rows, histories, progress)
+    _direction_figures(put, config, eight_plant, figures, rows, progress)
+    _noise_figures(put, config, main, figures, rows, histories, progress)
+    if table is not None and config.continuous_kicks > 0:
+        _continuous_figures(put, config, table, continuous_plant, figures, rows, progress)
+    return EvaluationReport(figures, rows, histories, main.ratio)
 
-    # Fig. 13 and Fig. 14: setpoint without and with a 12 deg direction mismatch.
+
+def trajectory_plant(put):
+    """The plant of Fig. 15: ``put`` with the kicks turned by the paper's 33 deg."""
+    return PerturbedPlant(put.plant, Mismatch(PAPER_TRAJECTORY_MISMATCH_RAD))
+
+
+def _setpoint_figures(put, config, figures, rows, histories, progress):
+    """Fig. 13 and Fig. 14: setpoint without and with a 12 deg direction mismatch."""
+    W = put.full_width_rad
     for fig, mismatch in (('fig13', 0.0), ('fig14', PAPER_SETPOINT_MISMATCH_RAD)):
         plant = PerturbedPlant(put.plant, Mismatch(mismatch))
         figures[fig] = []
@@ -397,8 +412,11 @@ def evaluate(put, config=EvaluationConfig(), table=None, progress=print, continu
         progress(f'{fig}: setpoint runs done')
     _setpoint_rows(rows, figures)
 
-    # Fig. 15: trajectory under a 33 deg mismatch, and its dependence on the kick period.
-    plant33 = PerturbedPlant(put.plant, Mismatch(PAPER_TRAJECTORY_MISMATCH_RAD))
+
+def _trajectory_figures(put, config, figures, rows, histories, progress):
+    """Fig. 15: trajectory under a 33 deg mismatch, and its dependence on the kick
+    period; returns the main tracking study."""
+    plant33 = trajectory_plant(put)
     main = tracking_study(put, plant33, config)
     histories['fig15'] = main
     figures['fig15'] = {'kick_period_s': config.kick_period_s,
@@ -418,8 +436,12 @@ def evaluate(put, config=EvaluationConfig(), table=None, progress=print, continu
         rows.append(_row('Fig. 15 trajectory, 33 deg mismatch',
                          f'MSE extended/basic at {period * 1e3:.0f} ms per kick', '-',
                          f'{s["mse_ratio"]:.3f}'))
+    return main
 
-    # Beyond the paper: eight directions against four (no mismatch).
+
+def _direction_figures(put, config, eight_plant, figures, rows, progress):
+    """Beyond the paper: eight directions against four (no mismatch)."""
+    W = put.full_width_rad
     eight = EightDirectionPlant(put.plant) if eight_plant is None else eight_plant
     figures['directions'] = {}
     for label, plant in (('4', put.plant), ('8', eight)):
@@ -447,7 +469,12 @@ def evaluate(put, config=EvaluationConfig(), table=None, progress=print, continu
         rows.append(_row('8 vs 4 directions, trajectory (no mismatch)',
                          f'{kind}: tracking MSE (8 vs 4)', '-', f'{eig:.3g} vs {four:.3g}'))
 
-    # Beyond the paper: noisy measurements, with and without a Kalman filter; the basic
+
+def _noise_figures(put, config, main, figures, rows, histories, progress):
+    """Beyond the paper: noisy measurements, with and without a Kalman filter; the
+    basic controller keeps the Phi_min that was best without noise."""
+    W = put.full_width_rad
+    plant33 = trajectory_plant(put)
     # controller keeps the Phi_min that was best without noise.
     figures['kalman'] = {}
     best_basic = (main.basic_phi_min_rad / W,)
@@ -468,23 +495,23 @@ def evaluate(put, config=EvaluationConfig(), table=None, progress=print, continu
                              f'{entry["raw"][f"mse_{kind}"]:.3g}'))
     progress('kalman: runs done')
 
-    # The continuous model, a few kicks.
-    if table is not None and config.continuous_kicks > 0:
-        cont = continuous_study(table, put, config, continuous_plant)
-        figures['continuous'] = cont
-        progress('continuous: runs done')
-        rows.append(_row('setpoint on the continuous model',
-                         f'{cont["kicks"]} kicks: table one-step error (deg)', '-',
-                         f'max {max(cont["one_step_error_deg"], default=0.0):.2e} of kicks '
-                         f'up to {max(cont["one_step_rotation_deg"], default=0.0):.4f}'))
-        rows.append(_row('setpoint on the continuous model', 'error after the kicks (deg), '
-                         'continuous vs table', '-',
-                         f'{cont["error_continuous_deg"][-1]:.4f} vs '
-                         f'{cont["error_table_deg"][-1]:.4f}'))
-        rows.append(_row('setpoint on the continuous model', 'transient peak per kick (deg, '
-                         'hidden by the discrete model)', 'overshoot noted (§6)',
-                         f'max {max(cont["peak_deviation_deg"], default=0.0):.3f}'))
-    return EvaluationReport(figures, rows, histories, main.ratio)
+
+def _continuous_figures(put, config, table, continuous_plant, figures, rows, progress):
+    """The continuous model, a few kicks."""
+    cont = continuous_study(table, put, config, continuous_plant)
+    figures['continuous'] = cont
+    progress('continuous: runs done')
+    rows.append(_row('setpoint on the continuous model',
+                     f'{cont["kicks"]} kicks: table one-step error (deg)', '-',
+                     f'max {max(cont["one_step_error_deg"], default=0.0):.2e} of kicks '
+                     f'up to {max(cont["one_step_rotation_deg"], default=0.0):.4f}'))
+    rows.append(_row('setpoint on the continuous model', 'error after the kicks (deg), '
+                     'continuous vs table', '-',
+                     f'{cont["error_continuous_deg"][-1]:.4f} vs '
+                     f'{cont["error_table_deg"][-1]:.4f}'))
+    rows.append(_row('setpoint on the continuous model', 'transient peak per kick (deg, '
+                     'hidden by the discrete model)', 'overshoot noted (§6)',
+                     f'max {max(cont["peak_deviation_deg"], default=0.0):.3f}'))
 
 
 # The paper's findings for the setpoint figures, by Phi_min (0.05 deg, 0.25 deg).

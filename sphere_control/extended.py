@@ -22,7 +22,8 @@ from sphere_control.geometry import (
     wrap_angle_rad,
 )
 from sphere_control.rotation_network import NetworkShape, RotationWidthNetwork
-from sphere_sim.kicks.discrete import DIAGONAL_DIRECTIONS_RAD, angle_between
+from sphere_sim.kicks.discrete import DIAGONAL_DIRECTIONS_RAD
+from sphere_sim.model.rotations import angle_between
 
 # A kick shorter than this fraction of the model's full width says little about its direction
 # (its angle is dominated by measurement noise and interpolation), so sigma_a is not updated.

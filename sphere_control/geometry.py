@@ -8,7 +8,8 @@ import math
 
 import numpy as np
 
-from sphere_sim.kicks.discrete import angle_between, normal_from_xy
+from sphere_sim.kicks.discrete import normal_from_xy
+from sphere_sim.model.rotations import angle_between
 
 FULL_TURN_RAD = 2.0 * math.pi
 

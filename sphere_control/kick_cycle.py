@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from sphere_control.geometry import error_angle_rad, error_direction_rad
-from sphere_sim.kicks.discrete import angle_between
+from sphere_sim.model.rotations import angle_between
 
 # Samples at or beyond the kick window with an angular speed below this count as settled. A
 # landed sphere is held by its contacts' friction (docs/parameters.md), so only the kick's own

@@ -21,7 +21,7 @@ from msg_defs.conversions import (
 )
 from msg_defs.device import NS_PER_S
 from msg_defs.topics import PULSE_PROGRAM, SPHERE_REFERENCE, SURFACE_NORMAL, VOLTAGE_COMMAND
-from sphere_sim.kicks.discrete import angle_between
+from sphere_sim.model.rotations import angle_between
 from sphere_sim.twin.plants import TIME_TOL_S
 from sphere_twin.bag.reader import BagError, deserialize, read_messages
 

@@ -7,6 +7,7 @@ import re
 import numpy as np
 import pytest
 
+from sphere_sim.studies import work_precision as wp
 from sphere_twin.commands import bench
 
 
@@ -18,32 +19,32 @@ def row(method, rtol, error, wall_s, scene='s'):
 def test_time_at_error_interpolates_in_log_log():
     rows = [row('fast', 1e-3, 1e-4, 1.0), row('fast', 1e-4, 1e-8, 100.0)]
     # 1e-6 is halfway in log(error), so the time is halfway in log(time).
-    assert bench.time_at_error(rows, 's', 'fast', 1e-6) == pytest.approx(10.0)
+    assert wp.time_at_error(rows, 's', 'fast', 1e-6) == pytest.approx(10.0)
 
 
 def test_time_at_error_takes_the_loosest_run_that_is_accurate_enough():
     rows = [row('fast', 1e-3, 1e-7, 2.0), row('fast', 1e-4, 1e-9, 5.0)]
-    assert bench.time_at_error(rows, 's', 'fast', 1e-6) == 2.0
+    assert wp.time_at_error(rows, 's', 'fast', 1e-6) == 2.0
 
 
 def test_time_at_error_is_nan_when_no_run_is_accurate_enough():
     rows = [row('LSODA', 1e-3, 1e-3, 1.0), row('LSODA', 1e-4, 1e-5, 2.0)]
-    assert math.isnan(bench.time_at_error(rows, 's', 'LSODA', 1e-6))
+    assert math.isnan(wp.time_at_error(rows, 's', 'LSODA', 1e-6))
 
 
 def test_run_reaching_is_the_run_that_bounds_the_interpolation():
     rows = [row('LSODA', 1e-3, 1e-4, 1.0), row('LSODA', 1e-4, 1e-8, 100.0),
             row('LSODA', 1e-5, 1e-9, 200.0)]
-    assert bench.run_reaching(rows, 's', 'LSODA', 1e-6) == (1e-4, 1e-8, 100.0)
-    assert bench.run_reaching(rows, 's', 'LSODA', 1e-3) == (1e-3, 1e-4, 1.0)
-    assert all(math.isnan(v) for v in bench.run_reaching(rows, 's', 'LSODA', 1e-10))
+    assert wp.run_reaching(rows, 's', 'LSODA', 1e-6) == (1e-4, 1e-8, 100.0)
+    assert wp.run_reaching(rows, 's', 'LSODA', 1e-3) == (1e-3, 1e-4, 1.0)
+    assert all(math.isnan(v) for v in wp.run_reaching(rows, 's', 'LSODA', 1e-10))
 
 
 def test_only_the_reference_run_is_marked_as_such():
     rows = [{**row('fast', 1e-10, 0.0, 9.0), 'note': '3 timed run(s)'},
             row('fast', 1e-9, 1e-12, 2.0), row('CVODE', 1e-10, 1e-11, 1.0)]
-    bench.mark_reference(rows, 'fast', 1e-10)
-    assert rows[0]['note'] == '3 timed run(s); ' + bench.REFERENCE_NOTE
+    wp.mark_reference(rows, 'fast', 1e-10)
+    assert rows[0]['note'] == '3 timed run(s); ' + wp.REFERENCE_NOTE
     assert 'note' not in rows[1] and 'note' not in rows[2]
 
 
@@ -55,18 +56,18 @@ def quick_run(tmp_path_factory):
     out = tmp_path_factory.mktemp('bench')
     stream = io.StringIO()
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(bench, 'QUICK_REPEATS', QUICK_RUN_REPEATS)
-        rows, summary = bench.work_precision(quick=True, out_dir=out, stream=stream)
+        patch.setattr(wp, 'QUICK_REPEATS', QUICK_RUN_REPEATS)
+        rows, summary = bench.run_work_precision_bench(quick=True, out_dir=out, stream=stream)
     return out, stream.getvalue(), rows, summary
 
 
 def test_quick_run_times_every_point_as_often_as_asked(quick_run):
     _, _, rows, _ = quick_run
-    assert len(rows) == len(bench.QUICK_METHODS) * len(bench.QUICK_TOLERANCES)
+    assert len(rows) == len(wp.QUICK_METHODS) * len(wp.QUICK_TOLERANCES)
     for r in rows:
         assert r['status'] == 'ok' and 'times' not in r
         assert r['note'] == f'{QUICK_RUN_REPEATS} timed run(s)'
-        assert 0.0 < r['wall_s'] < bench.QUICK_RUN_BUDGET_S
+        assert 0.0 < r['wall_s'] < wp.QUICK_RUN_BUDGET_S
 
 
 def test_quick_run_writes_beside_the_full_results(quick_run):
@@ -87,8 +88,8 @@ def test_quick_run_ends_with_the_summary_line(quick_run):
 def test_quick_run_times_the_best_library_methods_bare_evaluations(quick_run):
     _, printed, rows, summary = quick_run
     p = summary['per_scene']['diagonal_kick']
-    rtol, _, wall_s = bench.run_reaching(rows, 'diagonal_kick', p['best_scipy'],
-                                         bench.TARGET_ANGLE_ERROR_RAD)
+    rtol, _, wall_s = wp.run_reaching(rows, 'diagonal_kick', p['best_scipy'],
+                                         wp.TARGET_ANGLE_ERROR_RAD)
     assert (p['kernels_rtol'], p['kernels_run_s']) == (rtol, wall_s)
     assert summary['kernels_s'] == p['kernels_s'] > 0.0
     assert f"{p['best_scipy']} at rtol {p['kernels_rtol']:g}: its kernel evaluations" in printed
@@ -98,7 +99,7 @@ def test_quick_run_errors_fall_with_the_tolerance(quick_run):
     _, _, rows, summary = quick_run
     # The two reference methods agree far below the errors being measured.
     assert summary['agreement']['diagonal_kick'][0] < 1e-8
-    for method in bench.QUICK_METHODS:
+    for method in wp.QUICK_METHODS:
         errors = [r['angle_error_rad'] for r in sorted(rows, key=lambda r: -r['rtol'])
                   if r['method'] == method]
         assert errors[-1] < errors[0] / 100, method
@@ -116,7 +117,7 @@ def test_final_angle_error_is_the_largest_over_the_final_window(model):
     o = model.sphere_offset
     t = np.arange(0.0, 0.0301, 1e-3)
     tilt_rad = np.zeros(t.size)
-    tilt_rad[t < t[-1] - bench.FINAL_WINDOW_S - 1e-9] = 1e-3  # before the window
+    tilt_rad[t < t[-1] - wp.FINAL_WINDOW_S - 1e-9] = 1e-3  # before the window
     tilt_rad[-5] = 3e-6  # inside it
     tilt_rad[-1] = 0.0  # meets the reference at the end
 
@@ -128,7 +129,7 @@ def test_final_angle_error_is_the_largest_over_the_final_window(model):
         return SimpleNamespace(t=t, x=x, final_state=x[:, -1])
 
     scene = SimpleNamespace(model=model)
-    final, state, last = bench.errors(scene, trajectory(tilt_rad), trajectory(0.0 * tilt_rad))
+    final, state, last = wp.errors(scene, trajectory(tilt_rad), trajectory(0.0 * tilt_rad))
     assert final == pytest.approx(3e-6, rel=1e-6)
     assert last == 0.0
     assert state > 0.0

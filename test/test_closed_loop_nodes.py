@@ -6,7 +6,8 @@ import pytest
 
 from msg_defs.conversions import surface_normal_from_msg
 from msg_defs.topics import CONTROLLER_STATUS, SURFACE_NORMAL
-from sphere_sim.kicks.discrete import angle_between, normal_from_xy
+from sphere_sim.kicks.discrete import normal_from_xy
+from sphere_sim.model.rotations import angle_between
 from sphere_twin.processes import parameter_args
 from sphere_twin.testing import TopicProbe
 

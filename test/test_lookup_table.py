@@ -117,7 +117,7 @@ def test_shipped_table_matches_the_committed_optimised_kick(shipped):
     """From rest, the table's full kick is the optimisation's result, turned for each action."""
     from pathlib import Path
 
-    from sphere_sim.kicks.discrete import angle_between
+    from sphere_sim.model.rotations import angle_between
 
     optimised = json.loads((Path(__file__).parents[1] / 'bench' / 'results' /
                             'kick_optimization.json').read_text())

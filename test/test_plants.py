@@ -7,9 +7,10 @@ import pytest
 
 from msg_defs.conversions import programme_from_msg, programme_to_msg
 from sphere_sim.kicks.design import simulate_kick
-from sphere_sim.kicks.discrete import angle_between, normal_from_xy
+from sphere_sim.kicks.discrete import normal_from_xy
 from sphere_sim.kicks.lookup_table import LookupTable
 from sphere_sim.model.programme import Pulse, PulseProgramme, VoltageSchedule
+from sphere_sim.model.rotations import angle_between
 from sphere_sim.twin.plant_setup import build_plant
 from sphere_sim.twin.plants import (
     ContinuousPlant,

@@ -7,8 +7,8 @@ import pytest
 from test_nodes_in_process import BAD_PROGRAMMES, BAD_VOLTAGES
 
 from msg_defs.topics import PULSE_PROGRAM, VOLTAGE_COMMAND
-from sphere_sim.kicks.discrete import angle_between
 from sphere_sim.kicks.lookup_table import LookupTable
+from sphere_sim.model.rotations import angle_between
 from sphere_twin.testing import lockstep_twin
 
 pytestmark = pytest.mark.ros

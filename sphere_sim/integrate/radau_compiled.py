@@ -157,10 +157,219 @@ def _predict_factor(h_abs, h_abs_old, error_norm, error_norm_old):
 
 
 @numba.njit(cache=True)
-def integrate(t_start, t_end, x_start, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w,
-              rtol, atol, jac_scale, t_eval, x_eval, i_eval, h_first, max_step, max_steps,
-              onset_depth_m, jac_rate, jac_central, counters):
+def _rhs(t, x, u, arrays, out, diag, counters):
+    """The model's right-hand side into ``out``, counted."""
+    p, flags, directions, rbf_cz, rbf_cphi, rbf_w = arrays
+    dyn.rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, out, diag)
+    counters[C_NFEV] += 1
+
+
+@numba.njit(cache=True)
+def _new_jacobian(t, x, u, arrays, jac_scale, J, central, layout, J_RP, counters):
+    """:func:`_jacobian` on the bundled arrays, counted; True if block-arrow."""
+    p, flags, directions, rbf_cz, rbf_cphi, rbf_w = arrays
+    pos, red, pos_of, arrow_start, arrow_end, arrow_tail = (layout[0], layout[2], layout[3],
+                                                            layout[4], layout[5], layout[6])
+    counters[C_NJEV] += 1
+    return _jacobian(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, jac_scale, J,
+                     central, red, pos_of, pos, J_RP, arrow_start, arrow_end, arrow_tail)
+
+
+@numba.njit(cache=True)
+def _initial_step(t, y, f, u, arrays, rtol, atol, interval, max_step, diag, counters):
+    """First step as scipy's ``select_initial_step`` with error-estimator order 3."""
+    n = y.size
+    sc = np.empty(n)
+    for i in range(n):
+        sc[i] = atol[i] + abs(y[i]) * rtol
+    d0 = _rms(y, sc)
+    d1 = _rms(f, sc)
+    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    h0 = min(h0, interval)
+    y1 = y + h0 * f
+    f1 = np.empty(n)
+    _rhs(t + h0, y1, u, arrays, f1, diag, counters)
+    d2 = _rms(f1 - f, sc) / h0
+    tiny = d1 <= 1e-15 and d2 <= 1e-15
+    h1 = max(1e-6, h0 * 1e-3) if tiny else (0.01 / max(d1, d2)) ** 0.25
+    return min(100.0 * h0, h1, interval, max_step)
+
+
+@numba.njit(cache=True)
+def _extrapolate(Z, y, t, h, dense):
+    """Newton's starting guess: the previous step's collocation polynomial at the new stage
+    times, or zero without one (scipy's Radau does the same)."""
+    have_dense, t_old, h_dense, y_old, Q = dense
+    n = y.size
+    for i in range(3):
+        for j in range(n):
+            if have_dense:
+                xs = (t + h * C[i] - t_old) / h_dense
+                Z[i, j] = (y_old[j] + Q[j, 0] * xs + Q[j, 1] * xs * xs
+                           + Q[j, 2] * xs * xs * xs) - y[j]
+            else:
+                Z[i, j] = 0.0
+
+
+@numba.njit(cache=True)
+def _collocation_newton(t, h, y, u, arrays, Z, scale, newton_tol, faccon, lu, layout,
+                        structures, work, diag, counters):
+    """Simplified Newton on the collocation system (scipy's ``solve_collocation_system``),
+    with RADAU5's first-iterate test. ``Z`` holds the starting guess and, on convergence,
+    the stage increments.
+
+    Returns (converged, iterations, last contraction rate, faccon).
+    """
+    W, F, dW, stage, f_real, f_cplx = work
+    mr = MU_REAL / h
+    mc = complex(MU_COMPLEX_RE, MU_COMPLEX_IM) / h
+    for i in range(3):
+        for j in range(y.size):
+            W[i, j] = TI[i, 0] * Z[0, j] + TI[i, 1] * Z[1, j] + TI[i, 2] * Z[2, j]
+    dW_norm_old = -1.0
+    rate = -1.0
+    # Hairer's RADAU5: the first iteration is judged by the contraction of the previous
+    # Newton solve, relaxed towards 1, instead of always taking a second.
+    faccon = max(faccon, EPS) ** FACCON_RELAX
+    k = 0
+    for k in range(NEWTON_MAXITER):
+        if not _stage_derivatives(t, h, y, u, arrays, Z, stage, F, diag, counters):
+            return False, k + 1, rate, faccon
+        dW_norm = _newton_increment(F, W, dW, mr, mc, scale, lu, layout, structures, f_real,
+                                    f_cplx)
+        if dW_norm_old >= 0.0:
+            rate = dW_norm / dW_norm_old
+        if rate >= 0.0 and (rate >= 1.0 or rate ** (NEWTON_MAXITER - k)
+                            / (1.0 - rate) * dW_norm > newton_tol):
+            return False, k + 1, rate, faccon
+        _apply_increment(W, dW, Z)
+        if rate >= 0.0:
+            faccon = rate / (1.0 - rate)
+        if dW_norm == 0.0 or faccon * dW_norm < newton_tol:
+            return True, k + 1, rate, faccon
+        dW_norm_old = dW_norm
+    return False, k + 1, rate, faccon
+
+
+@numba.njit(cache=True)
+def _apply_increment(W, dW, Z):
+    """W += dW, and the stage increments Z = T W back from the transformed ones."""
+    n = W.shape[1]
+    for i in range(3):
+        for j in range(n):
+            W[i, j] += dW[i, j]
+    for i in range(3):
+        for j in range(n):
+            Z[i, j] = T[i, 0] * W[0, j] + T[i, 1] * W[1, j] + T[i, 2] * W[2, j]
+
+
+@numba.njit(cache=True)
+def _newton_increment(F, W, dW, mr, mc, scale, lu, layout, structures, f_real, f_cplx):
+    """One simplified-Newton increment ``dW`` of the transformed stages (scipy's real and
+    complex systems, solved side by side); returns its scaled RMS norm."""
+    n = scale.size
+    for j in range(n):
+        f_real[j] = (TI[0, 0] * F[0, j] + TI[0, 1] * F[1, j]
+                     + TI[0, 2] * F[2, j] - mr * W[0, j])
+        fc_re = TI[1, 0] * F[0, j] + TI[1, 1] * F[1, j] + TI[1, 2] * F[2, j]
+        fc_im = TI[2, 0] * F[0, j] + TI[2, 1] * F[1, j] + TI[2, 2] * F[2, j]
+        f_cplx[j] = complex(fc_re, fc_im) - mc * complex(W[1, j], W[2, j])
+    newton_system.solve_pair(lu[0], lu[1], lu[2], lu[3], lu[4], mr, mc, f_real, f_cplx,
+                             layout[2], layout[0], layout[1], lu[5], lu[6], structures[0],
+                             structures[1])
+    acc = 0.0
+    for j in range(n):
+        dW[0, j] = f_real[j]
+        dW[1, j] = f_cplx[j].real
+        dW[2, j] = f_cplx[j].imag
+        for i in range(3):
+            r = dW[i, j] / scale[j]
+            acc += r * r
+    return math.sqrt(acc / (3 * n))
+
+
+@numba.njit(cache=True)
+def _stage_derivatives(t, h, y, u, arrays, Z, stage, F, diag, counters):
+    """The right-hand side at the three stages into ``F``; False if any value is not finite."""
+    n = y.size
+    finite = True
+    for i in range(3):
+        for j in range(n):
+            stage[j] = y[j] + Z[i, j]
+        _rhs(t + C[i] * h, stage, u, arrays, F[i], diag, counters)
+        for j in range(n):
+            if not math.isfinite(F[i, j]):
+                finite = False
+    return finite
+
+
+@numba.njit(cache=True)
+def _error_norm(t, y, f, u, arrays, Z, h, h_lu, rejected, atol, rtol, lu, layout,
+                structure_r, y_new, err, scale, stage, ZE, f_new, diag, counters):
+    """The embedded error estimate of the step (scipy's), filtered through the real Newton
+    matrix; after a rejection an estimate above 1 is refined once, as scipy does. Fills
+    ``y_new`` with the step's end state."""
+    LU_real, piv_real, J_RP, work_real = lu[0], lu[1], lu[4], lu[5]
+    pos, vel, red = layout[0], layout[1], layout[2]
+    start_r, end_r, tail_r = structure_r
+    n = y.size
+    for j in range(n):
+        y_new[j] = y[j] + Z[2, j]
+        ZE[j] = (Z[0, j] * E[0] + Z[1, j] * E[1] + Z[2, j] * E[2]) / h
+        err[j] = f[j] + ZE[j]
+        scale[j] = atol[j] + max(abs(y[j]), abs(y_new[j])) * rtol
+    newton_system.solve(LU_real, piv_real, J_RP, MU_REAL / h_lu, err, red, pos, vel,
+                        work_real, start_r, end_r, tail_r)
+    error_norm = _rms(err, scale)
+    if rejected and error_norm > 1.0:
+        for j in range(n):
+            stage[j] = y[j] + err[j]
+        _rhs(t, stage, u, arrays, f_new, diag, counters)
+        for j in range(n):
+            err[j] = f_new[j] + ZE[j]
+        newton_system.solve(LU_real, piv_real, J_RP, MU_REAL / h_lu, err, red, pos, vel,
+                            work_real, start_r, end_r, tail_r)
+        error_norm = _rms(err, scale)
+    if not math.isfinite(error_norm):
+        error_norm = 1e10
+    return error_norm
+
+
+@numba.njit(cache=True)
+def _dense_output(y, Z, y_old, Q):
+    """Keep the accepted step's collocation polynomial: ``y_old`` and its coefficients ``Q``."""
+    for j in range(y.size):
+        y_old[j] = y[j]
+        for m in range(3):
+            Q[j, m] = Z[0, j] * P[0, m] + Z[1, j] * P[1, m] + Z[2, j] * P[2, m]
+
+
+@numba.njit(cache=True)
+def _write_samples(t_eval, x_eval, i_eval, t_new, t_old, h_dense, y_old, Q):
+    """Samples up to ``t_new`` from the dense output; returns the next sample's index."""
+    while i_eval < t_eval.size and t_eval[i_eval] <= t_new:
+        xs = (t_eval[i_eval] - t_old) / h_dense
+        for j in range(y_old.size):
+            x_eval[j, i_eval] = (y_old[j] + Q[j, 0] * xs + Q[j, 1] * xs * xs
+                                 + Q[j, 2] * xs * xs * xs)
+        i_eval += 1
+    return i_eval
+
+
+# Exempt from C901: the accept/reject loop of a compiled integrator. Its state (step size,
+# LU validity, Jacobian age, dense output, Newton's contraction) lives in locals that numba
+# keeps in registers; the seams scipy has (initial step, collocation Newton, error estimate,
+# dense output) are functions above, and what remains is the control flow between them.
+@numba.njit(cache=True)
+def integrate(t_start, t_end, x_start, u, arrays, rtol, atol, jac_scale, t_eval,  # noqa: C901
+              x_eval, i_eval, h_first, max_step, max_steps, onset_depth_m, jac_rate,
+              jac_central, counters):
     """Integrate dx/dt = rhs(t, x, u) from ``t_start`` towards ``t_end`` with Radau IIA.
+
+    The step loop of scipy's ``Radau._step_impl``: the initial step (:func:`_initial_step`),
+    the collocation Newton (:func:`_collocation_newton`), the error estimate
+    (:func:`_error_norm`), the dense output (:func:`_dense_output`, :func:`_write_samples`),
+    plus the contact-onset and electrode checks of the module docstring.
 
     Parameters
     ----------
@@ -169,8 +378,9 @@ def integrate(t_start, t_end, x_start, u, p, flags, directions, rbf_cz, rbf_cphi
     x_start : ndarray, shape (n,)
     u : ndarray, shape (n_beams,)
         Beam voltages (V).
-    p, flags, directions, rbf_cz, rbf_cphi, rbf_w
-        The packed model (:class:`sphere_sim.model.assembly.Model`).
+    arrays : tuple
+        The packed model, ``Model.kernel_arrays``: (p, flags, directions, rbf_cz, rbf_cphi,
+        rbf_w).
     rtol : float
     atol : ndarray, shape (n,)
     jac_scale : ndarray, shape (n,)
@@ -211,66 +421,41 @@ def integrate(t_start, t_end, x_start, u, p, flags, directions, rbf_cz, rbf_cphi
     i_eval : int
         Index of the first sample not yet written.
     """
+    p, flags, directions = arrays[0], arrays[1], arrays[2]
     n = x_start.size
     diag = np.empty(dyn.N_DIAG)
     t = t_start
     y = x_start.copy()
     f = np.empty(n)
-    dyn.rhs_kernel(t, y, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, f, diag)
-    counters[C_NFEV] += 1
+    _rhs(t, y, u, arrays, f, diag, counters)
     rtol = max(rtol, 100.0 * EPS)
     newton_tol = max(10.0 * EPS / rtol, min(0.03, rtol**0.5))
-    interval = t_end - t_start
-
-    # Initial step as scipy's select_initial_step with error-estimator order 3.
     if h_first > 0.0:
-        h_abs = min(h_first, interval, max_step)
+        h_abs = min(h_first, t_end - t_start, max_step)
     else:
-        sc = np.empty(n)
-        for i in range(n):
-            sc[i] = atol[i] + abs(y[i]) * rtol
-        d0 = _rms(y, sc)
-        d1 = _rms(f, sc)
-        h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
-        h0 = min(h0, interval)
-        y1 = y + h0 * f
-        f1 = np.empty(n)
-        dyn.rhs_kernel(t + h0, y1, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, f1, diag)
-        counters[C_NFEV] += 1
-        d2 = _rms(f1 - f, sc) / h0
-        tiny = d1 <= 1e-15 and d2 <= 1e-15
-        h1 = max(1e-6, h0 * 1e-3) if tiny else (0.01 / max(d1, d2)) ** 0.25
-        h_abs = min(100.0 * h0, h1, interval, max_step)
+        h_abs = _initial_step(t, y, f, u, arrays, rtol, atol, t_end - t_start, max_step, diag,
+                              counters)
 
-    # Newton systems without the kinematic states (sphere_sim.integrate.newton_system), block-arrow
-    # where that succeeds, dense otherwise.
-    pos, vel, red, pos_of, arrow_start, arrow_end, arrow_tail = newton_system.model_layout(
-        flags, n)
-    m = red.size
-    dense_start, dense_end, dense_tail = block_lu.dense_structure(m)
+    # Newton systems without the kinematic states (sphere_sim.integrate.newton_system),
+    # block-arrow where that succeeds, dense otherwise.
+    layout = newton_system.model_layout(flags, n)
+    m = layout[2].size
+    dense_structure = block_lu.dense_structure(m)
     J = np.empty((n, n))
-    J_RP = np.empty((m, pos.size))
-    arrow = _jacobian(t, y, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, jac_scale, J,
-                      jac_central, red, pos_of, pos, J_RP, arrow_start, arrow_end, arrow_tail)
-    counters[C_NJEV] += 1
+    J_RP = np.empty((m, layout[0].size))
+    arrow = _new_jacobian(t, y, u, arrays, jac_scale, J, jac_central, layout, J_RP, counters)
     current_jac = True
-    start_r, end_r, tail_r = arrow_start, arrow_end, arrow_tail
-    start_c, end_c, tail_c = arrow_start, arrow_end, arrow_tail
-    work_real = np.empty(m)
-    work_complex = np.empty(m, dtype=np.complex128)
-    LU_real = np.empty((m, m))
-    LU_complex = np.empty((m, m), dtype=np.complex128)
-    piv_real = np.empty(m, dtype=np.int64)
-    piv_complex = np.empty(m, dtype=np.int64)
+    arrow_structure = (layout[4], layout[5], layout[6])
+    structures = (arrow_structure, arrow_structure)
+    lu = (np.empty((m, m)), np.empty(m, dtype=np.int64), np.empty((m, m), dtype=np.complex128),
+          np.empty(m, dtype=np.int64), J_RP, np.empty(m), np.empty(m, dtype=np.complex128))
     have_lu = False
     h_lu = 0.0
     h_abs_old = -1.0
     error_norm_old = -1.0
-    have_dense = False
-    Q = np.zeros((n, 3))
-    t_old = t
-    h_dense = 1.0
     y_old = y.copy()
+    Q = np.zeros((n, 3))
+    dense = (False, t, 1.0, y_old, Q)
 
     n_gaps = n_contacts(flags)
     check_onset = onset_depth_m > 0.0 and n_gaps > 0
@@ -282,18 +467,14 @@ def integrate(t_start, t_end, x_start, u, p, flags, directions, rbf_cz, rbf_cphi
     gaps_stage = np.empty(max(n_gaps, 1))
 
     Z = np.zeros((3, n))
-    W = np.zeros((3, n))
-    F = np.zeros((3, n))
-    dW = np.zeros((3, n))
     stage = np.empty(n)
-    f_real = np.empty(n)
-    f_cplx = np.empty(n, dtype=np.complex128)
+    work = (np.zeros((3, n)), np.zeros((3, n)), np.zeros((3, n)), stage, np.empty(n),
+            np.empty(n, dtype=np.complex128))
     scale = np.empty(n)
     err = np.empty(n)
     ZE = np.empty(n)
     y_new = np.empty(n)
     f_new = np.empty(n)
-    mu_c = complex(MU_COMPLEX_RE, MU_COMPLEX_IM)
     steps_here = 0
     faccon = 1.0
 
@@ -304,12 +485,8 @@ def integrate(t_start, t_end, x_start, u, p, flags, directions, rbf_cz, rbf_cphi
             return STATUS_CHUNK, t, y, h_abs, i_eval
         min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
         h_proposed = h_abs
-        if h_abs > max_step:
-            h_abs = max_step
-            h_abs_old = -1.0
-            error_norm_old = -1.0
-        elif h_abs < min_step:
-            h_abs = min_step
+        if h_abs > max_step or h_abs < min_step:
+            h_abs = max_step if h_abs > max_step else min_step
             h_abs_old = -1.0
             error_norm_old = -1.0
         if check_onset:
@@ -325,26 +502,16 @@ def integrate(t_start, t_end, x_start, u, p, flags, directions, rbf_cz, rbf_cphi
         while not accepted:
             if h_abs < min_step:
                 return STATUS_STEP_TOO_SMALL, t, y, h_abs, i_eval
-            t_new = t + h_abs
-            if t_new > t_end:
-                t_new = t_end
+            t_new = min(t + h_abs, t_end)
             h = t_new - t
             h_abs = h
             if have_lu and h != h_lu:
                 have_lu = False
-            # Starting guess: extrapolate the previous step's collocation polynomial.
-            for i in range(3):
-                for j in range(n):
-                    if have_dense:
-                        xs = (t + h * C[i] - t_old) / h_dense
-                        Z[i, j] = (y_old[j] + Q[j, 0] * xs + Q[j, 1] * xs * xs
-                                   + Q[j, 2] * xs * xs * xs) - y[j]
-                    else:
-                        Z[i, j] = 0.0
+            _extrapolate(Z, y, t, h, dense)
             # Bound the step by the predicted time to contact: Newton with a Jacobian taken
             # while a contact is open diverges when the stages close it, and each divergence
             # costs up to NEWTON_MAXITER stage sweeps and a fresh Jacobian before h is halved.
-            if check_onset and have_dense:
+            if check_onset and dense[0]:
                 worst = _onset_fraction(y, Z, gaps0, gaps_stage, stage, n_gaps, p, flags,
                                         directions, onset_depth_m)
                 if worst < 1.0:
@@ -356,89 +523,25 @@ def integrate(t_start, t_end, x_start, u, p, flags, directions, rbf_cz, rbf_cphi
             converged = False
             while not converged:
                 if not have_lu:
-                    mr = MU_REAL / h
-                    mc = mu_c / h
-                    ok, (start_r, end_r, tail_r), (start_c, end_c, tail_c) = (
-                        newton_system.factor_pair(
-                            J, mr, mc, red, pos_of, LU_real, piv_real, LU_complex,
-                            piv_complex, arrow, arrow_start, arrow_end, arrow_tail,
-                            dense_start, dense_end, dense_tail))
+                    ok, structure_r, structure_c = newton_system.factor_pair(
+                        J, MU_REAL / h, complex(MU_COMPLEX_RE, MU_COMPLEX_IM) / h, layout[2],
+                        layout[3], lu[0], lu[1], lu[2], lu[3], arrow, layout[4], layout[5],
+                        layout[6], dense_structure[0], dense_structure[1],
+                        dense_structure[2])
                     counters[C_NLU] += 2
                     if not ok:
                         break
+                    structures = (structure_r, structure_c)
                     have_lu = True
                     h_lu = h
-                # Simplified Newton on the collocation system (scipy's solve_collocation_system).
-                mr = MU_REAL / h
-                mc = mu_c / h
-                for i in range(3):
-                    for j in range(n):
-                        W[i, j] = TI[i, 0] * Z[0, j] + TI[i, 1] * Z[1, j] + TI[i, 2] * Z[2, j]
-                dW_norm_old = -1.0
-                rate = -1.0
-                # Hairer's RADAU5: the first iteration is judged by the contraction of the
-                # previous Newton solve, relaxed towards 1, instead of always taking a second.
-                faccon = max(faccon, EPS) ** FACCON_RELAX
-                converged = False
-                k = 0
-                for k in range(NEWTON_MAXITER):
-                    finite = True
-                    for i in range(3):
-                        for j in range(n):
-                            stage[j] = y[j] + Z[i, j]
-                        dyn.rhs_kernel(t + C[i] * h, stage, u, p, flags, directions, rbf_cz,
-                                       rbf_cphi, rbf_w, F[i], diag)
-                        counters[C_NFEV] += 1
-                        for j in range(n):
-                            if not math.isfinite(F[i, j]):
-                                finite = False
-                    if not finite:
-                        break
-                    for j in range(n):
-                        f_real[j] = (TI[0, 0] * F[0, j] + TI[0, 1] * F[1, j]
-                                     + TI[0, 2] * F[2, j] - mr * W[0, j])
-                        fc_re = TI[1, 0] * F[0, j] + TI[1, 1] * F[1, j] + TI[1, 2] * F[2, j]
-                        fc_im = TI[2, 0] * F[0, j] + TI[2, 1] * F[1, j] + TI[2, 2] * F[2, j]
-                        f_cplx[j] = complex(fc_re, fc_im) - mc * complex(W[1, j], W[2, j])
-                    newton_system.solve_pair(LU_real, piv_real, LU_complex, piv_complex, J_RP,
-                                             mr, mc, f_real, f_cplx, red, pos, vel, work_real,
-                                             work_complex, (start_r, end_r, tail_r),
-                                             (start_c, end_c, tail_c))
-                    for j in range(n):
-                        dW[0, j] = f_real[j]
-                        dW[1, j] = f_cplx[j].real
-                        dW[2, j] = f_cplx[j].imag
-                    acc = 0.0
-                    for j in range(n):
-                        for i in range(3):
-                            r = dW[i, j] / scale[j]
-                            acc += r * r
-                    dW_norm = math.sqrt(acc / (3 * n))
-                    if dW_norm_old >= 0.0:
-                        rate = dW_norm / dW_norm_old
-                    if rate >= 0.0 and (rate >= 1.0 or rate ** (NEWTON_MAXITER - k)
-                                        / (1.0 - rate) * dW_norm > newton_tol):
-                        break
-                    for i in range(3):
-                        for j in range(n):
-                            W[i, j] += dW[i, j]
-                    for i in range(3):
-                        for j in range(n):
-                            Z[i, j] = T[i, 0] * W[0, j] + T[i, 1] * W[1, j] + T[i, 2] * W[2, j]
-                    if rate >= 0.0:
-                        faccon = rate / (1.0 - rate)
-                    if dW_norm == 0.0 or faccon * dW_norm < newton_tol:
-                        converged = True
-                        break
-                    dW_norm_old = dW_norm
-                n_iter = k + 1
+                converged, n_iter, rate, faccon = _collocation_newton(
+                    t, h, y, u, arrays, Z, scale, newton_tol, faccon, lu, layout, structures,
+                    work, diag, counters)
                 if not converged:
                     if current_jac:
                         break
-                    arrow = _jacobian(t, y, u, p, flags, directions, rbf_cz, rbf_cphi,
-                                      rbf_w, jac_scale, J, jac_central, red, pos_of, pos,
-                                      J_RP, arrow_start, arrow_end, arrow_tail)
-                    counters[C_NJEV] += 1
+                    arrow = _new_jacobian(t, y, u, arrays, jac_scale, J, jac_central, layout,
+                                          J_RP, counters)
                     current_jac = True
                     have_lu = False
             if not converged:
@@ -455,34 +558,16 @@ def integrate(t_start, t_end, x_start, u, p, flags, directions, rbf_cz, rbf_cphi
                 if worst < 1.0:
                     h_abs *= min(ONSET_SHRINK_MAX, max(ONSET_SHRINK_MIN, worst))
                     have_lu = False
-                    have_dense = False
+                    dense = (False, dense[1], dense[2], y_old, Q)
                     counters[C_REJECTED] += 1
                     counters[C_ONSET_REJECTED] += 1
                     rejected = True
                     continue
 
-            for j in range(n):
-                y_new[j] = y[j] + Z[2, j]
-                ZE[j] = (Z[0, j] * E[0] + Z[1, j] * E[1] + Z[2, j] * E[2]) / h
-                err[j] = f[j] + ZE[j]
-                scale[j] = atol[j] + max(abs(y[j]), abs(y_new[j])) * rtol
-            newton_system.solve(LU_real, piv_real, J_RP, MU_REAL / h_lu, err, red, pos, vel,
-                                work_real, start_r, end_r, tail_r)
-            error_norm = _rms(err, scale)
+            error_norm = _error_norm(t, y, f, u, arrays, Z, h, h_lu, rejected, atol, rtol, lu,
+                                     layout, structures[0], y_new, err, scale, stage, ZE,
+                                     f_new, diag, counters)
             safety = 0.9 * (2 * NEWTON_MAXITER + 1) / (2 * NEWTON_MAXITER + n_iter)
-            if rejected and error_norm > 1.0:
-                for j in range(n):
-                    stage[j] = y[j] + err[j]
-                dyn.rhs_kernel(t, stage, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w,
-                               f_new, diag)
-                counters[C_NFEV] += 1
-                for j in range(n):
-                    err[j] = f_new[j] + ZE[j]
-                newton_system.solve(LU_real, piv_real, J_RP, MU_REAL / h_lu, err, red, pos, vel,
-                                work_real, start_r, end_r, tail_r)
-                error_norm = _rms(err, scale)
-            if not math.isfinite(error_norm):
-                error_norm = 1e10
             if error_norm > 1.0:
                 factor = _predict_factor(h_abs, h_abs_old, error_norm, error_norm_old)
                 h_abs *= max(MIN_FACTOR, safety * factor)
@@ -499,38 +584,20 @@ def integrate(t_start, t_end, x_start, u, p, flags, directions, rbf_cz, rbf_cphi
             factor = 1.0
         else:
             have_lu = False
-        dyn.rhs_kernel(t_new, y_new, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, f_new,
-                       diag)
-        counters[C_NFEV] += 1
+        _rhs(t_new, y_new, u, arrays, f_new, diag, counters)
         if recompute_jac:
-            arrow = _jacobian(t_new, y_new, u, p, flags, directions, rbf_cz, rbf_cphi,
-                              rbf_w, jac_scale, J, jac_central, red, pos_of, pos, J_RP,
-                              arrow_start, arrow_end, arrow_tail)
-            counters[C_NJEV] += 1
-            current_jac = True
-        else:
-            current_jac = False
+            arrow = _new_jacobian(t_new, y_new, u, arrays, jac_scale, J, jac_central, layout,
+                                  J_RP, counters)
+        current_jac = recompute_jac
         h_abs_old = h_proposed
         error_norm_old = error_norm
-        # Dense output of the accepted step.
-        for j in range(n):
-            y_old[j] = y[j]
-            for m in range(3):
-                Q[j, m] = Z[0, j] * P[0, m] + Z[1, j] * P[1, m] + Z[2, j] * P[2, m]
-        t_old = t
-        h_dense = h
-        have_dense = True
-        while i_eval < t_eval.size and t_eval[i_eval] <= t_new:
-            xs = (t_eval[i_eval] - t_old) / h_dense
-            for j in range(n):
-                x_eval[j, i_eval] = (y_old[j] + Q[j, 0] * xs + Q[j, 1] * xs * xs
-                                     + Q[j, 2] * xs * xs * xs)
-            i_eval += 1
+        _dense_output(y, Z, y_old, Q)
+        dense = (True, t, h, y_old, Q)
+        i_eval = _write_samples(t_eval, x_eval, i_eval, t_new, t, h, y_old, Q)
         h_abs = h_abs * factor
         t = t_new
-        for j in range(n):
-            y[j] = y_new[j]
-            f[j] = f_new[j]
+        y[:] = y_new
+        f[:] = f_new
         counters[C_STEPS] += 1
         steps_here += 1
         if check_electrodes and crossed_electrode(y, electrode_gap0, p, flags) >= 0:

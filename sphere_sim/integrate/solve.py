@@ -214,9 +214,8 @@ def _segment_fast(model, x, t0, t1, u, rtol, atol, t_eval, onset_depth_m, budget
         steps_before = int(counters[rc.C_STEPS])
         x_chunk = x
         status, t, x, h, i_eval = rc.integrate(
-            t, t1, x, u, model.p, model.flags, model.beam_directions, model.rbf_cz,
-            model.rbf_cphi, model.rbf_w, float(rtol), atol, jac_scale, t_eval, x_eval, i_eval,
-            h, np.inf, max(1, budget.max_steps - budget.steps), onset_depth_m,
+            t, t1, x, u, model.kernel_arrays, float(rtol), atol, jac_scale, t_eval, x_eval,
+            i_eval, h, np.inf, max(1, budget.max_steps - budget.steps), onset_depth_m,
             FAST_JACOBIAN_RATE, FAST_JACOBIAN_CENTRAL, counters)
         budget.steps += int(counters[rc.C_STEPS]) - steps_before
         if status == rc.STATUS_STEP_BUDGET:

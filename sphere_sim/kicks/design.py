@@ -16,9 +16,10 @@ import numpy as np
 
 from msg_defs.device import KICK_WINDOW_S, VOLTAGE_LIMIT_V
 from sphere_sim.integrate.solve import simulate
-from sphere_sim.kicks.discrete import KickResult, angle_between
+from sphere_sim.kicks.discrete import KickResult
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.programme import Pulse, PulseProgramme
+from sphere_sim.model.rotations import angle_between
 
 SETTLE_BAND_RAD = math.radians(0.005)  # "settled": within 0.005 deg of the final normal
 KICK_SAMPLE_PERIOD_S = 2e-4

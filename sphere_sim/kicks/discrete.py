@@ -77,8 +77,3 @@ def normal_from_cardan(alpha_deg, beta_deg=0.0):
     return np.array([math.sin(b), -math.sin(a) * math.cos(b), math.cos(a) * math.cos(b)])
 
 
-def angle_between(a, b):
-    """Angle (rad) between two unit vectors, robust for tiny angles."""
-    a = np.asarray(a, dtype=float)
-    b = np.asarray(b, dtype=float)
-    return math.atan2(np.linalg.norm(np.cross(a, b)), float(a @ b))

@@ -13,9 +13,9 @@ import numpy as np
 from scipy.optimize import differential_evolution
 
 from sphere_sim.kicks.design import KickDesign, simulate_kick
-from sphere_sim.kicks.discrete import angle_between
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import rest_state
+from sphere_sim.model.rotations import angle_between
 from sphere_sim.model.scene import load_scene
 
 WIDTH_BOUNDS_S = (0.2e-3, 8e-3)

@@ -17,11 +17,12 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from sphere_sim.kicks.design import cardan_of_normal, simulate_kick
-from sphere_sim.kicks.discrete import angle_between, normal_from_xy
+from sphere_sim.kicks.discrete import normal_from_xy
 from sphere_sim.kicks.lookup_table import TABLE_FORMAT_VERSION, LookupTable, TableSpec
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.parameters import load_parameter_set
+from sphere_sim.model.rotations import angle_between
 from sphere_sim.model.scene import load_scene
 from sphere_sim.model.symmetry import Symmetry
 

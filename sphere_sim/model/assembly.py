@@ -105,6 +105,13 @@ class Model:
     jit: bool = True
 
     @property
+    def kernel_arrays(self):
+        """The packed model as the compiled integrator takes it, one record:
+        ``(p, flags, beam_directions, rbf_cz, rbf_cphi, rbf_w)``."""
+        return (self.p, self.flags, self.beam_directions, self.rbf_cz, self.rbf_cphi,
+                self.rbf_w)
+
+    @property
     def n_beams(self):
         return len(self.beams)
 

@@ -107,8 +107,10 @@ def bristle_rate(bristle, slip_t, gate, speed_squared, coulomb, stribeck,
             gate * (slip_t[2] - plastic * bristle[2]) - release * bristle[2])
 
 
+# Exempt from C901: the four readings side by side in one compiled branch per call; a
+# reading per function would be four kernels dispatched by a code the caller must also carry.
 @numba.njit(cache=True)
-def friction_magnitude(speed_m_per_s, normal_force_n, gate, viscous_ns_per_m, coulomb,
+def friction_magnitude(speed_m_per_s, normal_force_n, gate, viscous_ns_per_m, coulomb,  # noqa: C901
                        coulomb_velocity_m_per_s, stribeck, stribeck_velocity_m_per_s,
                        use_viscous, use_coulomb, use_stribeck, reading):
     """Friction force magnitude f in N of a regularised reading at tangential speed

@@ -194,41 +194,43 @@ def _set_path(data, path, value):
     node[keys[-1]] = value
 
 
+def _section(section, cls, values):
+    """One section's dataclass from its YAML mapping, every key checked and converted."""
+    if not isinstance(values, dict):
+        raise ParameterError(f'parameter set lacks section {section!r}')
+    allowed = {f.name: f.type for f in dataclasses.fields(cls)}
+    extra = set(values) - set(allowed)
+    missing = set(allowed) - set(values)
+    if extra:
+        raise ParameterError(
+            f'unknown key(s) {sorted(extra)} in {section!r}; allowed: {sorted(allowed)}')
+    if missing:
+        raise ParameterError(f'missing key(s) {sorted(missing)} in {section!r}')
+    return cls(**{key: _value(section, key, allowed[key], value) for key, value in values.items()})
+
+
+def _value(section, key, kind, value):
+    choices = _CHOICES.get((section, key))
+    if choices is not None:
+        if value not in choices:
+            raise ParameterError(f'{section}.{key} must be one of {choices}, got {value!r}')
+        return value
+    if kind in (bool, 'bool'):
+        return bool(value)
+    try:
+        return float(value)
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f'{section}.{key} must be a number, got {value!r}') from exc
+
+
 def _from_dict(data):
     top_fields = {f.name for f in dataclasses.fields(ParameterSet)}
     unknown = set(data) - top_fields - {'base', 'overrides'}
     if unknown:
         raise ParameterError(
             f'unknown key(s) {sorted(unknown)} in parameter set; allowed: {sorted(top_fields)}')
-    kwargs = {}
-    for section, cls in _SECTIONS.items():
-        values = data.get(section)
-        if not isinstance(values, dict):
-            raise ParameterError(f'parameter set lacks section {section!r}')
-        allowed = {f.name: f.type for f in dataclasses.fields(cls)}
-        extra = set(values) - set(allowed)
-        missing = set(allowed) - set(values)
-        if extra:
-            raise ParameterError(
-                f'unknown key(s) {sorted(extra)} in {section!r}; allowed: {sorted(allowed)}')
-        if missing:
-            raise ParameterError(f'missing key(s) {sorted(missing)} in {section!r}')
-        converted = {}
-        for key, value in values.items():
-            choices = _CHOICES.get((section, key))
-            if choices is not None:
-                if value not in choices:
-                    raise ParameterError(f'{section}.{key} must be one of {choices}, got {value!r}')
-                converted[key] = value
-            elif allowed[key] in (bool, 'bool'):
-                converted[key] = bool(value)
-            else:
-                try:
-                    converted[key] = float(value)
-                except (TypeError, ValueError) as exc:
-                    raise ParameterError(
-                        f'{section}.{key} must be a number, got {value!r}') from exc
-        kwargs[section] = cls(**converted)
+    kwargs = {section: _section(section, cls, data.get(section))
+              for section, cls in _SECTIONS.items()}
     uncertain = tuple(_uncertain(item) for item in data.get('uncertain', ()) or ())
     return ParameterSet(
         name=str(data.get('name', 'unnamed')),

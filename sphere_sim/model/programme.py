@@ -45,26 +45,27 @@ class PulseProgramme:
             raise ProgrammeError(
                 f'voltage limit must be a positive number, got {self.voltage_limit_v}')
         for i, pulse in enumerate(self.pulses):
-            where = f'pulse {i} (beam {pulse.beam})'
-            if pulse.beam not in (1, 2, 3, 4):
-                raise ProgrammeError(f'{where}: beam must be 1..4')
-            for name in ('amplitude_v', 'start_s', 'width_s'):
-                if not math.isfinite(getattr(pulse, name)):
-                    raise ProgrammeError(
-                        f'{where}: {name} must be finite, got {getattr(pulse, name)}')
-            if pulse.width_s < 0:
-                raise ProgrammeError(f'{where}: width_s must be >= 0, got {pulse.width_s}')
-            if pulse.start_s < 0:
-                raise ProgrammeError(f'{where}: start_s must be >= 0, got {pulse.start_s}')
-            if abs(pulse.amplitude_v) > self.voltage_limit_v:
-                raise ProgrammeError(
-                    f'{where}: |amplitude_v| = {abs(pulse.amplitude_v)} V exceeds the limit '
-                    f'{self.voltage_limit_v} V')
+            self._check_pulse(f'pulse {i} (beam {pulse.beam})', pulse)
         for t in self.edges():
-            peak = np.max(np.abs(self.voltages_at(t, beams=(1, 2, 3, 4))))
+            peak = np.max(np.abs(self.voltages_at(t)))
             if peak > self.voltage_limit_v * (1 + 1e-12):
                 raise ProgrammeError(f'overlapping pulses reach {peak} V at t = {t} s, '
                                      f'above {self.voltage_limit_v} V')
+
+    def _check_pulse(self, where, pulse):
+        if pulse.beam not in BEAM_IDS:
+            raise ProgrammeError(f'{where}: beam must be one of {BEAM_IDS}')
+        for name in ('amplitude_v', 'start_s', 'width_s'):
+            if not math.isfinite(getattr(pulse, name)):
+                raise ProgrammeError(f'{where}: {name} must be finite, got {getattr(pulse, name)}')
+        if pulse.width_s < 0:
+            raise ProgrammeError(f'{where}: width_s must be >= 0, got {pulse.width_s}')
+        if pulse.start_s < 0:
+            raise ProgrammeError(f'{where}: start_s must be >= 0, got {pulse.start_s}')
+        if abs(pulse.amplitude_v) > self.voltage_limit_v:
+            raise ProgrammeError(
+                f'{where}: |amplitude_v| = {abs(pulse.amplitude_v)} V exceeds the limit '
+                f'{self.voltage_limit_v} V')
 
     @classmethod
     def from_dicts(cls, items, voltage_limit_v=VOLTAGE_LIMIT_V):
@@ -86,7 +87,7 @@ class PulseProgramme:
         times = {p.start_s for p in self.pulses} | {p.end_s for p in self.pulses}
         return sorted(times)
 
-    def voltages_at(self, t_s, beams=(1, 2, 3, 4)):
+    def voltages_at(self, t_s, beams=BEAM_IDS):
         """Voltages (V) on ``beams`` at ``t_s``; an edge belongs to the segment after it."""
         out = np.zeros(len(beams))
         for pulse in self.pulses:
@@ -94,7 +95,7 @@ class PulseProgramme:
                 out[beams.index(pulse.beam)] += pulse.amplitude_v
         return out
 
-    def segments(self, beams=(1, 2, 3, 4)):
+    def segments(self, beams=BEAM_IDS):
         """The programme as zero-order-hold segments.
 
         Returns
@@ -130,7 +131,7 @@ class PulseProgramme:
             raise ProgrammeError(str(error)) from None
         pulses = [Pulse(beam, float(v), float(t0), float(t1 - t0))
                   for t0, t1, row in zip(times[:-1], times[1:], volts[:-1], strict=True)
-                  for beam, v in zip((1, 2, 3, 4), row, strict=True) if v != 0.0]
+                  for beam, v in zip(BEAM_IDS, row, strict=True) if v != 0.0]
         return cls(tuple(pulses), voltage_limit_v)
 
     def mirrored(self, beam_map):

@@ -95,3 +95,10 @@ def quat_to_cardan(q):
 def surface_normal_of_quat(q):
     """Unit normal of the flat face in the inertial frame: the body z axis, eq. (53)."""
     return quat_to_matrix(np.asarray(q, dtype=float))[:, 2].copy()
+
+
+def angle_between(a, b):
+    """Angle (rad) between two unit vectors, robust for tiny angles."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    return math.atan2(np.linalg.norm(np.cross(a, b)), float(a @ b))

@@ -47,17 +47,35 @@ def run(args):
     specs = [s for s in calibrated.uncertain if args.target is None or s.target in args.target]
     if not specs:
         raise SystemExit('the calibrated set declares no uncertain parameter for that target')
-    for spec in specs:
-        tied = f' (with {", ".join(spec.tied)})' if spec.tied else ''
-        print(f'{spec.target}: {spec.path}{tied} in [{spec.low:g}, {spec.high:g}]')
-        print(textwrap.fill(' '.join(spec.reason.split()), width=96, initial_indent='  ',
-                            subsequent_indent='  '))
+    print_ranges(specs)
     with tqdm(desc='calibrate', unit='eval', leave=False) as bar:
         def progress(value, observed):
             bar.set_postfix_str(f'{value:.4g} -> {observed:.4g}')
             bar.update()
 
         params, fits, checks = calibrate(calibrated, specs, args.workers, progress)
+    print_fits(fits, checks)
+    for spec in specs:
+        if spec.target == 'fig4_threshold':
+            print_threshold_hypotheses(params, base, spec)
+        if spec.target == ESTIMATE_TARGET:
+            print_estimate_sensitivity(params, spec, args.workers)
+    if args.write:
+        write_overrides(params, specs)
+    return 0
+
+
+def print_ranges(specs):
+    """Each uncertain parameter's range and the physical reason for it."""
+    for spec in specs:
+        tied = f' (with {", ".join(spec.tied)})' if spec.tied else ''
+        print(f'{spec.target}: {spec.path}{tied} in [{spec.low:g}, {spec.high:g}]')
+        print(textwrap.fill(' '.join(spec.reason.split()), width=96, initial_indent='  ',
+                            subsequent_indent='  '))
+
+
+def print_fits(fits, checks):
+    """Each fit's value, what it reached, and every evaluation on the way."""
     for result, (observed, target, tolerance) in zip(fits, checks, strict=True):
         print(f'fitted {result.spec.path} = {result.value:.4g} after {len(result.history)} '
               f'evaluations: {observed:.4g} {result.unit} (target {target:g} ± {tolerance:g})')
@@ -68,14 +86,6 @@ def run(args):
         print(f'  {"value":>12} {"observed":>12}')
         for value, seen in sorted(result.history):
             print(f'  {value:>12.4g} {seen:>10.4g} {result.unit}')
-    for spec in specs:
-        if spec.target == 'fig4_threshold':
-            print_threshold_hypotheses(params, base, spec)
-        if spec.target == ESTIMATE_TARGET:
-            print_estimate_sensitivity(params, spec, args.workers)
-    if args.write:
-        write_overrides(params, specs)
-    return 0
 
 
 def print_estimate_sensitivity(params, spec, workers):

@@ -92,8 +92,6 @@ def run_demo(setpoint_s=DEFAULT_SETPOINT_S, trajectory_s=DEFAULT_TRAJECTORY_S,
              real_time_factor=DEFAULT_REAL_TIME_FACTOR, bags_dir='bags', seed=0, out=None):
     """Run the scenario; returns 0 if the loop ran and every node exited cleanly, else 1."""
     from msg_defs.topics import CONTROLLER_STATUS, SURFACE_NORMAL
-    from sphere_twin.bag.reader import BagError
-    from sphere_twin.run_analysis import errors_rad, load_run, plot_report
     from sphere_twin.testing import TopicProbe, TwinTimeoutError
 
     out = sys.stdout if out is None else out
@@ -141,35 +139,8 @@ def run_demo(setpoint_s=DEFAULT_SETPOINT_S, trajectory_s=DEFAULT_TRAJECTORY_S,
         say(f'demo: stopping {" then ".join(p.name for p in reversed(group.processes))} '
             f'(SIGINT to each PID)')
         group.stop_all()
-    for process in group.processes:
-        for line in (process.stderr_text() + process.stdout_text()).splitlines()[-3:]:
-            say(f'  {process.name:>10} | {line}')
-        say(f'demo: stopped {process.name} (pid {process.pid}), exit code {process.returncode}')
-        if process.returncode != 0:
-            problems.append(f'{process.name} exited with {process.returncode}')
-    try:
-        # What the run did is read back from its own bag, as `sphere-twin report` reads it.
-        recorded = load_run(bag_dir)
-        times, errors = errors_rad(recorded)
-    except BagError as error:
-        problems.append(str(error))
-        times = np.empty(0)
-    if times.size == 0:
-        problems.append('no surface normal crossed between the processes')
-    else:
-        plot = plot_report(recorded, bag_dir.parent / f'{bag_dir.name}_error.png',
-                           title=f'{bag_dir.name}: setpoint, then eq. (64) from {setpoint_s:g} s')
-        on_setpoint = (times > 0.5 * setpoint_s) & (times < setpoint_s)
-        tracking = times >= setpoint_s
-        say(f'demo: {log.kicks()} kicks in {log.simulated_s():.1f} s simulated, '
-            f'{wall_s:.1f} s wall: real-time factor {log.simulated_s() / wall_s:.2f}')
-        if on_setpoint.any():
-            say(f'demo: setpoint: final error {math.degrees(errors[on_setpoint][-1]):.4f} deg')
-        if tracking.any():
-            rms = math.degrees(math.sqrt(float(np.mean(errors[tracking] ** 2))))
-            say(f'demo: trajectory: RMS error {rms:.3f} deg, final error '
-                f'{math.degrees(errors[-1]):.3f} deg')
-        say(f'demo: plot {plot}')
+    problems += _report_exits(group.processes, say)
+    problems += _report_bag(bag_dir, setpoint_s, log, wall_s, say)
     say(f'demo: bag {bag_dir}')
     if problems:
         say('demo: FAILED: ' + '; '.join(problems))
@@ -177,6 +148,47 @@ def run_demo(setpoint_s=DEFAULT_SETPOINT_S, trajectory_s=DEFAULT_TRAJECTORY_S,
     say('demo: OK: recorder, simulator, reference and controller ran as separate processes '
         f'on domain {domain_id} and exited with 0')
     return 0
+
+
+def _report_exits(processes, say):
+    """Each node's last lines and exit code; the problems (non-zero exits)."""
+    problems = []
+    for process in processes:
+        for line in (process.stderr_text() + process.stdout_text()).splitlines()[-3:]:
+            say(f'  {process.name:>10} | {line}')
+        say(f'demo: stopped {process.name} (pid {process.pid}), exit code {process.returncode}')
+        if process.returncode != 0:
+            problems.append(f'{process.name} exited with {process.returncode}')
+    return problems
+
+
+def _report_bag(bag_dir, setpoint_s, log, wall_s, say):
+    """What the run did, read back from its own bag as `sphere-twin report` reads it, and a
+    plot; the problems (an unreadable bag, no normal recorded)."""
+    from sphere_twin.bag.reader import BagError
+    from sphere_twin.run_analysis import errors_rad, load_run, plot_report
+
+    try:
+        recorded = load_run(bag_dir)
+        times, errors = errors_rad(recorded)
+    except BagError as error:
+        return [str(error)]
+    if times.size == 0:
+        return ['no surface normal crossed between the processes']
+    plot = plot_report(recorded, bag_dir.parent / f'{bag_dir.name}_error.png',
+                       title=f'{bag_dir.name}: setpoint, then eq. (64) from {setpoint_s:g} s')
+    on_setpoint = (times > 0.5 * setpoint_s) & (times < setpoint_s)
+    tracking = times >= setpoint_s
+    say(f'demo: {log.kicks()} kicks in {log.simulated_s():.1f} s simulated, '
+        f'{wall_s:.1f} s wall: real-time factor {log.simulated_s() / wall_s:.2f}')
+    if on_setpoint.any():
+        say(f'demo: setpoint: final error {math.degrees(errors[on_setpoint][-1]):.4f} deg')
+    if tracking.any():
+        rms = math.degrees(math.sqrt(float(np.mean(errors[tracking] ** 2))))
+        say(f'demo: trajectory: RMS error {rms:.3f} deg, final error '
+            f'{math.degrees(errors[-1]):.3f} deg')
+    say(f'demo: plot {plot}')
+    return []
 
 
 def register(subparsers):
