@@ -195,11 +195,10 @@ def _initial_step(t, y, f, u, arrays, rtol, atol, interval, max_step, diag, coun
     return min(100.0 * h0, h1, interval, max_step)
 
 
-@numba.njit(cache=True)
-def _extrapolate(Z, y, t, h, dense):
-    """Newton's starting guess: the previous step's collocation polynomial at the new stage
-    times, or zero without one (scipy's Radau does the same)."""
-    have_dense, t_old, h_dense, y_old, Q = dense
+@numba.njit(cache=True, inline='always')
+def _extrapolate(Z, y, t, h, have_dense, t_old, h_dense, y_old, Q):
+    """Newton's starting guess: the previous step's collocation polynomial (from ``t_old``
+    over ``h_dense``) at the new stage times, or zero without one (as scipy's Radau)."""
     n = y.size
     for i in range(3):
         for j in range(n):
@@ -211,99 +210,7 @@ def _extrapolate(Z, y, t, h, dense):
                 Z[i, j] = 0.0
 
 
-@numba.njit(cache=True)
-def _collocation_newton(t, h, y, u, arrays, Z, scale, newton_tol, faccon, lu, layout,
-                        structures, work, diag, counters):
-    """Simplified Newton on the collocation system (scipy's ``solve_collocation_system``),
-    with RADAU5's first-iterate test. ``Z`` holds the starting guess and, on convergence,
-    the stage increments.
-
-    Returns (converged, iterations, last contraction rate, faccon).
-    """
-    W, F, dW, stage, f_real, f_cplx = work
-    mr = MU_REAL / h
-    mc = complex(MU_COMPLEX_RE, MU_COMPLEX_IM) / h
-    for i in range(3):
-        for j in range(y.size):
-            W[i, j] = TI[i, 0] * Z[0, j] + TI[i, 1] * Z[1, j] + TI[i, 2] * Z[2, j]
-    dW_norm_old = -1.0
-    rate = -1.0
-    # Hairer's RADAU5: the first iteration is judged by the contraction of the previous
-    # Newton solve, relaxed towards 1, instead of always taking a second.
-    faccon = max(faccon, EPS) ** FACCON_RELAX
-    k = 0
-    for k in range(NEWTON_MAXITER):
-        if not _stage_derivatives(t, h, y, u, arrays, Z, stage, F, diag, counters):
-            return False, k + 1, rate, faccon
-        dW_norm = _newton_increment(F, W, dW, mr, mc, scale, lu, layout, structures, f_real,
-                                    f_cplx)
-        if dW_norm_old >= 0.0:
-            rate = dW_norm / dW_norm_old
-        if rate >= 0.0 and (rate >= 1.0 or rate ** (NEWTON_MAXITER - k)
-                            / (1.0 - rate) * dW_norm > newton_tol):
-            return False, k + 1, rate, faccon
-        _apply_increment(W, dW, Z)
-        if rate >= 0.0:
-            faccon = rate / (1.0 - rate)
-        if dW_norm == 0.0 or faccon * dW_norm < newton_tol:
-            return True, k + 1, rate, faccon
-        dW_norm_old = dW_norm
-    return False, k + 1, rate, faccon
-
-
-@numba.njit(cache=True)
-def _apply_increment(W, dW, Z):
-    """W += dW, and the stage increments Z = T W back from the transformed ones."""
-    n = W.shape[1]
-    for i in range(3):
-        for j in range(n):
-            W[i, j] += dW[i, j]
-    for i in range(3):
-        for j in range(n):
-            Z[i, j] = T[i, 0] * W[0, j] + T[i, 1] * W[1, j] + T[i, 2] * W[2, j]
-
-
-@numba.njit(cache=True)
-def _newton_increment(F, W, dW, mr, mc, scale, lu, layout, structures, f_real, f_cplx):
-    """One simplified-Newton increment ``dW`` of the transformed stages (scipy's real and
-    complex systems, solved side by side); returns its scaled RMS norm."""
-    n = scale.size
-    for j in range(n):
-        f_real[j] = (TI[0, 0] * F[0, j] + TI[0, 1] * F[1, j]
-                     + TI[0, 2] * F[2, j] - mr * W[0, j])
-        fc_re = TI[1, 0] * F[0, j] + TI[1, 1] * F[1, j] + TI[1, 2] * F[2, j]
-        fc_im = TI[2, 0] * F[0, j] + TI[2, 1] * F[1, j] + TI[2, 2] * F[2, j]
-        f_cplx[j] = complex(fc_re, fc_im) - mc * complex(W[1, j], W[2, j])
-    newton_system.solve_pair(lu[0], lu[1], lu[2], lu[3], lu[4], mr, mc, f_real, f_cplx,
-                             layout[2], layout[0], layout[1], lu[5], lu[6], structures[0],
-                             structures[1])
-    acc = 0.0
-    for j in range(n):
-        dW[0, j] = f_real[j]
-        dW[1, j] = f_cplx[j].real
-        dW[2, j] = f_cplx[j].imag
-        for i in range(3):
-            r = dW[i, j] / scale[j]
-            acc += r * r
-    return math.sqrt(acc / (3 * n))
-
-
-@numba.njit(cache=True)
-def _stage_derivatives(t, h, y, u, arrays, Z, stage, F, diag, counters):
-    """The right-hand side at the three stages into ``F``; False if any value is not finite."""
-    n = y.size
-    finite = True
-    for i in range(3):
-        for j in range(n):
-            stage[j] = y[j] + Z[i, j]
-        _rhs(t + C[i] * h, stage, u, arrays, F[i], diag, counters)
-        for j in range(n):
-            if not math.isfinite(F[i, j]):
-                finite = False
-    return finite
-
-
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline='always')
 def _error_norm(t, y, f, u, arrays, Z, h, h_lu, rejected, atol, rtol, lu, layout,
                 structure_r, y_new, err, scale, stage, ZE, f_new, diag, counters):
     """The embedded error estimate of the step (scipy's), filtered through the real Newton
@@ -335,7 +242,7 @@ def _error_norm(t, y, f, u, arrays, Z, h, h_lu, rejected, atol, rtol, lu, layout
     return error_norm
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline='always')
 def _dense_output(y, Z, y_old, Q):
     """Keep the accepted step's collocation polynomial: ``y_old`` and its coefficients ``Q``."""
     for j in range(y.size):
@@ -344,7 +251,7 @@ def _dense_output(y, Z, y_old, Q):
             Q[j, m] = Z[0, j] * P[0, m] + Z[1, j] * P[1, m] + Z[2, j] * P[2, m]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline='always')
 def _write_samples(t_eval, x_eval, i_eval, t_new, t_old, h_dense, y_old, Q):
     """Samples up to ``t_new`` from the dense output; returns the next sample's index."""
     while i_eval < t_eval.size and t_eval[i_eval] <= t_new:
@@ -356,10 +263,13 @@ def _write_samples(t_eval, x_eval, i_eval, t_new, t_old, h_dense, y_old, Q):
     return i_eval
 
 
-# Exempt from C901: the accept/reject loop of a compiled integrator. Its state (step size,
-# LU validity, Jacobian age, dense output, Newton's contraction) lives in locals that numba
-# keeps in registers; the seams scipy has (initial step, collocation Newton, error estimate,
-# dense output) are functions above, and what remains is the control flow between them.
+# Exempt from C901: the accept/reject loop of a compiled integrator, with the simplified
+# Newton iteration inside it. Its state (step size, LU validity, Jacobian age, dense output,
+# Newton's contraction) lives in locals; the initial step, the starting guess, the error
+# estimate and the dense output are functions above (the per-step ones inlined by numba). The
+# Newton iteration was a function too: that cost 5-6 % of every kick (median over the three
+# work-precision scenes at three tolerances), because numba counts references to each array
+# handed to a call, and the iteration needs fifteen of them. It stays here.
 @numba.njit(cache=True)
 def integrate(t_start, t_end, x_start, u, arrays, rtol, atol, jac_scale, t_eval,  # noqa: C901
               x_eval, i_eval, h_first, max_step, max_steps, onset_depth_m, jac_rate,
@@ -367,9 +277,10 @@ def integrate(t_start, t_end, x_start, u, arrays, rtol, atol, jac_scale, t_eval,
     """Integrate dx/dt = rhs(t, x, u) from ``t_start`` towards ``t_end`` with Radau IIA.
 
     The step loop of scipy's ``Radau._step_impl``: the initial step (:func:`_initial_step`),
-    the collocation Newton (:func:`_collocation_newton`), the error estimate
-    (:func:`_error_norm`), the dense output (:func:`_dense_output`, :func:`_write_samples`),
-    plus the contact-onset and electrode checks of the module docstring.
+    the starting guess (:func:`_extrapolate`), the simplified Newton on the collocation
+    system, the error estimate (:func:`_error_norm`), the dense output (:func:`_dense_output`,
+    :func:`_write_samples`), plus the contact-onset and electrode checks of the module
+    docstring.
 
     Parameters
     ----------
@@ -421,13 +332,14 @@ def integrate(t_start, t_end, x_start, u, arrays, rtol, atol, jac_scale, t_eval,
     i_eval : int
         Index of the first sample not yet written.
     """
-    p, flags, directions = arrays[0], arrays[1], arrays[2]
+    p, flags, directions, rbf_cz, rbf_cphi, rbf_w = arrays
     n = x_start.size
     diag = np.empty(dyn.N_DIAG)
     t = t_start
     y = x_start.copy()
     f = np.empty(n)
-    _rhs(t, y, u, arrays, f, diag, counters)
+    dyn.rhs_kernel(t, y, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, f, diag)
+    counters[C_NFEV] += 1
     rtol = max(rtol, 100.0 * EPS)
     newton_tol = max(10.0 * EPS / rtol, min(0.03, rtol**0.5))
     if h_first > 0.0:
@@ -455,7 +367,9 @@ def integrate(t_start, t_end, x_start, u, arrays, rtol, atol, jac_scale, t_eval,
     error_norm_old = -1.0
     y_old = y.copy()
     Q = np.zeros((n, 3))
-    dense = (False, t, 1.0, y_old, Q)
+    have_dense = False
+    t_old = t
+    h_dense = 1.0
 
     n_gaps = n_contacts(flags)
     check_onset = onset_depth_m > 0.0 and n_gaps > 0
@@ -468,8 +382,15 @@ def integrate(t_start, t_end, x_start, u, arrays, rtol, atol, jac_scale, t_eval,
 
     Z = np.zeros((3, n))
     stage = np.empty(n)
-    work = (np.zeros((3, n)), np.zeros((3, n)), np.zeros((3, n)), stage, np.empty(n),
-            np.empty(n, dtype=np.complex128))
+    W = np.zeros((3, n))
+    F = np.zeros((3, n))
+    dW = np.zeros((3, n))
+    f_real = np.empty(n)
+    f_cplx = np.empty(n, dtype=np.complex128)
+    mu_c = complex(MU_COMPLEX_RE, MU_COMPLEX_IM)
+    pos, vel, red = layout[0], layout[1], layout[2]
+    LU_real, piv_real, LU_complex, piv_complex = lu[0], lu[1], lu[2], lu[3]
+    work_real, work_complex = lu[5], lu[6]
     scale = np.empty(n)
     err = np.empty(n)
     ZE = np.empty(n)
@@ -507,11 +428,11 @@ def integrate(t_start, t_end, x_start, u, arrays, rtol, atol, jac_scale, t_eval,
             h_abs = h
             if have_lu and h != h_lu:
                 have_lu = False
-            _extrapolate(Z, y, t, h, dense)
+            _extrapolate(Z, y, t, h, have_dense, t_old, h_dense, y_old, Q)
             # Bound the step by the predicted time to contact: Newton with a Jacobian taken
             # while a contact is open diverges when the stages close it, and each divergence
             # costs up to NEWTON_MAXITER stage sweeps and a fresh Jacobian before h is halved.
-            if check_onset and dense[0]:
+            if check_onset and have_dense:
                 worst = _onset_fraction(y, Z, gaps0, gaps_stage, stage, n_gaps, p, flags,
                                         directions, onset_depth_m)
                 if worst < 1.0:
@@ -534,9 +455,70 @@ def integrate(t_start, t_end, x_start, u, arrays, rtol, atol, jac_scale, t_eval,
                     structures = (structure_r, structure_c)
                     have_lu = True
                     h_lu = h
-                converged, n_iter, rate, faccon = _collocation_newton(
-                    t, h, y, u, arrays, Z, scale, newton_tol, faccon, lu, layout, structures,
-                    work, diag, counters)
+                # Simplified Newton on the collocation system (scipy's
+                # solve_collocation_system); why it is not a function: above integrate.
+                mr = MU_REAL / h
+                mc = mu_c / h
+                for i in range(3):
+                    for j in range(n):
+                        W[i, j] = TI[i, 0] * Z[0, j] + TI[i, 1] * Z[1, j] + TI[i, 2] * Z[2, j]
+                dW_norm_old = -1.0
+                rate = -1.0
+                # Hairer's RADAU5: the first iteration is judged by the contraction of the
+                # previous Newton solve, relaxed towards 1, instead of always taking a second.
+                faccon = max(faccon, EPS) ** FACCON_RELAX
+                converged = False
+                k = 0
+                for k in range(NEWTON_MAXITER):
+                    finite = True
+                    for i in range(3):
+                        for j in range(n):
+                            stage[j] = y[j] + Z[i, j]
+                        dyn.rhs_kernel(t + C[i] * h, stage, u, p, flags, directions, rbf_cz,
+                                       rbf_cphi, rbf_w, F[i], diag)
+                        counters[C_NFEV] += 1
+                        for j in range(n):
+                            if not math.isfinite(F[i, j]):
+                                finite = False
+                    if not finite:
+                        break
+                    for j in range(n):
+                        f_real[j] = (TI[0, 0] * F[0, j] + TI[0, 1] * F[1, j]
+                                     + TI[0, 2] * F[2, j] - mr * W[0, j])
+                        fc_re = TI[1, 0] * F[0, j] + TI[1, 1] * F[1, j] + TI[1, 2] * F[2, j]
+                        fc_im = TI[2, 0] * F[0, j] + TI[2, 1] * F[1, j] + TI[2, 2] * F[2, j]
+                        f_cplx[j] = complex(fc_re, fc_im) - mc * complex(W[1, j], W[2, j])
+                    newton_system.solve_pair(LU_real, piv_real, LU_complex, piv_complex, J_RP,
+                                             mr, mc, f_real, f_cplx, red, pos, vel, work_real,
+                                             work_complex, structures[0], structures[1])
+                    for j in range(n):
+                        dW[0, j] = f_real[j]
+                        dW[1, j] = f_cplx[j].real
+                        dW[2, j] = f_cplx[j].imag
+                    acc = 0.0
+                    for j in range(n):
+                        for i in range(3):
+                            r = dW[i, j] / scale[j]
+                            acc += r * r
+                    dW_norm = math.sqrt(acc / (3 * n))
+                    if dW_norm_old >= 0.0:
+                        rate = dW_norm / dW_norm_old
+                    if rate >= 0.0 and (rate >= 1.0 or rate ** (NEWTON_MAXITER - k)
+                                        / (1.0 - rate) * dW_norm > newton_tol):
+                        break
+                    for i in range(3):
+                        for j in range(n):
+                            W[i, j] += dW[i, j]
+                    for i in range(3):
+                        for j in range(n):
+                            Z[i, j] = T[i, 0] * W[0, j] + T[i, 1] * W[1, j] + T[i, 2] * W[2, j]
+                    if rate >= 0.0:
+                        faccon = rate / (1.0 - rate)
+                    if dW_norm == 0.0 or faccon * dW_norm < newton_tol:
+                        converged = True
+                        break
+                    dW_norm_old = dW_norm
+                n_iter = k + 1
                 if not converged:
                     if current_jac:
                         break
@@ -558,7 +540,7 @@ def integrate(t_start, t_end, x_start, u, arrays, rtol, atol, jac_scale, t_eval,
                 if worst < 1.0:
                     h_abs *= min(ONSET_SHRINK_MAX, max(ONSET_SHRINK_MIN, worst))
                     have_lu = False
-                    dense = (False, dense[1], dense[2], y_old, Q)
+                    have_dense = False
                     counters[C_REJECTED] += 1
                     counters[C_ONSET_REJECTED] += 1
                     rejected = True
@@ -584,7 +566,9 @@ def integrate(t_start, t_end, x_start, u, arrays, rtol, atol, jac_scale, t_eval,
             factor = 1.0
         else:
             have_lu = False
-        _rhs(t_new, y_new, u, arrays, f_new, diag, counters)
+        dyn.rhs_kernel(t_new, y_new, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, f_new,
+                       diag)
+        counters[C_NFEV] += 1
         if recompute_jac:
             arrow = _new_jacobian(t_new, y_new, u, arrays, jac_scale, J, jac_central, layout,
                                   J_RP, counters)
@@ -592,12 +576,13 @@ def integrate(t_start, t_end, x_start, u, arrays, rtol, atol, jac_scale, t_eval,
         h_abs_old = h_proposed
         error_norm_old = error_norm
         _dense_output(y, Z, y_old, Q)
-        dense = (True, t, h, y_old, Q)
-        i_eval = _write_samples(t_eval, x_eval, i_eval, t_new, t, h, y_old, Q)
+        have_dense, t_old, h_dense = True, t, h
+        i_eval = _write_samples(t_eval, x_eval, i_eval, t_new, t_old, h_dense, y_old, Q)
         h_abs = h_abs * factor
         t = t_new
-        y[:] = y_new
-        f[:] = f_new
+        for j in range(n):
+            y[j] = y_new[j]
+            f[j] = f_new[j]
         counters[C_STEPS] += 1
         steps_here += 1
         if check_electrodes and crossed_electrode(y, electrode_gap0, p, flags) >= 0:
