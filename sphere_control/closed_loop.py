@@ -56,6 +56,10 @@ class LoopSettings:
     stall_progress_rad : float
     cone_policy : ConePolicy
     cone_half_angle_rad : float
+    preview : bool
+        Reference preview (beyond the paper): decide towards where the reference will be one
+        kick period later, when the kick has settled, instead of towards the current sample.
+        The errors are still measured against the current sample.
     """
 
     max_steps: int = 400
@@ -65,6 +69,7 @@ class LoopSettings:
     stall_progress_rad: float = 1e-6
     cone_policy: ConePolicy = ConePolicy.CLAMP
     cone_half_angle_rad: float = CONE_HALF_ANGLE_RAD
+    preview: bool = False
 
 
 @dataclasses.dataclass(frozen=True)
@@ -171,7 +176,7 @@ def run_closed_loop(controller, plant, start_normal, reference, settings=LoopSet
         outcome = _stop(settings, reference, sample, stall, true_normal)
         if outcome is not None or step == settings.max_steps:
             break
-        command = controller.decide(seen, sample.normal)
+        command = controller.decide(seen, _target(settings, reference, sample, time_s).normal)
         if command is None:
             pending = None
             rest_streak += 1
@@ -197,6 +202,14 @@ def run_closed_loop(controller, plant, start_normal, reference, settings=LoopSet
     if outcome is None:
         outcome = Outcome.NOT_SETTLED if reference.is_constant else Outcome.COMPLETED
     return trace.history(outcome, settle_step)
+
+
+def _target(settings, reference, sample, time_s):
+    """What the controller aims at: the current sample, or with preview the reference one
+    kick period on, when the kick about to be decided has settled."""
+    if not settings.preview or reference.is_constant:
+        return sample
+    return ref.sample(reference, time_s + settings.kick_period_s, settings.cone_half_angle_rad)
 
 
 def _stop(settings, reference, sample, stall, true_normal):

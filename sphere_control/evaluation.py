@@ -237,7 +237,7 @@ class TrackingResult:
 
 
 def tracking_study(put, plant, config, kick_period_s=None, directions_rad=None, noise=None,
-                   basic_phi_min_widths=None):
+                   basic_phi_min_widths=None, preview=False):
     """Fig. 15: the scaled eq. (64) trajectory, best basic against extended.
 
     Parameters
@@ -246,11 +246,14 @@ def tracking_study(put, plant, config, kick_period_s=None, directions_rad=None, 
         Measurement noise, seeded from ``config.seed``, with or without the Kalman filter.
     basic_phi_min_widths : tuple of float, optional
         Overrides ``config.basic_phi_min_widths``.
+    preview : bool
+        Both controllers aim where the reference will be when the kick has settled
+        (:class:`LoopSettings`), not at the current sample.
     """
     period = config.kick_period_s if kick_period_s is None else kick_period_s
     trajectory = scaled_trajectory(put)
     steps = round(config.trajectory_periods / trajectory.frequency_hz / period)
-    settings = LoopSettings(max_steps=steps, kick_period_s=period)
+    settings = LoopSettings(max_steps=steps, kick_period_s=period, preview=preview)
     W = put.full_width_rad
     learning_min = None if noise is None else max(
         DIRECTION_LEARNING_MIN_FRACTION * W, NOISE_LEARNING_SIGMAS * math.sqrt(2.0) * noise[0])
@@ -352,6 +355,7 @@ class EvaluationReport:
     rows: list
     histories: dict
     final_ratio: float
+    preview_ratio: float
 
 
 def _row(scenario, quantity, paper, ours):
@@ -381,12 +385,12 @@ def evaluate(put, config=EvaluationConfig(), table=None, progress=print, continu
                'kick_scale': put.kick_scale, 'kick_period_s': config.kick_period_s}
     rows, histories = [], {}
     _setpoint_figures(put, config, figures, rows, histories, progress)
-    main = _trajectory_figures(put, config, figures, rows, histories, progress)
+    main, previewed = _trajectory_figures(put, config, figures, rows, histories, progress)
     _direction_figures(put, config, eight_plant, figures, rows, progress)
     _noise_figures(put, config, main, figures, rows, histories, progress)
     if table is not None and config.continuous_kicks > 0:
         _continuous_figures(put, config, table, continuous_plant, figures, rows, progress)
-    return EvaluationReport(figures, rows, histories, main.ratio)
+    return EvaluationReport(figures, rows, histories, main.ratio, previewed.ratio)
 
 
 def trajectory_plant(put):
@@ -415,16 +419,23 @@ def _setpoint_figures(put, config, figures, rows, histories, progress):
 
 def _trajectory_figures(put, config, figures, rows, histories, progress):
     """Fig. 15: trajectory under a 33 deg mismatch, and its dependence on the kick
-    period; returns the main tracking study."""
+    period, each without and with reference preview; returns the main tracking study and
+    the same with preview."""
     plant33 = trajectory_plant(put)
     main = tracking_study(put, plant33, config)
     histories['fig15'] = main
     figures['fig15'] = {'kick_period_s': config.kick_period_s,
                         'frequency_hz': scaled_trajectory(put).frequency_hz, **main.summary()}
-    sweep = {}
+    previewed = tracking_study(put, plant33, config, preview=True)
+    histories['fig15_preview'] = previewed
+    figures['fig15']['preview'] = previewed.summary()
+    sweep, sweep_preview = {}, {}
     for period in config.kick_period_sweep_s:
         sweep[period] = tracking_study(put, plant33, config, kick_period_s=period).summary()
+        sweep_preview[period] = tracking_study(put, plant33, config, kick_period_s=period,
+                                               preview=True).summary()
     figures['fig15_kick_period_sweep'] = {str(k): v for k, v in sweep.items()}
+    figures['fig15_kick_period_sweep_preview'] = {str(k): v for k, v in sweep_preview.items()}
     progress('fig15: trajectory runs done')
     rows.append(_row('Fig. 15 trajectory, 33 deg mismatch',
                      f'MSE extended/basic (tracking phase, {config.kick_period_s * 1e3:.0f} ms '
@@ -432,11 +443,15 @@ def _trajectory_figures(put, config, figures, rows, histories, progress):
     rows.append(_row('Fig. 15 trajectory, 33 deg mismatch', 'MSE extended/basic (whole run, '
                      'approach from level included)', '-',
                      f'{main.summary()["mse_ratio_whole_run"]:.3f}'))
+    rows.append(_row('Fig. 15 trajectory, 33 deg mismatch',
+                     'MSE extended/basic with reference preview (tracking phase)', '-',
+                     f'{previewed.ratio:.3f}'))
     for period, s in sweep.items():
         rows.append(_row('Fig. 15 trajectory, 33 deg mismatch',
-                         f'MSE extended/basic at {period * 1e3:.0f} ms per kick', '-',
-                         f'{s["mse_ratio"]:.3f}'))
-    return main
+                         f'MSE extended/basic at {period * 1e3:.0f} ms per kick, without / '
+                         'with preview', '-',
+                         f'{s["mse_ratio"]:.3f} / {sweep_preview[period]["mse_ratio"]:.3f}'))
+    return main, previewed
 
 
 def _direction_figures(put, config, eight_plant, figures, rows, progress):

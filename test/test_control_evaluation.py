@@ -68,3 +68,33 @@ def test_fig15_extended_tracks_better_than_the_best_basic(put):
     assert result.basic.outcome is Outcome.COMPLETED
     assert 0 < result.catch_up_step < len(result.basic.actions) // 2
     assert result.ratio < 0.5
+
+
+def test_reference_preview_removes_the_step_behind_on_an_ideal_plant(put):
+    """At the paper's pace (about 60 ms per kick) a controller that aims at the current sample
+    is one reference step behind; aiming where the reference will be when the kick has settled
+    takes most of that lag away, for both controllers."""
+    plant = PerturbedPlant(put.plant, Mismatch(math.radians(33.0)))
+    config = EvaluationConfig(trajectory_periods=0.25, basic_phi_min_widths=(0.5, 1.0))
+    plain = tracking_study(put, plant, config, kick_period_s=0.06)
+    ahead = tracking_study(put, plant, config, kick_period_s=0.06, preview=True)
+    assert ahead.mse_extended < 0.7 * plain.mse_extended
+    assert ahead.mse_basic < plain.mse_basic
+    assert ahead.ratio < plain.ratio
+
+
+def test_preview_changes_nothing_on_a_setpoint(put):
+    from sphere_control.closed_loop import LoopSettings, run_closed_loop
+    from sphere_control.controllers import make_controller
+    from sphere_control.reference import Setpoint
+
+    def run(preview):
+        controller = make_controller('extended', PAPER_PHI_MIN_RAD[0], put.full_width_rad,
+                                     put.plant.directions_rad)
+        return run_closed_loop(controller, put.plant, [0.0, 0.0, 1.0],
+                               Setpoint.from_normal(PAPER_SETPOINT_NORMAL),
+                               LoopSettings(preview=preview))
+
+    plain, ahead = run(False), run(True)
+    assert plain.outcome is Outcome.SETTLED
+    assert (plain.actions == ahead.actions).all() and (plain.normals == ahead.normals).all()
