@@ -50,6 +50,7 @@ AXIS_SETPOINT_NORMAL = (math.hypot(0.01, 0.02), 0.0, 0.9997)
 # A run counts as oscillating if it never settled and its last OSCILLATION_KICKS errors all stay
 # within OSCILLATION_BAND_WIDTHS full kick widths of the reference: it circles the reference.
 OSCILLATION_KICKS = 10
+KICK_PERIOD_STEP_S = 0.01  # the default kick period is the settle time rounded up to this
 OSCILLATION_BAND_WIDTHS = 2.0
 # The tracking phase of a trajectory run starts when both compared runs are within this many
 # full kick widths of the reference; before that both kick at full width towards the start of
@@ -73,8 +74,9 @@ class EvaluationConfig:
 
     Attributes
     ----------
-    kick_period_s : float
-        Time per decision in the trajectory runs (s).
+    kick_period_s : float or None
+        Time per decision in the trajectory runs (s). None: the plant's own, its full kick's
+        settle time rounded up to KICK_PERIOD_STEP_S (:attr:`PlantUnderTest.kick_period_s`).
     kick_period_sweep_s : tuple of float
         Further kick periods at which the trajectory ratio is reported (s).
     trajectory_periods : float
@@ -94,10 +96,10 @@ class EvaluationConfig:
     seed : int
     """
 
-    # The paper does not give the kick period; the table's kick window (the paper's kicks settle
-    # in about 50 ms, Fig. 5) is the shortest period at which kicks do not overlap.
-    kick_period_s: float = KICK_WINDOW_S
-    kick_period_sweep_s: tuple = (0.03, 0.12)
+    # The paper does not give the kick period. A kick must have settled before the next is
+    # decided, so the default is the plant's settle time, rounded up.
+    kick_period_s: float | None = None
+    kick_period_sweep_s: tuple = (0.03, 0.06, 0.12)
     trajectory_periods: float = 1.0
     basic_phi_min_widths: tuple = (0.25, 0.5, 0.75, 1.0)
     extended_phi_min_rad: float = PAPER_PHI_MIN_RAD[0]
@@ -113,19 +115,37 @@ class EvaluationConfig:
         return cls(kick_period_sweep_s=(0.03,), trajectory_periods=0.5,
                    basic_phi_min_widths=(0.25, 0.5, 1.0), continuous_kicks=2)
 
+    def for_plant(self, put):
+        """This configuration with the kick period resolved for ``put``."""
+        if self.kick_period_s is not None:
+            return self
+        return dataclasses.replace(self, kick_period_s=put.kick_period_s)
+
 
 @dataclasses.dataclass(frozen=True)
 class PlantUnderTest:
-    """A KickPlant with its full kick width measured from the level state."""
+    """A KickPlant with its full kick width and settle time measured from the level state."""
 
     label: str
     plant: object
     full_width_rad: float
+    settle_time_s: float = 0.0
 
     @classmethod
     def measure(cls, label, plant):
-        width = angle_between(LEVEL_NORMAL, plant.kick(LEVEL_NORMAL, 0, 1.0).normal)
-        return cls(label, plant, width)
+        full = plant.kick(LEVEL_NORMAL, 0, 1.0)
+        return cls(label, plant, angle_between(LEVEL_NORMAL, full.normal),
+                   float(full.settle_time_s))
+
+    @property
+    def kick_period_s(self):
+        """The shortest decision period at which a full kick has settled before the next
+        decision: its settle time rounded up to KICK_PERIOD_STEP_S; the kick window for a
+        plant that reports no settle time (the analytic one)."""
+        if not (math.isfinite(self.settle_time_s) and self.settle_time_s > 0.0):
+            return KICK_WINDOW_S
+        steps = math.ceil(self.settle_time_s / KICK_PERIOD_STEP_S - 1e-9)
+        return round(steps * KICK_PERIOD_STEP_S, 9)
 
     @property
     def kick_scale(self):
@@ -250,7 +270,7 @@ def tracking_study(put, plant, config, kick_period_s=None, directions_rad=None, 
         Both controllers aim where the reference will be when the kick has settled
         (:class:`LoopSettings`), not at the current sample.
     """
-    period = config.kick_period_s if kick_period_s is None else kick_period_s
+    period = config.for_plant(put).kick_period_s if kick_period_s is None else kick_period_s
     trajectory = scaled_trajectory(put)
     steps = round(config.trajectory_periods / trajectory.frequency_hz / period)
     settings = LoopSettings(max_steps=steps, kick_period_s=period, preview=preview)
@@ -380,6 +400,7 @@ def evaluate(put, config=EvaluationConfig(), table=None, progress=print, continu
     -------
     EvaluationReport
     """
+    config = config.for_plant(put)
     figures = {'plant': put.label, 'full_kick_deg': math.degrees(put.full_width_rad),
                'paper_full_kick_deg': math.degrees(PAPER_FULL_KICK_RAD),
                'kick_scale': put.kick_scale, 'kick_period_s': config.kick_period_s}

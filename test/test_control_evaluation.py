@@ -98,3 +98,12 @@ def test_preview_changes_nothing_on_a_setpoint(put):
     plain, ahead = run(False), run(True)
     assert plain.outcome is Outcome.SETTLED
     assert (plain.actions == ahead.actions).all() and (plain.normals == ahead.normals).all()
+
+
+@pytest.mark.parametrize(('settle_s', 'period_s'), [(0.0448, 0.05), (0.05, 0.05), (0.0501, 0.06),
+                                                    (0.0, 0.06), (math.nan, 0.06)])
+def test_default_kick_period_is_the_settle_time_rounded_up(settle_s, period_s):
+    put = PlantUnderTest('fake', None, math.radians(0.54), settle_s)
+    assert put.kick_period_s == pytest.approx(period_s)
+    assert EvaluationConfig().for_plant(put).kick_period_s == pytest.approx(period_s)
+    assert EvaluationConfig(kick_period_s=0.03).for_plant(put).kick_period_s == 0.03

@@ -7,6 +7,8 @@ writes ``evaluation.json`` and the figures like the paper's Figs. 13-15 to ``--o
 preview: <ratio>`` and ``trajectory MSE extended/basic: <ratio>`` (without preview).
 """
 
+import argparse
+import dataclasses
 import enum
 import json
 import math
@@ -57,8 +59,18 @@ def register(subparsers):
                         help='axis-parallel kick table for the eight-direction study')
     parser.add_argument('--plant', type=PlantChoice, choices=list(PlantChoice),
                         default=PlantChoice.TABLE, help='discrete model to evaluate on')
+    parser.add_argument('--kick-period-s', type=_positive_seconds, default=None,
+                        help='time per decision in the trajectory runs (s; default: the full '
+                             "kick's settle time rounded up to 10 ms)")
     parser.add_argument('--out', type=Path, default=RESULTS_DIR, help='output directory')
     parser.set_defaults(func=run)
+
+
+def _positive_seconds(text):
+    value = float(text)
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f'must be a positive number of seconds, got {text}')
+    return value
 
 
 def load_table(path):
@@ -99,6 +111,11 @@ def run(args):
     print(note)
     print(f'full kick {math.degrees(put.full_width_rad):.4f} deg (paper 0.54 deg; scale '
           f'{put.kick_scale:.4f})')
+    config = dataclasses.replace(config, kick_period_s=args.kick_period_s).for_plant(put)
+    how = ('as given' if args.kick_period_s is not None else
+           f'the full kick settles in {put.settle_time_s * 1e3:.1f} ms, rounded up'
+           if put.settle_time_s > 0 else 'the kick window: the plant reports no settle time')
+    print(f'kick period {config.kick_period_s * 1e3:.0f} ms ({how})')
     report = evaluate(put, config, table=table, progress=lambda m: print(m, flush=True),
                       eight_plant=eight)
     args.out.mkdir(parents=True, exist_ok=True)
