@@ -22,6 +22,7 @@ import time
 import numpy as np
 
 from msg_defs.device import KICK_WINDOW_S
+from sphere_control import reference as ref
 from sphere_control.closed_loop import NO_ACTION, LoopSettings, Outcome, run_closed_loop
 from sphere_control.controllers import ControllerKind, make_controller
 from sphere_control.estimator import KalmanParams, NormalKalmanFilter
@@ -31,8 +32,15 @@ from sphere_control.extended import (
 )
 from sphere_control.kick_plants import EightDirectionPlant
 from sphere_control.perturbations import Mismatch, NoisySensor, PerturbedPlant
+from sphere_control.reachable import (
+    best_single_kick,
+    kick_vectors,
+    reach_per_kick,
+    reference_steps,
+    speed_ratios,
+)
 from sphere_control.reference import CircleTrajectory, Setpoint
-from sphere_sim.kicks.discrete import PAPER_FULL_KICK_RAD
+from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD, PAPER_FULL_KICK_RAD
 from sphere_sim.model.rotations import angle_between
 
 # The paper's numbers (§4.1, §5).
@@ -205,6 +213,42 @@ def scaled_trajectory(put):
     """Eq. (64) with f1 scaled by the kick-size ratio (module docstring)."""
     return CircleTrajectory(PAPER_TRAJECTORY.amplitude,
                             PAPER_TRAJECTORY.frequency_hz * put.kick_scale)
+
+
+def speed_study(put, plant, config):
+    """Where on eq. (64) the reference outruns the plant (:mod:`sphere_control.reachable`).
+
+    Over one period of the scaled trajectory, one kick period at a time: the reference's step
+    against the furthest the plant can move along it per kick, by the kicks the true ``plant``
+    makes at the reference's normal, and by the controllers' nominal model (``put``'s width
+    along the nominal directions). Angles in degrees, tilts from the vertical.
+    """
+    period = config.for_plant(put).kick_period_s
+    trajectory = scaled_trajectory(put)
+    times = np.arange(0.0, 1.0 / trajectory.frequency_hz, period)
+    cone = CONE_HALF_ANGLE_RAD
+    normals = [ref.sample(trajectory, t, cone).normal for t in times]
+    steps = reference_steps(trajectory, times, period, cone)
+    actions = range(len(plant.directions_rad))
+
+    def true_kicks(i):
+        n = normals[i]
+        return np.array([plant.kick(n, a, 1.0).normal[:2] - n[:2] for a in actions])
+
+    nominal = kick_vectors(plant.directions_rad, put.full_width_rad)
+    tilt_deg = np.degrees([angle_between(LEVEL_NORMAL, n) for n in normals])
+    out = {'kick_period_s': period,
+           'needed_per_kick_deg_max': math.degrees(float(np.max(np.hypot(*steps.T))))}
+    for name, kicks_at in (('plant', true_kicks), ('model', lambda i: nominal)):
+        for how, reach in (('', reach_per_kick), ('single_', best_single_kick)):
+            ratios = speed_ratios(steps, kicks_at, reach)
+            fast = ratios > 1.0
+            out.setdefault(name, {}).update({
+                f'{how}fraction_outrun': float(np.mean(fast)),
+                f'{how}max_ratio': float(np.max(ratios)),
+                f'{how}tilt_deg_outrun': ([float(tilt_deg[fast].min()),
+                                           float(tilt_deg[fast].max())] if fast.any() else None)})
+    return out
 
 
 def catch_up_step(histories, full_width_rad):
@@ -447,6 +491,7 @@ def _trajectory_figures(put, config, figures, rows, histories, progress):
     histories['fig15'] = main
     figures['fig15'] = {'kick_period_s': config.kick_period_s,
                         'frequency_hz': scaled_trajectory(put).frequency_hz, **main.summary()}
+    figures['fig15']['reachable'] = speed_study(put, plant33, config)
     previewed = tracking_study(put, plant33, config, preview=True)
     histories['fig15_preview'] = previewed
     figures['fig15']['preview'] = previewed.summary()
@@ -467,6 +512,20 @@ def _trajectory_figures(put, config, figures, rows, histories, progress):
     rows.append(_row('Fig. 15 trajectory, 33 deg mismatch',
                      'MSE extended/basic with reference preview (tracking phase)', '-',
                      f'{previewed.ratio:.3f}'))
+    reach = figures['fig15']['reachable']['plant']
+    band = ('nowhere' if reach['tilt_deg_outrun'] is None else
+            f'{100 * reach["fraction_outrun"]:.0f} % of the time, at tilts '
+            f'{reach["tilt_deg_outrun"][0]:.1f}-{reach["tilt_deg_outrun"][1]:.1f} deg')
+    rows.append(_row('Fig. 15 trajectory, 33 deg mismatch',
+                     'reference faster than the plant can follow (true kicks)', '-',
+                     f'{band}; needed/reachable up to {reach["max_ratio"]:.2f}'))
+    single = ('nowhere' if reach['single_tilt_deg_outrun'] is None else
+              f'{100 * reach["single_fraction_outrun"]:.0f} % of the time, at tilts '
+              f'{reach["single_tilt_deg_outrun"][0]:.1f}-'
+              f'{reach["single_tilt_deg_outrun"][1]:.1f} deg')
+    rows.append(_row('Fig. 15 trajectory, 33 deg mismatch',
+                     'reference faster than any single kick along it (true kicks)', '-',
+                     f'{single}; up to {reach["single_max_ratio"]:.2f}'))
     for period, s in sweep.items():
         rows.append(_row('Fig. 15 trajectory, 33 deg mismatch',
                          f'MSE extended/basic at {period * 1e3:.0f} ms per kick, without / '

@@ -107,3 +107,19 @@ def test_default_kick_period_is_the_settle_time_rounded_up(settle_s, period_s):
     assert put.kick_period_s == pytest.approx(period_s)
     assert EvaluationConfig().for_plant(put).kick_period_s == pytest.approx(period_s)
     assert EvaluationConfig(kick_period_s=0.03).for_plant(put).kick_period_s == 0.03
+
+
+def test_speed_study_finds_where_a_slow_kick_rate_is_outrun(put):
+    """At the paper's pace the 0.54 deg kick follows eq. (64) everywhere; kicking five times
+    less often, each kick must cover five times the path, more than a kick reaches."""
+    from sphere_control.evaluation import speed_study
+
+    plant = PerturbedPlant(put.plant, Mismatch(math.radians(33.0)))
+    paced = speed_study(put, plant, EvaluationConfig(kick_period_s=0.06))
+    assert paced['plant']['fraction_outrun'] == 0.0 and paced['plant']['max_ratio'] < 1.0
+    slow = speed_study(put, plant, EvaluationConfig(kick_period_s=0.3))
+    assert slow['plant']['max_ratio'] == pytest.approx(5.0 * paced['plant']['max_ratio'],
+                                                       rel=0.2)
+    assert slow['plant']['fraction_outrun'] > 0.5
+    low, high = slow['plant']['tilt_deg_outrun']
+    assert 0.0 <= low < high <= 27.0  # eq. (64) stays within 26 deg of tilt
