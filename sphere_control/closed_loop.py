@@ -19,6 +19,7 @@ from sphere_control import reference as ref
 from sphere_control.geometry import error_angle_rad
 from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD
 
+KICK_PERIOD_STEP_S = 0.01  # a default kick period is a settle time rounded up to this
 NO_ACTION = -1  # the action recorded for a step spent resting
 
 
@@ -70,6 +71,14 @@ class LoopSettings:
     cone_policy: ConePolicy = ConePolicy.CLAMP
     cone_half_angle_rad: float = CONE_HALF_ANGLE_RAD
     preview: bool = False
+
+
+def settled_kick_period_s(settle_time_s):
+    """The shortest decision period after which a kick that settles in ``settle_time_s`` is
+    over: rounded up to KICK_PERIOD_STEP_S; the kick window when no settle time is known."""
+    if not (math.isfinite(settle_time_s) and settle_time_s > 0.0):
+        return KICK_WINDOW_S
+    return round(math.ceil(settle_time_s / KICK_PERIOD_STEP_S - 1e-9) * KICK_PERIOD_STEP_S, 9)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -23,7 +23,13 @@ import numpy as np
 
 from msg_defs.device import KICK_WINDOW_S
 from sphere_control import reference as ref
-from sphere_control.closed_loop import NO_ACTION, LoopSettings, Outcome, run_closed_loop
+from sphere_control.closed_loop import (
+    NO_ACTION,
+    LoopSettings,
+    Outcome,
+    run_closed_loop,
+    settled_kick_period_s,
+)
 from sphere_control.controllers import ControllerKind, make_controller
 from sphere_control.estimator import KalmanParams, NormalKalmanFilter
 from sphere_control.extended import (
@@ -58,7 +64,6 @@ AXIS_SETPOINT_NORMAL = (math.hypot(0.01, 0.02), 0.0, 0.9997)
 # A run counts as oscillating if it never settled and its last OSCILLATION_KICKS errors all stay
 # within OSCILLATION_BAND_WIDTHS full kick widths of the reference: it circles the reference.
 OSCILLATION_KICKS = 10
-KICK_PERIOD_STEP_S = 0.01  # the default kick period is the settle time rounded up to this
 OSCILLATION_BAND_WIDTHS = 2.0
 # The tracking phase of a trajectory run starts when both compared runs are within this many
 # full kick widths of the reference; before that both kick at full width towards the start of
@@ -84,7 +89,7 @@ class EvaluationConfig:
     ----------
     kick_period_s : float or None
         Time per decision in the trajectory runs (s). None: the plant's own, its full kick's
-        settle time rounded up to KICK_PERIOD_STEP_S (:attr:`PlantUnderTest.kick_period_s`).
+        settle time rounded up (:attr:`PlantUnderTest.kick_period_s`).
     kick_period_sweep_s : tuple of float
         Further kick periods at which the trajectory ratio is reported (s).
     trajectory_periods : float
@@ -150,10 +155,7 @@ class PlantUnderTest:
         """The shortest decision period at which a full kick has settled before the next
         decision: its settle time rounded up to KICK_PERIOD_STEP_S; the kick window for a
         plant that reports no settle time (the analytic one)."""
-        if not (math.isfinite(self.settle_time_s) and self.settle_time_s > 0.0):
-            return KICK_WINDOW_S
-        steps = math.ceil(self.settle_time_s / KICK_PERIOD_STEP_S - 1e-9)
-        return round(steps * KICK_PERIOD_STEP_S, 9)
+        return settled_kick_period_s(self.settle_time_s)
 
     @property
     def kick_scale(self):

@@ -14,6 +14,8 @@ import math
 import numpy as np
 
 from sphere_control.geometry import error_angle_rad, error_direction_rad
+from sphere_control.reachable import model_kicks, speed_ratios
+from sphere_control.reference_motion import ReferenceMotion
 from sphere_sim.model.rotations import angle_between
 
 # Samples at or beyond the kick window with an angular speed below this count as settled. A
@@ -71,11 +73,16 @@ class KickCycle:
         Wall-clock time without a sample after which the state counts as stale.
     lead_periods : int
         Sample periods between the deciding sample and the kick's start.
+    preview : bool
+        Aim where the reference will be one window after its newest sample, estimated from
+        its recent samples (:class:`ReferenceMotion`; a jump is not extrapolated), instead of
+        at its newest sample.
     """
 
     def __init__(self, controller, window_s, settle_samples=DEFAULT_SETTLE_SAMPLES,
                  settle_rate_rad_per_s=DEFAULT_SETTLE_RATE_RAD_PER_S,
-                 stale_timeout_s=DEFAULT_STALE_TIMEOUT_S, lead_periods=DEFAULT_LEAD_PERIODS):
+                 stale_timeout_s=DEFAULT_STALE_TIMEOUT_S, lead_periods=DEFAULT_LEAD_PERIODS,
+                 preview=False):
         self.controller = controller
         self.window_s = window_s
         self.settle_samples = settle_samples
@@ -88,9 +95,29 @@ class KickCycle:
         self.pending = None  # (start_s, normal_before, command)
         self.kicks = 0
         self.period_s = None  # the sample period, learnt from the stamps
+        self.preview = preview
+        self.reference_motion = ReferenceMotion()
 
-    def on_reference(self, normal):
+    def on_reference(self, normal, time_s=None):
+        """A reference sample; its stamp ``time_s`` (s) feeds the motion estimate."""
         self.reference = np.asarray(normal, dtype=float)
+        if time_s is not None:
+            self.reference_motion.add(time_s, self.reference)
+
+    def target(self):
+        """What the controller aims at: the reference, or with preview where it will be."""
+        if self.preview:
+            ahead = self.reference_motion.ahead(self.window_s)
+            if ahead is not None:
+                return ahead
+        return self.reference
+
+    def speed_ratio(self):
+        """The reference's step per window over the furthest the controller's model of the
+        kicks reaches along it (:mod:`sphere_control.reachable`); above 1 the reference
+        outruns the plant. 0 for a reference standing still."""
+        step = self.reference_motion.velocity_xy() * self.window_s
+        return float(speed_ratios([step], lambda _: model_kicks(self.controller))[0])
 
     def on_sample(self, time_s, normal, wall_s):
         """Record a measured sample; returns the :class:`Decision` it leads to."""
@@ -143,7 +170,7 @@ class KickCycle:
             return Decision(Phase.NO_REFERENCE)
         phi = error_angle_rad(normal, self.reference)
         theta = error_direction_rad(normal, self.reference) if phi > 0.0 else 0.0
-        command = self.controller.decide(normal, self.reference)
+        command = self.controller.decide(normal, self.target())
         if command is None:
             return Decision(Phase.RESTING, None, phi, theta)
         lead_s = (LEAD_BEFORE_PERIOD_KNOWN_S if self.period_s is None

@@ -28,6 +28,18 @@ def kick_vectors(directions_rad, widths_rad):
     return np.column_stack([widths * np.cos(directions), widths * np.sin(directions)])
 
 
+def model_kicks(controller):
+    """The kick vectors a controller believes in: its (learned) directions, and its
+    networks' full-intensity widths (extended) or its full-kick width (basic)."""
+    directions = getattr(controller, 'directions_rad', None)
+    if directions is None:
+        directions = controller.params.directions_rad
+    networks = getattr(controller, 'networks', None)
+    widths = ([net(1.0) for net in networks] if networks is not None
+              else controller.params.full_width_rad)
+    return kick_vectors(directions, widths)
+
+
 def reach_per_kick(kicks_xy, direction_rad):
     """Largest mean x-y displacement per kick along ``direction_rad`` (the ray's exit from the
     convex hull of 0 and the kick vectors ``kicks_xy``, shape (n, 2)); 0 if no kick has a

@@ -31,8 +31,10 @@ def test_lockstep_closed_loop_reaches_the_setpoint_and_rests(ros_nodes, controll
     simulator = ros_nodes.start('simulator', parameter_args(plant='discrete', lockstep=True))
     ros_nodes.start('reference', parameter_args(setpoint_xy=list(SETPOINT_XY)))
     phi_min_deg = PHI_MIN_DEG[controller]
+    # The extended one runs with reference preview: on a setpoint it aims at the setpoint.
     ros_nodes.start('controller', parameter_args(controller=controller,
-                                                 phi_min_deg=phi_min_deg))
+                                                 phi_min_deg=phi_min_deg,
+                                                 preview=controller == 'extended'))
     probe = TopicProbe(ros_nodes.domain_id, (CONTROLLER_STATUS, SURFACE_NORMAL), simulator)
     statuses = probe.messages[CONTROLLER_STATUS.name]
     try:
@@ -56,3 +58,5 @@ def test_lockstep_closed_loop_reaches_the_setpoint_and_rests(ros_nodes, controll
     assert float(values['phi_deg']) < phi_min_deg
     # From level to 1.28 deg of tilt takes several kicks of at most 0.73 deg, not one.
     assert int(values['kicks']) >= 2
+    # A setpoint stands still: nothing for the kicks to catch up with.
+    assert float(values['reference_speed_ratio']) == 0.0
