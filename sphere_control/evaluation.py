@@ -106,6 +106,9 @@ class EvaluationConfig:
         Measurement noise stds per x-y component, in full kick widths (Kalman study).
     continuous_kicks : int
         Kicks of the setpoint scenario on the continuous model (0: skip).
+    twin_trajectory_periods : float
+        Length of the Fig. 15 run on the twin's continuous plant, in periods 1/f1 (0: skip
+        the twin study; see :func:`twin_study`).
     seed : int
     """
 
@@ -120,13 +123,15 @@ class EvaluationConfig:
     prelearn_kicks: int = 40
     noise_std_widths: tuple = (0.1, 0.25)
     continuous_kicks: int = 6
+    twin_trajectory_periods: float = 0.25
     seed: int = 0
 
     @classmethod
     def quick(cls):
         """Shorter runs for a smoke check (one lap of the trajectory, two continuous kicks)."""
         return cls(kick_period_sweep_s=(0.03,), trajectory_periods=0.5,
-                   basic_phi_min_widths=(0.25, 0.5, 1.0), continuous_kicks=2)
+                   basic_phi_min_widths=(0.25, 0.5, 1.0), continuous_kicks=2,
+                   twin_trajectory_periods=0.0)
 
     def for_plant(self, put):
         """This configuration with the kick period resolved for ``put``."""
@@ -399,6 +404,59 @@ def continuous_study(table, put, config, continuous_plant=None):
     }
 
 
+def twin_study(table, put, config, basic_phi_min_rad):
+    """The Fig. 13 setpoint and a stretch of the Fig. 15 circle on the twin's continuous plant
+    (:class:`~sphere_control.kick_plants.TwinKickPlant`: the state carries from kick to kick,
+    as in the simulator node) beside the same runs on the table.
+
+    The 33 deg mismatch of Fig. 15 cannot be laid on a physical plant's kicks; it is laid on the
+    controllers' belief instead: they take the kicks' directions to be 33 deg short of what
+    they are, on both plants. The basic controller runs at ``basic_phi_min_rad``, the best on
+    the table.
+    """
+    from sphere_control.kick_plants import TwinKickPlant
+    from sphere_sim.model.assembly import assemble
+    from sphere_sim.model.initial_state import rest_state
+    from sphere_sim.model.scene import load_scene
+    from sphere_sim.twin.plants import ContinuousPlant
+
+    config = config.for_plant(put)
+    period = config.kick_period_s
+    model = assemble(load_scene('rest'), table.parameters())
+    x_level = rest_state(model)
+
+    def fresh_twin():
+        return TwinKickPlant(table, ContinuousPlant(model, x_level.copy()), period)
+
+    setpoint = Setpoint.from_normal(PAPER_SETPOINT_NORMAL)
+    settings = LoopSettings(max_steps=config.setpoint_max_steps, kick_period_s=period)
+    out = {'kick_period_s': period, 'setpoint': {}, 'trajectory': {}}
+    for kind in (ControllerKind.BASIC, ControllerKind.EXTENDED):
+        runs = {name: run_closed_loop(study_controller(kind, PAPER_PHI_MIN_RAD[0], put, table,
+                                                       config), plant, LEVEL_NORMAL,
+                                      setpoint, settings)
+                for name, plant in (('twin', fresh_twin()), ('table', table))}
+        out['setpoint'][kind.value] = {k: setpoint_summary(h, put.full_width_rad)
+                                       for k, h in runs.items()}
+    trajectory = scaled_trajectory(put)
+    steps = round(config.twin_trajectory_periods / trajectory.frequency_hz / period)
+    believed = tuple(d - PAPER_TRAJECTORY_MISMATCH_RAD for d in table.directions_rad)
+    settings = LoopSettings(max_steps=steps, kick_period_s=period)
+    for kind, phi in ((ControllerKind.BASIC, basic_phi_min_rad),
+                      (ControllerKind.EXTENDED, config.extended_phi_min_rad * put.kick_scale)):
+        runs = {name: run_closed_loop(study_controller(kind, phi, put, table, config, believed),
+                                      plant, LEVEL_NORMAL, trajectory, settings)
+                for name, plant in (('twin', fresh_twin()), ('table', table))}
+        start = catch_up_step(list(runs.values()), put.full_width_rad)
+        out['trajectory'][kind.value] = {
+            name: {'mse': float(np.mean(h.squared_xy_errors[start:])), 'kicks': h.kicks,
+                   'final_error_deg': math.degrees(h.final_error_rad)}
+            for name, h in runs.items()}
+        out['trajectory'][kind.value]['catch_up_step'] = start
+    out['trajectory']['steps'] = steps
+    return out
+
+
 class _RecordingPlant:
     """Passes kicks through and keeps their KickResults."""
 
@@ -457,6 +515,8 @@ def evaluate(put, config=EvaluationConfig(), table=None, progress=print, continu
     _noise_figures(put, config, main, figures, rows, histories, progress)
     if table is not None and config.continuous_kicks > 0:
         _continuous_figures(put, config, table, continuous_plant, figures, rows, progress)
+    if table is not None and config.twin_trajectory_periods > 0:
+        _twin_figures(put, config, table, main.basic_phi_min_rad, figures, rows, progress)
     return EvaluationReport(figures, rows, histories, main.ratio, previewed.ratio)
 
 
@@ -609,6 +669,28 @@ def _continuous_figures(put, config, table, continuous_plant, figures, rows, pro
     rows.append(_row('setpoint on the continuous model', 'transient peak per kick (deg, '
                      'hidden by the discrete model)', 'overshoot noted (§6)',
                      f'max {max(cont["peak_deviation_deg"], default=0.0):.3f}'))
+
+
+def _twin_figures(put, config, table, basic_phi_min_rad, figures, rows, progress):
+    """The closed loop on the twin's continuous plant beside the table (:func:`twin_study`)."""
+    twin = twin_study(table, put, config, basic_phi_min_rad)
+    figures['twin'] = twin
+    progress('twin: runs done')
+    scenario = 'twin\'s continuous plant vs table'
+    for kind, runs in twin['setpoint'].items():
+        rows.append(_row(f'{scenario}, Fig. 13 setpoint (0.05 deg)', f'{kind}: twin vs table',
+                         '-', f'{_fmt_setpoint(runs["twin"])} vs {_fmt_setpoint(runs["table"])}'))
+    span = twin['trajectory']['steps'] * twin['kick_period_s']
+    for kind in ('basic', 'extended'):
+        runs = twin['trajectory'][kind]
+        rows.append(_row(f'{scenario}, Fig. 15 for {span:.1f} s (33 deg believed)',
+                         f'{kind}: tracking MSE twin vs table', '-',
+                         f'{runs["twin"]["mse"]:.3g} vs {runs["table"]["mse"]:.3g}'))
+    ext, bas = twin['trajectory']['extended'], twin['trajectory']['basic']
+    rows.append(_row(f'{scenario}, Fig. 15 for {span:.1f} s (33 deg believed)',
+                     'MSE extended/basic, twin vs table', '-',
+                     f'{ext["twin"]["mse"] / bas["twin"]["mse"]:.3f} vs '
+                     f'{ext["table"]["mse"] / bas["table"]["mse"]:.3f}'))
 
 
 # The paper's findings for the setpoint figures, by Phi_min (0.05 deg, 0.25 deg).

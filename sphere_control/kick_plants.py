@@ -125,3 +125,35 @@ class ContinuousKickPlant:
                                   window_s=self.bench.window_s, rtol=self.bench.rtol,
                                   x_rest=rest)
         return kicked
+
+
+class TwinKickPlant:
+    """The simulator node's continuous plant as a KickPlant: the state carries over.
+
+    Unlike :class:`ContinuousKickPlant`, which starts every kick from rest, each call sends the
+    kick's programme to the twin's :class:`~sphere_sim.twin.plants.ContinuousPlant` and lets
+    simulated time run on by one kick period, whatever the sphere, the beams and the friction
+    bristles were doing: the closed loop runs on the same plant as the running twin. The
+    ``normal`` passed in must be the plant's own (the closed loop passes back what the last
+    kick returned); resting steps do not advance the plant.
+
+    Parameters
+    ----------
+    kick_model : LookupTable or CombinedKickPlant
+        The kicks' programmes (``programme(action, intensity)``) and nominal directions.
+    plant : sphere_sim.twin.plants.ContinuousPlant
+    period_s : float
+        Simulated time per kick (s), at least the longest programme.
+    """
+
+    def __init__(self, kick_model, plant, period_s):
+        self.kick_model = kick_model
+        self.plant = plant
+        self.period_s = period_s
+        self.directions_rad = tuple(kick_model.directions_rad)
+
+    def kick(self, normal, action, intensity):
+        programme = self.kick_model.programme(int(action), float(intensity))
+        self.plant.run_programme(programme)
+        self.plant.advance(self.plant.time_s + max(self.period_s, programme.duration_s))
+        return KickResult(self.plant.snapshot().normal)

@@ -135,3 +135,25 @@ def test_measurement_noise_is_seeded_and_has_the_stated_spread():
     errors = np.array([angle_between(r, normal) for r in readings])
     # The angle of a 2-D isotropic Gaussian error is Rayleigh: RMS = sqrt(2) sigma.
     assert np.sqrt(np.mean(errors ** 2)) == pytest.approx(math.sqrt(2) * sigma, rel=0.05)
+
+
+def test_twin_kick_plant_carries_the_state_and_agrees_with_the_table(table):
+    """The closed loop's view of the simulator's continuous plant: a full kick from level
+    lands where the table says (to its one-step error, 0.002 deg measured in the evaluation),
+    and the next kick starts from where the last one left the plant, not from rest."""
+    from sphere_control.kick_plants import TwinKickPlant
+    from sphere_sim.model.assembly import assemble
+    from sphere_sim.model.initial_state import rest_state
+    from sphere_sim.model.scene import load_scene
+
+    model = assemble(load_scene('rest'), table.parameters())
+    plant = ContinuousPlant(model, rest_state(model))
+    twin = TwinKickPlant(table, plant, period_s=0.05)
+    level = np.array([0.0, 0.0, 1.0])
+    first = twin.kick(level, 0, 1.0).normal
+    predicted = table.kick(level, 0, 1.0).normal
+    assert math.degrees(angle_between(first, predicted)) < 0.005
+    assert plant.time_s == pytest.approx(0.05)
+    second = twin.kick(first, 2, 1.0).normal  # the opposite kick takes it most of the way back
+    assert plant.time_s == pytest.approx(0.10)
+    assert angle_between(second, level) < 0.5 * angle_between(first, level)
