@@ -611,8 +611,8 @@ def _direction_figures(put, config, eight_plant, figures, rows, progress):
                                    config, kinds=(ControllerKind.BASIC,))
             entry[name] = {'extended': setpoint_summary(runs[ControllerKind.EXTENDED], W),
                            'basic': setpoint_summary(basic[ControllerKind.BASIC], W)}
-        tracking = tracking_study(put, plant, config)
-        entry['trajectory'] = tracking.summary()
+        entry['trajectory'] = tracking_study(put, plant, config).summary()
+        entry['trajectory_preview'] = tracking_study(put, plant, config, preview=True).summary()
         figures['directions'][label] = entry
     progress('directions: runs done')
     for name in ('paper setpoint', 'axis setpoint'):
@@ -625,6 +625,11 @@ def _direction_figures(put, config, eight_plant, figures, rows, progress):
         four, eig = (figures['directions'][n]['trajectory'][f'mse_{kind}'] for n in ('4', '8'))
         rows.append(_row('8 vs 4 directions, trajectory (no mismatch)',
                          f'{kind}: tracking MSE (8 vs 4)', '-', f'{eig:.3g} vs {four:.3g}'))
+        four, eig = (figures['directions'][n]['trajectory_preview'][f'mse_{kind}']
+                     for n in ('4', '8'))
+        rows.append(_row('8 vs 4 directions, trajectory (no mismatch)',
+                         f'{kind}: tracking MSE with preview (8 vs 4)', '-',
+                         f'{eig:.3g} vs {four:.3g}'))
 
 
 def _noise_figures(put, config, main, figures, rows, histories, progress):
@@ -632,7 +637,6 @@ def _noise_figures(put, config, main, figures, rows, histories, progress):
     basic controller keeps the Phi_min that was best without noise."""
     W = put.full_width_rad
     plant33 = trajectory_plant(put)
-    # controller keeps the Phi_min that was best without noise.
     figures['kalman'] = {}
     best_basic = (main.basic_phi_min_rad / W,)
     for fraction in config.noise_std_widths:
@@ -643,6 +647,9 @@ def _noise_figures(put, config, main, figures, rows, histories, progress):
                                     basic_phi_min_widths=best_basic)
             entry['with filter' if use_kalman else 'raw'] = result.summary()
             histories[('kalman', fraction, use_kalman)] = result
+        entry['with filter and preview'] = tracking_study(
+            put, plant33, config, noise=(std, True), basic_phi_min_widths=best_basic,
+            preview=True).summary()
         figures['kalman'][str(fraction)] = entry
         for kind in ('extended', 'basic'):
             rows.append(_row(f'noise std {math.degrees(std):.4f} deg ({fraction} kick), '
@@ -650,6 +657,11 @@ def _noise_figures(put, config, main, figures, rows, histories, progress):
                              f'{kind}: tracking MSE with vs without Kalman', '-',
                              f'{entry["with filter"][f"mse_{kind}"]:.3g} vs '
                              f'{entry["raw"][f"mse_{kind}"]:.3g}'))
+            rows.append(_row(f'noise std {math.degrees(std):.4f} deg ({fraction} kick), '
+                             'trajectory 33 deg mismatch',
+                             f'{kind}: tracking MSE with Kalman, with vs without preview', '-',
+                             f'{entry["with filter and preview"][f"mse_{kind}"]:.3g} vs '
+                             f'{entry["with filter"][f"mse_{kind}"]:.3g}'))
     progress('kalman: runs done')
 
 
