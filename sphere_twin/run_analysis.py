@@ -21,6 +21,7 @@ from msg_defs.conversions import (
 )
 from msg_defs.device import NS_PER_S
 from msg_defs.topics import PULSE_PROGRAM, SPHERE_REFERENCE, SURFACE_NORMAL, VOLTAGE_COMMAND
+from msg_defs.voltage_rules import check_segments, check_voltages
 from sphere_sim.model.rotations import angle_between
 from sphere_sim.twin.plants import TIME_TOL_S
 from sphere_twin.bag.reader import BagError, deserialize, read_messages
@@ -72,11 +73,12 @@ def load_run(bag_dir):
                 references.append((raw.log_time_ns, surface_normal_from_msg(msg)))
             elif raw.topic == PULSE_PROGRAM.name:
                 programmes.append((raw.log_time_ns, ns_from_time(msg.header.stamp),
-                                   *programme_from_msg(msg)))
+                                   *check_segments(*programme_from_msg(msg))))
             else:
-                holds.append((raw.log_time_ns, voltages_from_msg(msg)))
+                holds.append((raw.log_time_ns, check_voltages(voltages_from_msg(msg))))
         except ValueError:
-            continue  # a message that breaks the contract was rejected by the twin too
+            # A message that breaks the contract or the command rules: the twin refused it too.
+            continue
     if not normals:
         raise BagError(f'{bag_dir}: no {SURFACE_NORMAL.name} messages to analyse')
     log_ns = np.array([m[0] for m in receive_map], dtype=float)

@@ -109,3 +109,35 @@ def test_continuous_plant_replays_a_recording_to_the_integrator_tolerance(ros_no
     # like the run (rtol 1e-6, atol 1e-10 on the quaternion): it agrees to that tolerance
     # (6e-10 rad measured over eight kicks), often to the bit.
     assert replayed['kicks'] >= 3 and replayed['max_error_rad'] < 1e-8
+
+
+def test_recorded_commands_that_break_the_rules_are_dropped_as_the_twin_dropped_them(tmp_path):
+    """A recording is a boundary where data enters: a programme or a hold beyond the device's
+    rules (msg_defs.voltage_rules) is skipped on reading, as the twin refused it when live."""
+    from rclpy.serialization import serialize_message
+
+    from msg_defs.conversions import programme_to_msg, surface_normal_to_msg, voltages_to_msg
+    from msg_defs.topics import PULSE_PROGRAM, SURFACE_NORMAL, VOLTAGE_COMMAND
+    from sphere_twin.bag import format as bag_format
+    from sphere_twin.bag.writer import BagWriter
+    from sphere_twin.run_analysis import load_run
+
+    good = programme_to_msg([0.0, 1e-3], [[80.0, 0.0, 0.0, 0.0], [0.0] * 4])
+    over = programme_to_msg([0.0, 1e-3], [[80.0, 0.0, 0.0, 0.0], [0.0] * 4])
+    over.points[0].effort[0] = 90.0  # as a sender that skipped the rules would write it
+    hold_over = voltages_to_msg([0.0] * 4)
+    hold_over.effort = [0.0, 0.0, 85.0, 0.0]
+    bag_dir = tmp_path / 'rules'
+    with BagWriter(bag_dir) as bag:
+        for topic in (SURFACE_NORMAL, PULSE_PROGRAM, VOLTAGE_COMMAND):
+            bag.add_topic(topic.name, bag_format.type_name_of(topic.msg_type),
+                          [bag_format.qos_to_dict(topic.qos.to_profile())])
+        bag.write(SURFACE_NORMAL.name,
+                  serialize_message(surface_normal_to_msg(normal_from_xy(0.0, 0.0))), 1)
+        for k, msg in enumerate((good, over)):
+            bag.write(PULSE_PROGRAM.name, serialize_message(msg), 10 + k)
+        bag.write(VOLTAGE_COMMAND.name, serialize_message(hold_over), 20)
+        bag.write(VOLTAGE_COMMAND.name, serialize_message(voltages_to_msg([1.0] * 4)), 21)
+    run = load_run(bag_dir)
+    assert len(run.kicks) == 1 and run.kicks[0][2][0][0] == 80.0
+    assert len(run.holds) == 1 and run.holds[0][1].tolist() == [1.0] * 4
