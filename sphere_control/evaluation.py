@@ -16,6 +16,7 @@ the same kick period.
 
 import dataclasses
 import enum
+import itertools
 import math
 import time
 
@@ -441,18 +442,21 @@ def twin_study(table, put, config, basic_phi_min_rad):
     trajectory = scaled_trajectory(put)
     steps = round(config.twin_trajectory_periods / trajectory.frequency_hz / period)
     believed = tuple(d - PAPER_TRAJECTORY_MISMATCH_RAD for d in table.directions_rad)
-    settings = LoopSettings(max_steps=steps, kick_period_s=period)
-    for kind, phi in ((ControllerKind.BASIC, basic_phi_min_rad),
-                      (ControllerKind.EXTENDED, config.extended_phi_min_rad * put.kick_scale)):
+    for preview, kind in itertools.product((False, True),
+                                           (ControllerKind.BASIC, ControllerKind.EXTENDED)):
+        phi = (basic_phi_min_rad if kind is ControllerKind.BASIC
+               else config.extended_phi_min_rad * put.kick_scale)
+        settings = LoopSettings(max_steps=steps, kick_period_s=period, preview=preview)
         runs = {name: run_closed_loop(study_controller(kind, phi, put, table, config, believed),
                                       plant, LEVEL_NORMAL, trajectory, settings)
                 for name, plant in (('twin', fresh_twin()), ('table', table))}
         start = catch_up_step(list(runs.values()), put.full_width_rad)
-        out['trajectory'][kind.value] = {
+        key = kind.value + (' with preview' if preview else '')
+        out['trajectory'][key] = {
             name: {'mse': float(np.mean(h.squared_xy_errors[start:])), 'kicks': h.kicks,
                    'final_error_deg': math.degrees(h.final_error_rad)}
             for name, h in runs.items()}
-        out['trajectory'][kind.value]['catch_up_step'] = start
+        out['trajectory'][key]['catch_up_step'] = start
     out['trajectory']['steps'] = steps
     return out
 
@@ -693,16 +697,17 @@ def _twin_figures(put, config, table, basic_phi_min_rad, figures, rows, progress
         rows.append(_row(f'{scenario}, Fig. 13 setpoint (0.05 deg)', f'{kind}: twin vs table',
                          '-', f'{_fmt_setpoint(runs["twin"])} vs {_fmt_setpoint(runs["table"])}'))
     span = twin['trajectory']['steps'] * twin['kick_period_s']
-    for kind in ('basic', 'extended'):
-        runs = twin['trajectory'][kind]
+    for suffix in ('', ' with preview'):
+        for kind in ('basic', 'extended'):
+            runs = twin['trajectory'][kind + suffix]
+            rows.append(_row(f'{scenario}, Fig. 15 for {span:.1f} s (33 deg believed)',
+                             f'{kind}{suffix}: tracking MSE twin vs table', '-',
+                             f'{runs["twin"]["mse"]:.3g} vs {runs["table"]["mse"]:.3g}'))
+        ext, bas = twin['trajectory']['extended' + suffix], twin['trajectory']['basic' + suffix]
         rows.append(_row(f'{scenario}, Fig. 15 for {span:.1f} s (33 deg believed)',
-                         f'{kind}: tracking MSE twin vs table', '-',
-                         f'{runs["twin"]["mse"]:.3g} vs {runs["table"]["mse"]:.3g}'))
-    ext, bas = twin['trajectory']['extended'], twin['trajectory']['basic']
-    rows.append(_row(f'{scenario}, Fig. 15 for {span:.1f} s (33 deg believed)',
-                     'MSE extended/basic, twin vs table', '-',
-                     f'{ext["twin"]["mse"] / bas["twin"]["mse"]:.3f} vs '
-                     f'{ext["table"]["mse"] / bas["table"]["mse"]:.3f}'))
+                         f'MSE extended/basic{suffix}, twin vs table', '-',
+                         f'{ext["twin"]["mse"] / bas["twin"]["mse"]:.3f} vs '
+                         f'{ext["table"]["mse"] / bas["table"]["mse"]:.3f}'))
 
 
 # The paper's findings for the setpoint figures, by Phi_min (0.05 deg, 0.25 deg).
