@@ -2,12 +2,17 @@
 
 Each subcommand lives in its own module under :mod:`sphere_twin.commands` and exposes
 ``register(subparsers)``; this module only wires them together, so that the CLI calls the
-same functions the tests call.
+same functions the tests call. A mistake of the user's (a missing or malformed file, a scene
+or parameter set that breaks its rules, an option out of range) ends the command with one line,
+``sphere-twin <cmd>: error: ...``, and exit status 2; a traceback means a bug (``--debug``
+shows it for anything).
 """
 
 import argparse
 import importlib
 import sys
+
+import yaml
 
 from node_runtime.ros_env import ensure_localhost_discovery
 
@@ -31,11 +36,42 @@ COMMAND_MODULES = (
 )
 
 
+USAGE_STATUS = 2  # argparse's status for a usage error; the same for every user mistake
+
+
+def user_errors():
+    """The exception types that are the user's mistake, not a bug (imported when needed)."""
+    from msg_defs.voltage_rules import VoltageRuleError
+    from sphere_sim.integrate.solve import SolverError
+    from sphere_sim.kicks.design import DesignError
+    from sphere_sim.kicks.lookup_table import TableError
+    from sphere_sim.model.initial_state import RestError
+    from sphere_sim.model.parameters import ParameterError
+    from sphere_sim.model.programme import ProgrammeError
+    from sphere_sim.model.scene import SceneError
+    from sphere_sim.twin.plants import PlantError
+    from sphere_twin.bag.reader import BagError
+    from sphere_twin.commands.options import CommandError
+
+    return (CommandError, SceneError, ParameterError, ProgrammeError, TableError, BagError,
+            DesignError, VoltageRuleError, PlantError, RestError, SolverError, yaml.YAMLError,
+            OSError)
+
+
+def one_line(error):
+    """An error's message on one line (YAML's and the OS's span several)."""
+    if isinstance(error, OSError) and error.filename is not None:
+        return f'{error.filename}: {error.strerror or error}'
+    return ' '.join(str(error).split()) or type(error).__name__
+
+
 def build_parser():
     parser = argparse.ArgumentParser(
         prog='sphere-twin',
         description='Digital twin of an electrostatically kicked sphere micromirror.',
     )
+    parser.add_argument('--debug', action='store_true',
+                        help='show the traceback of any error, not only of a bug')
     subparsers = parser.add_subparsers(dest='command', metavar='COMMAND', required=True)
     for name in COMMAND_MODULES:
         module = importlib.import_module(f'sphere_twin.commands.{name}')
@@ -47,7 +83,20 @@ def main(argv=None):
     ensure_localhost_discovery()
     parser = build_parser()
     args = parser.parse_args(argv)
-    return args.func(args)
+    try:
+        return args.func(args)
+    except user_errors() as error:
+        if args.debug:
+            raise
+        command = ' '.join(filter(None, (args.command, *_subcommands(args))))
+        print(f'sphere-twin {command}: error: {one_line(error)}', file=sys.stderr)
+        return USAGE_STATUS
+
+
+def _subcommands(args):
+    """The nested subcommand names (``table build``, ``bag info``), as argparse names them."""
+    return [value for key, value in vars(args).items()
+            if key.endswith('_command') and isinstance(value, str)]
 
 
 if __name__ == '__main__':

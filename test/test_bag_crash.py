@@ -254,10 +254,10 @@ def test_an_unreadable_mcap_file_is_a_one_line_error(tmp_path, capsys, case):
         list(read_messages(bag_dir))
     assert '\n' not in str(raised.value)
     for action in ('info', 'repair'):
-        assert cli.main(['bag', action, str(bag_dir)]) == 1
+        assert cli.main(['bag', action, str(bag_dir)]) == 2
         captured = capsys.readouterr()
-        (line,) = captured.out.splitlines()
-        assert line.startswith('error: ') and 'Traceback' not in captured.err
+        (line,) = captured.err.splitlines()
+        assert line.startswith(f'sphere-twin bag {action}: error: ') and not captured.out
         assert str(raised.value) in line
 
 
@@ -268,9 +268,9 @@ def test_a_directory_without_metadata_is_a_one_line_error(tmp_path, capsys):
         list(read_messages(tmp_path / 'plain'))
     for target in ('plain', 'missing'):
         for action in ('info', 'repair'):
-            assert cli.main(['bag', action, str(tmp_path / target)]) == 1
-            (line,) = capsys.readouterr().out.splitlines()
-            assert line.startswith('error: ') and 'is not a bag' in line
+            assert cli.main(['bag', action, str(tmp_path / target)]) == 2
+            (line,) = capsys.readouterr().err.splitlines()
+            assert line.startswith(f'sphere-twin bag {action}: error: ') and 'is not a bag' in line
 
 
 # --- a recorder killed for real ------------------------------------------------------------

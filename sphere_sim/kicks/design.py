@@ -25,6 +25,10 @@ SETTLE_BAND_RAD = math.radians(0.005)  # "settled": within 0.005 deg of the fina
 KICK_SAMPLE_PERIOD_S = 2e-4
 
 
+class DesignError(ValueError):
+    """A kick design file that cannot be read as one."""
+
+
 @dataclasses.dataclass(frozen=True)
 class KickDesign:
     """Pulse parameters of one kick in its reference direction.
@@ -82,12 +86,22 @@ class KickDesign:
 
     @classmethod
     def load(cls, path):
-        """The design saved by ``sphere-twin optimize-kick`` (its JSON's ``design``)."""
-        data = dict(json.loads(Path(path).read_text())['design'])
-        data.pop('direction_deg', None)
-        data['low_beams'] = tuple(data['low_beams'])
-        data['high_beams'] = tuple(data['high_beams'])
-        return cls(**data)
+        """The design saved by ``sphere-twin optimize-kick`` (its JSON's ``design``).
+
+        Raises
+        ------
+        DesignError
+            For a file that is not such a JSON (OSError for one that cannot be read).
+        """
+        try:
+            data = dict(json.loads(Path(path).read_text())['design'])
+            data.pop('direction_deg', None)
+            data['low_beams'] = tuple(data['low_beams'])
+            data['high_beams'] = tuple(data['high_beams'])
+            return cls(**data)
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+            raise DesignError(f'{path} is not a kick design saved by `sphere-twin '
+                              f'optimize-kick`: {type(exc).__name__}: {exc}') from exc
 
 
 def cardan_of_normal(normal):

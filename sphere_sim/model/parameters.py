@@ -262,6 +262,9 @@ def _read_yaml(path):
             data = yaml.safe_load(stream)
     except FileNotFoundError as exc:
         raise ParameterError(f'parameter file not found: {path}') from exc
+    except yaml.YAMLError as exc:
+        raise ParameterError(f'parameter file {path} is not valid YAML: '
+                             f'{" ".join(str(exc).split())}') from exc
     if not isinstance(data, dict):
         raise ParameterError(f'parameter file {path} must hold a mapping')
     return data

@@ -240,4 +240,9 @@ def load_scene(name_or_path):
             data = yaml.safe_load(stream)
         except yaml.YAMLError as exc:
             raise SceneError(f'scene file {path} is not valid YAML: {exc}') from exc
-    return scene_from_dict(data, name=path.stem)
+    if data is None:
+        raise SceneError(f'scene file {path} is empty')
+    try:
+        return scene_from_dict(data, name=path.stem)
+    except SceneError as exc:
+        raise SceneError(f'scene file {path}: {exc}') from exc

@@ -3,7 +3,6 @@
 from pathlib import Path
 
 from msg_defs.device import NS_PER_S
-from sphere_twin.bag.reader import BagError
 
 
 def register(subparsers):
@@ -55,22 +54,12 @@ def info_lines(bag_dir):
 
 
 def run_info(args):
-    try:
-        lines = info_lines(args.bag)
-    except BagError as error:
-        print(f'error: {error}')
-        return 1
-    print('\n'.join(lines))
+    print('\n'.join(info_lines(args.bag)))
     return 0
 
 
 def run_repair(args):
     from sphere_twin.bag.repair import repair_bag
 
-    try:
-        result = repair_bag(args.bag, backup=not args.no_backup)
-    except BagError as error:
-        print(f'error: {error}')
-        return 1
-    print(result.summary())
+    print(repair_bag(args.bag, backup=not args.no_backup).summary())
     return 0

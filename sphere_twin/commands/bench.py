@@ -219,7 +219,7 @@ def register(subparsers):
     parser = subparsers.add_parser(
         'bench', help='integrator benchmarks (work-precision, regularisation study)',
         description='Benchmarks of the numerics; results go to bench/results.')
-    sub = parser.add_subparsers(dest='bench', metavar='BENCH', required=True)
+    sub = parser.add_subparsers(dest='bench_command', metavar='BENCH', required=True)
     wp = sub.add_parser('work-precision', help='wall time against error for every method',
                         description='Three scenes, tolerances 1e-3..1e-10, every method; '
                                     'writes bench/results/work_precision.{csv,md,png}.')

@@ -22,6 +22,7 @@ from sphere_sim.model.parameters import (
     PARAMS_DIR,
     load_parameter_set,
 )
+from sphere_twin.commands.options import CommandError, positive_int
 
 
 def register(subparsers):
@@ -35,7 +36,7 @@ def register(subparsers):
                     'sphere_sim/params/calibrated.yaml.')
     parser.add_argument('--target', choices=CALIBRATION_TARGETS, action='append',
                         help='fit only the parameters of this target (repeatable; default all)')
-    parser.add_argument('--workers', type=int, default=os.cpu_count() or 1,
+    parser.add_argument('--workers', type=positive_int, default=os.cpu_count() or 1,
                         help='parallel workers of the kick optimisations (default: all cores)')
     parser.add_argument('--write', action='store_true', help='rewrite calibrated.yaml')
     parser.set_defaults(func=run)
@@ -46,7 +47,7 @@ def run(args):
     base = load_parameter_set(LITERAL_SET)
     specs = [s for s in calibrated.uncertain if args.target is None or s.target in args.target]
     if not specs:
-        raise SystemExit('the calibrated set declares no uncertain parameter for that target')
+        raise CommandError('the calibrated set declares no uncertain parameter for that target')
     print_ranges(specs)
     with tqdm(desc='calibrate', unit='eval', leave=False) as bar:
         def progress(value, observed):

@@ -5,25 +5,17 @@ the two over the net's centre box (see :func:`sphere_sim.model.capacitance.compa
 optionally plots both along a few slices.
 """
 
-import argparse
 import time
 
 import numpy as np
 
 from sphere_sim.model import capacitance as cap
-from sphere_twin.commands.options import add_params_option
+from sphere_twin.commands.options import add_params_option, positive_float
 
 # Gaps g = z_S - z_G of the plotted slices (m): from near the contact (d_Iso = 1.5 um) to the
 # rest gap (10 um), all inside the fitted region for phi >= 0.
 PLOT_GAPS_M = (2.0e-6, 5.0e-6, 10.0e-6)
 PLOT_POINTS = 400  # per slice
-
-
-def _positive_float(text):
-    value = float(text)
-    if not value > 0.0:
-        raise argparse.ArgumentTypeError(f'must be > 0, got {text}')
-    return value
 
 
 def register(subparsers):
@@ -37,7 +29,7 @@ def register(subparsers):
                                    'settings: a name or a YAML file')
     parser.add_argument('--no-fringe', action='store_true',
                         help='leave out the fringe (second) term of eq. (8)')
-    parser.add_argument('--fringe-angle-rad', type=_positive_float, default=None,
+    parser.add_argument('--fringe-angle-rad', type=positive_float, default=None,
                         metavar='RAD',
                         help="theta_f regularising the fringe term (default: the parameter "
                              "set's)")

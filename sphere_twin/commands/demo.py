@@ -7,7 +7,6 @@ back from the bag it recorded as `sphere-twin report` reads it: kicks, final and
 real-time factor, the bag and a plot of the error against run time.
 """
 
-import argparse
 import datetime
 import math
 import os
@@ -19,6 +18,7 @@ import numpy as np
 
 from msg_defs.device import NS_PER_S
 from node_runtime.ros_env import DISCOVERY_RANGE_VAR
+from sphere_twin.commands.options import positive_float
 from sphere_twin.processes import NodeSpec, fresh_domain_id, parameter_args, running_nodes
 
 SETPOINT_XY = (0.01, 0.02)  # Fig. 13
@@ -33,13 +33,6 @@ WALL_MARGIN = 3.0
 # Subscribers of /sphere/surface_normal the simulator waits for: recorder, controller, and the
 # demo's own probe.
 DEMO_NORMAL_SUBSCRIBERS = 3  # the run may take this many times its paced duration before it is cut
-
-
-def _positive(text):
-    value = float(text)
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f'must be > 0, got {text}')
-    return value
 
 
 def demo_nodes(bag_dir, setpoint_s, real_time_factor, seed):
@@ -199,11 +192,11 @@ def register(subparsers):
                     'fresh ROS domain (discovery limited to localhost), run the Fig. 13 '
                     'setpoint and then the eq. (64) trajectory, stop every node by PID, '
                     'and report kicks, errors, real-time factor, the bag and a plot.')
-    parser.add_argument('--setpoint-s', type=_positive, default=DEFAULT_SETPOINT_S,
+    parser.add_argument('--setpoint-s', type=positive_float, default=DEFAULT_SETPOINT_S,
                         help='simulated seconds on the setpoint')
-    parser.add_argument('--trajectory-s', type=_positive, default=DEFAULT_TRAJECTORY_S,
+    parser.add_argument('--trajectory-s', type=positive_float, default=DEFAULT_TRAJECTORY_S,
                         help='simulated seconds on the trajectory')
-    parser.add_argument('--real-time-factor', type=_positive, default=DEFAULT_REAL_TIME_FACTOR,
+    parser.add_argument('--real-time-factor', type=positive_float, default=DEFAULT_REAL_TIME_FACTOR,
                         help='simulated seconds per wall second')
     parser.add_argument('--bags-dir', default='bags', help='where the bag directory goes')
     parser.add_argument('--seed', type=int, default=0)

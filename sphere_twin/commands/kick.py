@@ -4,7 +4,7 @@ import json
 
 from sphere_sim.model.scene import load_scene
 from sphere_sim.studies.runs import DEFAULT_RTOL, run_scene, summarize
-from sphere_twin.commands.options import add_params_option
+from sphere_twin.commands.options import add_params_option, positive_float
 
 
 def register(subparsers):
@@ -16,7 +16,8 @@ def register(subparsers):
     parser.add_argument('scene', help='scene name (see sphere_sim/scenes) or path to a YAML file')
     add_params_option(parser, default=None,
                       help="parameter set (name or YAML file) instead of the scene's own")
-    parser.add_argument('--rtol', type=float, default=DEFAULT_RTOL, help='relative tolerance')
+    parser.add_argument('--rtol', type=positive_float, default=DEFAULT_RTOL,
+                        help='relative tolerance')
     parser.add_argument('--json', action='store_true', help='print the outcome as JSON')
     parser.set_defaults(func=run)
 

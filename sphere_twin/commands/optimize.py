@@ -9,7 +9,7 @@ from tqdm import tqdm
 from sphere_sim.kicks.calibration import TARGET_KICK_DEG
 from sphere_sim.kicks.design import KickDesign
 from sphere_sim.kicks.optimization import optimise_kick
-from sphere_twin.commands.options import add_params_option
+from sphere_twin.commands.options import add_params_option, positive_int
 
 DEFAULT_OUTPUT = 'bench/results/kick_optimization.json'
 AXIS_OUTPUT = 'bench/results/kick_optimization_axis.json'
@@ -32,9 +32,9 @@ def register(subparsers):
                         help='diagonal (hind-left, towards -45 deg) or axis (towards +x)')
     add_params_option(parser)
     parser.add_argument('--seed', type=int, default=1)
-    parser.add_argument('--popsize', type=int, default=8, help='population per parameter')
-    parser.add_argument('--maxiter', type=int, default=12, help='generations')
-    parser.add_argument('--workers', type=int, default=2, help='parallel processes')
+    parser.add_argument('--popsize', type=positive_int, default=8, help='population per parameter')
+    parser.add_argument('--maxiter', type=positive_int, default=12, help='generations')
+    parser.add_argument('--workers', type=positive_int, default=2, help='parallel processes')
     parser.add_argument('--output', default=None,
                         help=f'JSON path (default {DEFAULT_OUTPUT}, or {AXIS_OUTPUT} for axis)')
     parser.set_defaults(func=run)

@@ -1,9 +1,48 @@
-"""Options that several subcommands share, defined once."""
+"""Options that several subcommands share, defined once, and the commands' own error."""
 
 import argparse
+import math
 
 from msg_defs.device import DEFAULT_PARAMETER_SET
 from sphere_sim.model.parameters import ParameterError, available_parameter_sets, load_parameter_set
+
+
+class CommandError(Exception):
+    """A command cannot do what was asked, for a reason the user can fix (the CLI prints the
+    message on one line and exits with status 2)."""
+
+
+def positive_float(text):
+    """argparse type: a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f'must be a positive number, got {text}')
+    return value
+
+
+def positive_int(text):
+    """argparse type: an integer >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'not an integer: {text!r}') from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f'must be at least 1, got {text}')
+    return value
+
+
+def unit_interval(text):
+    """argparse type: a number in [0, 1] (an intensity u_K)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f'must lie in [0, 1], got {text}')
+    return value
 
 
 def parameter_set(text):

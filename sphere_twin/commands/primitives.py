@@ -14,7 +14,7 @@ from sphere_sim.kicks.characteristics import (
 )
 from sphere_sim.kicks.design import KickDesign
 from sphere_twin.commands.optimize import DEFAULT_OUTPUT as DEFAULT_DESIGN
-from sphere_twin.commands.options import add_params_option
+from sphere_twin.commands.options import add_params_option, positive_float, positive_int
 
 RESULTS = Path('bench/results')
 
@@ -29,12 +29,13 @@ def register(subparsers):
                            description='Rotation width against u_K in [0, 1] for initial '
                                        'tilts alpha; writes a PNG and JSON.')
     width.add_argument('--alphas-deg', type=float, nargs='+', default=[0.0, 20.0, 35.0])
-    width.add_argument('--intensities', type=int, default=11, help='points in [0, 1]')
+    width.add_argument('--intensities', type=positive_int, default=11, help='points in [0, 1]')
     offsets = sub.add_parser('offsets', help='voltage offsets over the cone (Fig. 8)',
                              description='For each grid state, the offset on the compensating '
                                          'beam that puts the kick on its nominal direction.')
-    offsets.add_argument('--grid-step', type=float, default=0.16, help='step in x_sn and y_sn')
-    offsets.add_argument('--workers', type=int, default=2, help='local processes')
+    offsets.add_argument('--grid-step', type=positive_float, default=0.16,
+                         help='step in x_sn and y_sn')
+    offsets.add_argument('--workers', type=positive_int, default=2, help='local processes')
     for p in (width, offsets):
         add_params_option(p)
         p.add_argument('--design', default=DEFAULT_DESIGN,

@@ -5,8 +5,7 @@ import math
 from pathlib import Path
 
 from msg_defs.device import KICK_WINDOW_S
-from sphere_twin.bag.reader import BagError
-from sphere_twin.commands.options import add_params_option
+from sphere_twin.commands.options import CommandError, add_params_option
 
 
 def register(subparsers):
@@ -51,15 +50,11 @@ def run(args):
     from sphere_twin.plots import plot_lines
     from sphere_twin.run_analysis import load_run, replay, replay_start_index
 
-    try:
-        recorded = load_run(args.bag)
-    except BagError as error:
-        print(f'error: {error}')
-        return 1
+    recorded = load_run(args.bag)
     start = replay_start_index(recorded, KICK_WINDOW_S)
     if start >= recorded.normal_t_s.size:
-        print('error: the recording ends before a kick that began before it settles')
-        return 1
+        raise CommandError(f'{args.bag}: the recording ends before a kick that began before '
+                           'it settles')
     plant = build_replay_plant(args.plant, recorded.normals[start],
                                float(recorded.normal_t_s[start]), args.params, args.tables)
     result = replay(recorded, plant, start)

@@ -4,7 +4,7 @@ import json
 import math
 from pathlib import Path
 
-from sphere_twin.bag.reader import BagError
+from sphere_twin.commands.options import positive_float
 
 
 def register(subparsers):
@@ -16,7 +16,7 @@ def register(subparsers):
     parser.add_argument('bag', type=Path, help='bag directory (with metadata.yaml)')
     parser.add_argument('--out', type=Path, default=None,
                         help='output directory (default: beside the bag)')
-    parser.add_argument('--band-deg', type=float, default=0.05,
+    parser.add_argument('--band-deg', type=positive_float, default=0.05,
                         help='settling band around a setpoint (deg)')
     parser.set_defaults(func=run)
 
@@ -24,12 +24,8 @@ def register(subparsers):
 def run(args):
     from sphere_twin.run_analysis import load_run, plot_report, statistics
 
-    try:
-        recorded = load_run(args.bag)
-        stats = statistics(recorded, math.radians(args.band_deg))
-    except BagError as error:
-        print(f'error: {error}')
-        return 1
+    recorded = load_run(args.bag)
+    stats = statistics(recorded, math.radians(args.band_deg))
     out = args.out or args.bag.parent
     out.mkdir(parents=True, exist_ok=True)
     stem = out / f'{args.bag.name}_report'

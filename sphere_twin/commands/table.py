@@ -11,7 +11,12 @@ from sphere_sim.kicks.design import KickDesign
 from sphere_sim.kicks.lookup_table import DEFAULT_TABLE_PATH, LookupTable, TableSpec
 from sphere_sim.kicks.table_build import build_table, check_table
 from sphere_twin.commands.optimize import DEFAULT_OUTPUT as DEFAULT_DESIGN
-from sphere_twin.commands.options import add_params_option
+from sphere_twin.commands.options import (
+    add_params_option,
+    positive_float,
+    positive_int,
+    unit_interval,
+)
 
 
 def register(subparsers):
@@ -24,14 +29,14 @@ def register(subparsers):
                                        'an interrupted build resumes from its partial file.')
     build.add_argument('--output', default=str(DEFAULT_TABLE_PATH), help='table .npz path')
     add_params_option(build)
-    build.add_argument('--grid-step', type=float, default=TableSpec.grid_step,
+    build.add_argument('--grid-step', type=positive_float, default=TableSpec.grid_step,
                        help='grid step in x_sn and y_sn')
-    build.add_argument('--intensities', type=float, nargs='+',
+    build.add_argument('--intensities', type=unit_interval, nargs='+',
                        default=list(TableSpec.intensities), help='u_K values')
-    build.add_argument('--window-s', type=float, default=TableSpec.window_s)
+    build.add_argument('--window-s', type=positive_float, default=TableSpec.window_s)
     build.add_argument('--design', default=DEFAULT_DESIGN,
                        help='kick optimisation JSON whose design to use')
-    build.add_argument('--workers', type=int, default=2, help='local processes')
+    build.add_argument('--workers', type=positive_int, default=2, help='local processes')
     build.add_argument('--scheduler', default=None,
                        help='Dask scheduler address, e.g. tcp://host:8786')
     build.set_defaults(func=run_build)
@@ -39,7 +44,7 @@ def register(subparsers):
                            description='Interpolated against simulated kicks at random '
                                        'off-grid states, actions and intensities.')
     check.add_argument('--table', default=str(DEFAULT_TABLE_PATH))
-    check.add_argument('--points', type=int, default=8)
+    check.add_argument('--points', type=positive_int, default=8)
     check.add_argument('--seed', type=int, default=0)
     check.set_defaults(func=run_check)
 
