@@ -12,37 +12,25 @@ class CommandError(Exception):
     message on one line and exits with status 2)."""
 
 
-def positive_float(text):
-    """argparse type: a finite number > 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
-    if not (math.isfinite(value) and value > 0.0):
-        raise argparse.ArgumentTypeError(f'must be a positive number, got {text}')
-    return value
+def _checked_number(convert, kind, accept, requirement):
+    """An argparse type: ``convert`` the text, then ``accept`` the value or say the
+    ``requirement``."""
+    def parse(text):
+        try:
+            value = convert(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'not {kind}: {text!r}') from None
+        if not accept(value):
+            raise argparse.ArgumentTypeError(f'{requirement}, got {text}')
+        return value
+    return parse
 
 
-def positive_int(text):
-    """argparse type: an integer >= 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'not an integer: {text!r}') from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f'must be at least 1, got {text}')
-    return value
-
-
-def unit_interval(text):
-    """argparse type: a number in [0, 1] (an intensity u_K)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
-    if not 0.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError(f'must lie in [0, 1], got {text}')
-    return value
+positive_float = _checked_number(float, 'a number', lambda v: math.isfinite(v) and v > 0.0,
+                                 'must be a positive number')
+positive_int = _checked_number(int, 'an integer', lambda v: v >= 1, 'must be at least 1')
+unit_interval = _checked_number(float, 'a number', lambda v: 0.0 <= v <= 1.0,
+                                'must lie in [0, 1]')  # an intensity u_K
 
 
 def parameter_set(text):
