@@ -35,8 +35,21 @@ def ensure_localhost_discovery(environ=None):
     return env[DISCOVERY_RANGE_VAR]
 
 
+# Set by the signal handlers below: a shutdown was asked for. The KeyboardInterrupt they raise
+# can land inside a C extension's call (rclpy's take_message, a numba kernel), which then
+# reports it as its own error (RuntimeError "Unable to convert call argument", SystemError);
+# after a shutdown signal such an error is the shutdown, not a bug.
+_shutdown_signal = []
+
+
 def _raise_keyboard_interrupt(signum, frame):
+    _shutdown_signal.append(signal.Signals(signum).name)
     raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def shutdown_requested():
+    """True once SIGINT or SIGTERM reached a process that installed the handlers below."""
+    return bool(_shutdown_signal)
 
 
 def install_shutdown_signal_handlers():
@@ -49,7 +62,7 @@ def install_shutdown_signal_handlers():
     so ``rclpy.spin`` ends with ``KeyboardInterrupt`` or ``ExternalShutdownException``, both
     of which a node's ``main`` treats as a normal shutdown.
     """
-    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGINT, _raise_keyboard_interrupt)
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
 
 
@@ -90,6 +103,9 @@ def run_node(build, args=None, spin=None, farewell=None):
         (spin or rclpy.spin)(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if not shutdown_requested():
+            raise
     finally:
         if node is not None:
             if farewell is not None:
