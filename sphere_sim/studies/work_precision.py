@@ -36,7 +36,7 @@ TOLERANCES = (1e-3, 3e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
 QUICK_TOLERANCES = (1e-3, 1e-5, 1e-7)
 METHODS = ('fast', 'Radau', 'BDF', 'LSODA', 'DOP853', 'CVODE')
 QUICK_METHODS = ('fast', 'LSODA', 'Radau')
-REPEATS = 3  # timed runs per point; the median is reported (the issue asks for >= 3)
+REPEATS = 3  # timed runs per point; the median is reported
 RTF_REPEATS = 11  # real-time-factor runs take ~50 ms: a median of many is cheap and steadier
 QUICK_REPEATS = 1
 # Reference: two different methods at the tightest tolerance; their agreement is printed.
