@@ -159,7 +159,7 @@ class PlantUnderTest:
     @property
     def kick_period_s(self):
         """The shortest decision period at which a full kick has settled before the next
-        decision: its settle time rounded up to KICK_PERIOD_STEP_S; the kick window for a
+        decision: its settle time rounded up (:func:`settled_kick_period_s`); the kick window for a
         plant that reports no settle time (the analytic one)."""
         return settled_kick_period_s(self.settle_time_s)
 

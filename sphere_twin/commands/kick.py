@@ -24,8 +24,8 @@ def register(subparsers):
 
 def run(args):
     scene = load_scene(args.scene)
-    params = scene.parameters(args.params) if args.params is not None else None
-    outcome = summarize(run_scene(scene, params, rtol=args.rtol))
+    # The scene's own set unless --params names another; the scene's perturbation either way.
+    outcome = summarize(run_scene(scene, scene.parameters(args.params), rtol=args.rtol))
     if args.json:
         print(json.dumps(outcome.to_dict(), indent=2))
         return 0
