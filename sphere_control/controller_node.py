@@ -29,6 +29,7 @@ from msg_defs.topics import (
     SURFACE_NORMAL,
     VOLTAGE_COMMAND,
 )
+from node_runtime.pace import PaceMeter
 from node_runtime.ros_env import parameter_descriptor, run_node
 from sphere_control.controllers import CONTROLLER_KINDS, controller_for
 from sphere_control.kick_cycle import KickCycle, Phase
@@ -93,6 +94,7 @@ class ControllerNode(Node):
         self.create_timer(STALE_CHECK_PERIOD_S, self.on_stale_check)
         self._last_phase = None
         self._hold_sent_at_s = -1.0
+        self.pace = PaceMeter()
         self.get_logger().info(f'{self.controller_kind} controller, Phi_min '
                                f'{p["phi_min_deg"]:g} deg, {len(table.directions_rad)} actions, '
                                f'kick period {self.kick_period_s * 1e3:.0f} ms, preview '
@@ -112,6 +114,7 @@ class ControllerNode(Node):
             self.get_logger().error(f'ignored {SURFACE_NORMAL.name}: {error}')
             return
         sample_s = ns_from_time(msg.header.stamp) / NS_PER_S
+        self.pace.note(sample_s)
         decision = self.cycle.on_sample(sample_s, normal, time.monotonic())
         if decision.command is not None:
             programme = self.kicks.programme(decision.command.action,
@@ -178,7 +181,8 @@ class ControllerNode(Node):
         return ratio
 
     def summary(self):
-        return f'controller: {self.cycle.kicks} kicks'
+        return (f'controller: {self.cycle.kicks} kicks over {self.pace.simulated_span_s():.3f} s '
+                f'of samples; real-time factor {self.pace.real_time_factor():.3f}')
 
 
 def main(args=None):

@@ -9,6 +9,7 @@ from rclpy.node import Node
 from msg_defs.conversions import surface_normal_to_msg
 from msg_defs.device import NS_PER_S
 from msg_defs.topics import SPHERE_REFERENCE
+from node_runtime.pace import PaceMeter
 from node_runtime.ros_env import parameter_descriptor, run_node
 from sphere_control.reference import CircleTrajectory, Setpoint, sample
 
@@ -47,6 +48,7 @@ class ReferenceNode(Node):
             SPHERE_REFERENCE.msg_type, SPHERE_REFERENCE.name, SPHERE_REFERENCE.qos.to_profile())
         self._start_ns = None
         self._warned_clamp = False
+        self.pace = PaceMeter()
         self.create_timer(1.0 / p['publish_rate_hz'], self.on_timer)
         # Latched at once: with use_sim_time the timer waits for /clock, and a controller
         # should hold the reference before the simulator starts.
@@ -65,6 +67,8 @@ class ReferenceNode(Node):
         if self._start_ns is None:
             self._start_ns = now.nanoseconds
         elapsed_s = (now.nanoseconds - self._start_ns) / NS_PER_S
+        if elapsed_s > 0.0:  # not the latched first one, published before time runs
+            self.pace.note(elapsed_s)
         reference, _ = self.reference_at(elapsed_s)
         if reference.clamped and not self._warned_clamp:
             requested = reference.requested_xy
@@ -75,8 +79,9 @@ class ReferenceNode(Node):
         self._publisher.publish(surface_normal_to_msg(reference.normal, now.to_msg()))
 
     def summary(self):
-        return f'reference: setpoint {self.setpoint.xy}, trajectory from ' + (
-            f'{self.trajectory_start_s:g} s' if self.trajectory_start_s >= 0 else 'never')
+        return (f'reference: setpoint {self.setpoint.xy}, trajectory from '
+                + (f'{self.trajectory_start_s:g} s' if self.trajectory_start_s >= 0 else 'never')
+                + f'; real-time factor {self.pace.real_time_factor():.3f}')
 
 
 def main(args=None):

@@ -97,10 +97,14 @@ class TopicProbe:
             if time.monotonic() > deadline:
                 output = '' if self.process is None else self.process.stderr_text()[-2000:]
                 raise TwinTimeoutError(f'no {what} within {timeout_s} s\n{output}')
-            if self.process is not None and not self.process.running:
+            if self.process is not None and not self.process.running():
                 raise TwinTimeoutError(f'the node process exited with '
                                        f'{self.process.returncode}')
             self._executor.spin_once(timeout_sec=SPIN_PERIOD_S)
+
+    def spin_once(self, timeout_s=0.0):
+        """Process the messages that are there, waiting up to ``timeout_s`` for one."""
+        self._executor.spin_once(timeout_sec=timeout_s)
 
     def wait_for_subscribers(self, topic, timeout_s=DEFAULT_TIMEOUT_S):
         """Until someone subscribes to ``topic`` (discovery is asynchronous)."""
@@ -127,6 +131,8 @@ class TwinClient(TopicProbe):
         Every measured surface normal received, in order.
     diagnostics : list of str
         Messages of every ``/diagnostics`` status received.
+    rejections : list of str
+        Those of them that report a rejected command (not the periodic status).
     """
 
     def __init__(self, process, domain_id, kicks, window_s):
@@ -149,6 +155,19 @@ class TwinClient(TopicProbe):
     @property
     def diagnostics(self):
         return [status.message for m in self._diagnostics for status in m.status]
+
+    @property
+    def rejections(self):
+        from diagnostic_msgs.msg import DiagnosticStatus
+
+        return [status.message for m in self._diagnostics for status in m.status
+                if status.level != DiagnosticStatus.OK]
+
+    def status(self):
+        """The key-values of the last ``/diagnostics`` status received, or {} before one."""
+        if not self._diagnostics:
+            return {}
+        return {kv.key: kv.value for kv in self._diagnostics[-1].status[0].values}
 
     def wait_for_normal(self, timeout_s=DEFAULT_TIMEOUT_S):
         """The latest measured normal, waiting for the first one."""

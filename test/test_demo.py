@@ -6,15 +6,15 @@ import re
 import pytest
 
 from sphere_twin.cli import build_parser
-from sphere_twin.commands.demo import run_demo
+from sphere_twin.commands.demo import DEFAULT_REAL_TIME_FACTOR, run_demo
 
 pytestmark = pytest.mark.ros
 
 
-def test_short_demo_runs_the_loop_records_a_bag_and_reports(tmp_path):
+@pytest.mark.parametrize('plant', ['continuous', 'discrete'])
+def test_short_demo_runs_the_loop_records_a_bag_and_reports(tmp_path, plant):
     out = io.StringIO()
-    code = run_demo(setpoint_s=3.0, trajectory_s=2.0, real_time_factor=5.0,
-                    bags_dir=tmp_path, out=out)
+    code = run_demo(setpoint_s=3.0, trajectory_s=2.0, bags_dir=tmp_path, out=out, plant=plant)
     lines = out.getvalue().splitlines()
     text = '\n'.join(lines)
     assert code == 0, text
@@ -23,6 +23,14 @@ def test_short_demo_runs_the_loop_records_a_bag_and_reports(tmp_path):
     assert all(line.endswith('exit code 0') for line in lines if line.startswith('demo: stopped'))
     kicks = re.search(r'demo: (\d+) kicks in ([\d.]+) s simulated', text)
     assert kicks and int(kicks.group(1)) > 0 and float(kicks.group(2)) >= 5.0
+    assert f'{plant} plant, paced at {DEFAULT_REAL_TIME_FACTOR[plant]:g}x' in text
+    pace = re.search(r'demo: real-time factor: controller ([\d.]+), reference ([\d.]+), '
+                     r'simulator ([\d.]+); late programmes: (\d+)', text)
+    assert pace, text
+    # Each node saw simulated time run at the pace asked for (a loaded machine lags a little).
+    for factor in pace.groups()[:3]:
+        assert 0.5 * DEFAULT_REAL_TIME_FACTOR[plant] < float(factor) < 1.05 * \
+            DEFAULT_REAL_TIME_FACTOR[plant]
     bag = re.search(r'demo: bag (\S+)', text).group(1)
     assert (tmp_path / bag.split('/')[-1] / 'metadata.yaml').is_file()
     assert list(tmp_path.glob('*_error.png'))
@@ -32,6 +40,9 @@ def test_short_demo_runs_the_loop_records_a_bag_and_reports(tmp_path):
 def test_cli_parses_the_scenario_and_rejects_non_positive_durations():
     parser = build_parser()
     args = parser.parse_args(['demo', '--setpoint-s', '2.5', '--real-time-factor', '10'])
-    assert (args.setpoint_s, args.real_time_factor) == (2.5, 10.0)
+    assert (args.setpoint_s, args.real_time_factor, args.plant) == (2.5, 10.0, 'continuous')
+    assert parser.parse_args(['demo', '--plant', 'discrete']).real_time_factor is None
+    with pytest.raises(SystemExit):
+        parser.parse_args(['demo', '--plant', 'table'])
     with pytest.raises(SystemExit):
         parser.parse_args(['demo', '--trajectory-s', '0'])

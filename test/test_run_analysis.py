@@ -8,6 +8,7 @@ import pytest
 
 from msg_defs.topics import CONTROLLER_STATUS
 from sphere_sim.kicks.discrete import normal_from_xy
+from sphere_sim.twin.plants import LIVE_ERROR_BOUND_RAD
 from sphere_twin.cli import build_parser
 from sphere_twin.processes import parameter_args
 from sphere_twin.run_analysis import RecordedRun, setpoint_segments, statistics
@@ -83,6 +84,7 @@ def test_lockstep_recording_reports_and_replays_exactly(ros_nodes, tmp_path):
     assert replayed['kicks'] == data['kicks'] and replayed['max_error_rad'] < 1e-12
 
 
+
 @pytest.mark.ros
 def test_continuous_plant_replays_a_recording_to_the_integrator_tolerance(ros_nodes, tmp_path):
     from sphere_twin.commands import replay_check
@@ -105,10 +107,12 @@ def test_continuous_plant_replays_a_recording_to_the_integrator_tolerance(ros_no
                                       '--plant', 'continuous'])
     assert replay_check.run(args) == 0
     replayed = json.loads((tmp_path / 'continuous_replay.json').read_text())
-    # The replay integrates from the rest state of the first recorded normal, sample by sample
-    # like the run (rtol 1e-6, atol 1e-10 on the quaternion): it agrees to that tolerance
-    # (6e-10 rad measured over eight kicks), often to the bit.
-    assert replayed['kicks'] >= 3 and replayed['max_error_rad'] < 1e-8
+    # The replay integrates from the rest state of the first recorded normal (the run from the
+    # scene's), sample by sample like the run, at the live tolerance: they agree to what that
+    # tolerance is chosen for, a hundredth of the noise study's sensor noise (4e-6 rad measured
+    # over three kicks; 6e-10 rad at rtol 1e-6).
+    assert replayed['kicks'] >= 3
+    assert replayed['max_error_rad'] < LIVE_ERROR_BOUND_RAD
 
 
 def test_recorded_commands_that_break_the_rules_are_dropped_as_the_twin_dropped_them(tmp_path):

@@ -29,9 +29,10 @@ def test_no_bad_command_crashes_the_simulator_or_reaches_the_plant(twin):
     for msg in BAD_PROGRAMMES:
         twin.send_raw(PULSE_PROGRAM, msg)
     bad = len(BAD_VOLTAGES) + len(BAD_PROGRAMMES)
-    twin.spin_until(lambda: len(twin.diagnostics) >= bad, what=f'{bad} rejections')
-    assert all(message.startswith('rejected /beams/') for message in twin.diagnostics)
-    assert twin.process.running
+    twin.spin_until(lambda: len(twin.rejections) >= bad, what=f'{bad} rejections')
+    assert all(message.startswith('rejected /beams/') for message in twin.rejections)
+    assert int(twin.status()['rejected']) >= bad
+    assert twin.process.running()
     # Nothing moved, and a valid kick afterwards still works.
     np.testing.assert_array_equal(twin.samples[-1][1], start)
     assert angle_between(twin.kick(action=2, intensity=1.0), start) > math.radians(0.01)

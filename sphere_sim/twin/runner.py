@@ -7,6 +7,7 @@ where it enters the twin, and a rejected one leaves the plant untouched.
 """
 
 import dataclasses
+import time
 
 import numpy as np
 
@@ -35,6 +36,28 @@ class TwinCounters:
     rejected: int = 0
     programmes: int = 0
     late: int = 0  # programmes whose start time had passed when they arrived
+
+
+@dataclasses.dataclass
+class TwinTimings:
+    """Where a run's wall time went, and how long programmes took to act (s).
+
+    ``integrating_s`` is the plant's own time (its ``advance``); the node adds what it spends
+    publishing. A programme's latency is from its arrival (``command_programme``) to the end
+    of the tick that first shows its effect, in wall time, and from the start it asked for to
+    the start it got, in simulated time.
+    """
+
+    integrating_s: float = 0.0
+    publishing_s: float = 0.0
+    latencies_wall_s: list = dataclasses.field(default_factory=list)
+    delays_sim_s: list = dataclasses.field(default_factory=list)
+
+    def latency_summary(self):
+        """(median, largest) wall latency in s; NaNs before the first programme."""
+        if not self.latencies_wall_s:
+            return float('nan'), float('nan')
+        return float(np.median(self.latencies_wall_s)), float(max(self.latencies_wall_s))
 
 
 class TwinRunner:
@@ -69,7 +92,10 @@ class TwinRunner:
         self.lockstep = lockstep
         self.voltage_limit_v = voltage_limit_v
         self.counters = TwinCounters()
-        self._queued = []  # (start_s, kind, payload), applied at the next sample boundary
+        self.timings = TwinTimings()
+        # (start_s, kind, payload, asked_s, arrival_wall_s), applied at the next sample boundary
+        self._queued = []
+        self._acted = []  # (arrival_wall_s) of programmes applied in this tick
         self._step = 0
         self._idle_published = False
 
@@ -90,7 +116,7 @@ class TwinRunner:
             volts = check_voltages(voltages_v, self.voltage_limit_v)
         except VoltageRuleError as error:
             raise CommandError(str(error)) from None
-        self._queue(self.time_s, 'hold', volts)
+        self._queue(self.time_s, 'hold', volts, self.time_s)
 
     def command_programme(self, times_s, voltages_v, start_s=0.0):
         """Queue a programme (segments relative to its start) starting at ``start_s``
@@ -107,10 +133,10 @@ class TwinRunner:
             raise CommandError(str(error)) from None
         if 0.0 < start_s < self.time_s - 1e-9:
             self.counters.late += 1  # started now instead
-        self._queue(max(start_s, self.time_s), 'programme', programme)
+        self._queue(max(start_s, self.time_s), 'programme', programme, start_s)
 
-    def _queue(self, start_s, kind, payload):
-        self._queued.append((start_s, kind, payload))
+    def _queue(self, start_s, kind, payload, asked_s):
+        self._queued.append((start_s, kind, payload, asked_s, time.perf_counter()))
         self._queued.sort(key=lambda item: item[0])
         self._idle_published = False
 
@@ -118,13 +144,15 @@ class TwinRunner:
         """Apply queued commands due now; returns the reasons of those the plant refused."""
         refused = []
         while self._queued and self._queued[0][0] <= self.time_s + TIME_TOL_S:
-            _, kind, payload = self._queued.pop(0)
+            _, kind, payload, asked_s, arrival_wall_s = self._queued.pop(0)
             try:
                 if kind == 'hold':
                     self.plant.hold(payload)
                 else:
                     self.plant.run_programme(payload)
                     self.counters.programmes += 1
+                    self._acted.append(arrival_wall_s)
+                    self.timings.delays_sim_s.append(self.time_s - max(asked_s, 0.0))
                 self.counters.accepted += 1
             except (PlantError, ProgrammeError) as error:
                 self.counters.rejected += 1
@@ -147,7 +175,9 @@ class TwinRunner:
             return None, refused
         if self.counters.samples > 0:
             self._step += 1
+            started = time.perf_counter()
             self.plant.advance(self.time_s)
+            self.timings.integrating_s += time.perf_counter() - started
             refused += self._apply_due()
         snapshot = self.plant.snapshot()
         self.counters.samples += 1
@@ -155,6 +185,13 @@ class TwinRunner:
                 and not self._queued):
             self._idle_published = True
         return Sample(snapshot, self.measure(snapshot.normal)), refused
+
+    def sample_out(self):
+        """Call once the tick's sample is published: the programmes applied in that tick have
+        now shown their effect, and their wall latency is recorded."""
+        now = time.perf_counter()
+        self.timings.latencies_wall_s += [now - arrival for arrival in self._acted]
+        self._acted.clear()
 
     def measure(self, normal):
         """The sensor's reading: the normal tilted by seeded Gaussian noise."""

@@ -53,7 +53,15 @@ FAST_TIMER_PERIOD_S = 1e-4
 # While idle in lockstep, the last sample is repeated at this wall-clock period so that a
 # subscriber that joined late still receives the state.
 IDLE_REPEAT_PERIOD_S = 0.2
-
+# A paced run is anchored to the wall clock: its timer fires this many times per sample and
+# ticks whenever simulated time is behind, so a sample that cost more than its period (the
+# first milliseconds of a kick) is caught up at this multiple of the pace. Not faster: a
+# controller schedules a kick a couple of sample periods ahead of the sample it decided on,
+# and a burst of samples would pass that start before the command arrives.
+CATCH_UP_SPEEDUP = 2
+# The status on /diagnostics is published at this wall-clock period, so that a healthy twin
+# is visible to `ros2 topic echo /diagnostics` and to a supervisor.
+STATUS_PERIOD_S = 1.0
 
 
 class SimulatorNode(Node):
@@ -88,9 +96,11 @@ class SimulatorNode(Node):
                                  self.on_voltage_command, VOLTAGE_COMMAND.qos.to_profile())
         self.create_subscription(PULSE_PROGRAM.msg_type, PULSE_PROGRAM.name,
                                  self.on_pulse_program, PULSE_PROGRAM.qos.to_profile())
-        paced = self.real_time_factor > 0 and not p['lockstep']
-        period = self.period_s / self.real_time_factor if paced else FAST_TIMER_PERIOD_S
+        self.paced = self.real_time_factor > 0 and not p['lockstep']
+        period = (self.period_s / self.real_time_factor / CATCH_UP_SPEEDUP if self.paced
+                  else FAST_TIMER_PERIOD_S)
         self.create_timer(period, self.on_timer)
+        self.create_timer(STATUS_PERIOD_S, self.on_status_timer)
         self.wait_for_subscribers = p['wait_for_subscribers']
         self._last_sample = None
         self._last_repeat_wall_s = 0.0
@@ -156,13 +166,30 @@ class SimulatorNode(Node):
         self.get_logger().error(f'rejected {topic}: {reason}')
         self._publish_diagnostics(DiagnosticStatus.ERROR, f'rejected {topic}: {reason}')
 
+    def on_status_timer(self):
+        self._publish_diagnostics(DiagnosticStatus.OK, 'running' if self.wait_for_subscribers
+                                  == 0 else 'waiting for subscribers')
+
+    def status_values(self):
+        """The figures of the periodic status: counters, time, real-time factor, where the
+        wall time went (fractions) and programme latency (ms)."""
+        c, t = self.runner.counters, self.runner.timings
+        wall = max(time.perf_counter() - self._wall_start_s, 1e-9)
+        median_ms, max_ms = (1e3 * v for v in t.latency_summary())
+        return (
+            ('accepted', c.accepted), ('rejected', c.rejected), ('programmes', c.programmes),
+            ('late', c.late), ('samples', c.samples),
+            ('simulated_time_s', f'{self.runner.time_s:.6f}'), ('wall_time_s', f'{wall:.3f}'),
+            ('real_time_factor', f'{self.runner.time_s / wall:.4f}'),
+            ('integrating_fraction', f'{t.integrating_s / wall:.4f}'),
+            ('publishing_fraction', f'{t.publishing_s / wall:.4f}'),
+            ('programme_latency_median_ms', f'{median_ms:.3f}'),
+            ('programme_latency_max_ms', f'{max_ms:.3f}'))
+
     def _publish_diagnostics(self, level, message):
-        c = self.runner.counters
         status = DiagnosticStatus(level=level, name='simulator: commands',
                                   hardware_id='sphere_twin', message=message)
-        status.values = [KeyValue(key=k, value=str(v)) for k, v in (
-            ('accepted', c.accepted), ('rejected', c.rejected), ('programmes', c.programmes),
-            ('samples', c.samples), ('simulated_time_s', f'{self.runner.time_s:.6f}'))]
+        status.values = [KeyValue(key=k, value=str(v)) for k, v in self.status_values()]
         array = DiagnosticArray(status=[status])
         array.header.stamp = time_from_ns(round(self.runner.time_s * NS_PER_S))
         self._topic_publishers[DIAGNOSTICS.name].publish(array)
@@ -177,6 +204,9 @@ class SimulatorNode(Node):
                                    f'{SURFACE_NORMAL.name}: simulated time starts')
             self.wait_for_subscribers = 0
             self._wall_start_s = time.perf_counter()
+        if self.paced and self.runner.counters.samples > 0 and self.runner.time_s >= (
+                time.perf_counter() - self._wall_start_s) * self.real_time_factor:
+            return  # ahead of the wall clock
         sample, refused = self.runner.tick()
         for reason in refused:
             self._report_rejection('plant', reason)
@@ -188,7 +218,10 @@ class SimulatorNode(Node):
                 self._publish(self._last_sample, markers=False)
             return
         self._last_sample = sample
+        started = time.perf_counter()
         self._publish(sample, markers=self.runner.counters.samples % MARKER_EVERY_N_SAMPLES == 1)
+        self.runner.timings.publishing_s += time.perf_counter() - started
+        self.runner.sample_out()
 
     def _publish(self, sample, markers):
         snap = sample.snapshot
@@ -208,15 +241,14 @@ class SimulatorNode(Node):
                                                    beams[1]))
 
     def summary(self):
-        """The final line: simulated time, samples, programmes, rejections, real-time factor."""
-        c = self.runner.counters
-        return (f'simulator: simulated {self.runner.time_s:.3f} s, {c.samples} samples, '
-                f'{c.programmes} programmes ({c.late} late), {c.rejected} rejected; '
-                f'real-time factor {self.achieved_real_time_factor():.3f}')
-
-    def achieved_real_time_factor(self):
-        wall = time.perf_counter() - self._wall_start_s
-        return self.runner.time_s / wall if wall > 0 else 0.0
+        """The final line: simulated time, samples, programmes, rejections, real-time factor,
+        and the share of wall time spent integrating and publishing."""
+        v = dict(self.status_values())
+        return (f'simulator: simulated {self.runner.time_s:.3f} s, {v["samples"]} samples, '
+                f'{v["programmes"]} programmes ({v["late"]} late), {v["rejected"]} rejected; '
+                f'real-time factor {float(v["real_time_factor"]):.3f}; integrating '
+                f'{float(v["integrating_fraction"]):.0%}, publishing '
+                f'{float(v["publishing_fraction"]):.0%} of wall time')
 
 
 def main(args=None):

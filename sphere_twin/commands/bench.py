@@ -38,6 +38,7 @@ from sphere_sim.studies.work_precision import (
     bench_scenes,
     work_precision,
 )
+from sphere_twin.commands import bench_twin
 
 RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
 KICK_FILE = RESULTS_DIR / 'kick_optimization.json'
@@ -233,6 +234,7 @@ def register(subparsers):
     reg.add_argument('--quick', action='store_true', help='one tolerance only')
     reg.add_argument('--out', type=Path, default=RESULTS_DIR, help='output directory')
     reg.set_defaults(func=run_regularisation)
+    bench_twin.register(sub)
 
 
 def run_work_precision(args):

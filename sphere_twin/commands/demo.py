@@ -1,15 +1,17 @@
 """``sphere-twin demo``: the closed loop as separate processes, recorded to a bag.
 
-Starts the recorder, the simulator (discrete plant, paced), the reference node and the
-extended controller on a fresh ROS domain; runs the default scenario (the Fig. 13 setpoint,
-then the trajectory of eq. (64)); stops every node by its PID; and reports what happened, read
-back from the bag it recorded as `sphere-twin report` reads it: kicks, final and RMS error,
-real-time factor, the bag and a plot of the error against run time.
+Starts the recorder, the simulator (the continuous model of §3 by default, or the discrete
+kick table; paced), the reference node and the extended controller on a fresh ROS domain;
+runs the default scenario (the Fig. 13 setpoint, then the trajectory of eq. (64)); stops every
+node by its PID; and reports what happened, read back from the bag it recorded as
+`sphere-twin report` reads it: kicks, final and RMS error, the real-time factor each node saw,
+late programmes, the bag and a plot of the error against run time.
 """
 
 import datetime
 import math
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -18,41 +20,54 @@ import numpy as np
 
 from msg_defs.device import NS_PER_S
 from node_runtime.ros_env import DISCOVERY_RANGE_VAR
+from sphere_sim.twin.plant_setup import PLANT_KINDS
 from sphere_twin.commands.options import positive_float
 from sphere_twin.processes import NodeSpec, fresh_domain_id, parameter_args, running_nodes
 
 SETPOINT_XY = (0.01, 0.02)  # Fig. 13
 DEFAULT_SETPOINT_S = 8.0  # simulated seconds on the setpoint before the trajectory starts
 DEFAULT_TRAJECTORY_S = 25.0  # half a period of eq. (64): out to A_max and back to the centre
-DEFAULT_REAL_TIME_FACTOR = 5.0
+# The physics runs at the device's pace; the kick table, which costs nothing, faster.
+DEFAULT_REAL_TIME_FACTOR = {'continuous': 1.0, 'discrete': 5.0}
+DEFAULT_PLANT = 'continuous'
 # Eq. (64) entered where it passes the centre (t = 1/(4 f1)), so the trajectory takes over from
 # the setpoint without a jump to A_max.
 TRAJECTORY_OFFSET_S = 12.5
 START_TIMEOUT_S = 60.0
-WALL_MARGIN = 3.0
+WALL_MARGIN = 3.0  # the run may take this many times its paced duration before it is cut
 # Subscribers of /sphere/surface_normal the simulator waits for: recorder, controller, and the
 # demo's own probe.
-DEMO_NORMAL_SUBSCRIBERS = 3  # the run may take this many times its paced duration before it is cut
+DEMO_NORMAL_SUBSCRIBERS = 3
+# Each node's farewell line ends with the real-time factor it saw; the simulator's also counts
+# the programmes that arrived after their start.
+REAL_TIME_FACTOR_PATTERN = re.compile(r'real-time factor (\S+?);?(?:\s|$)')
+LATE_PATTERN = re.compile(r'\((\d+) late\)')
 
 
-def demo_nodes(bag_dir, setpoint_s, real_time_factor, seed):
-    """What the demo starts, in start order (stopped in reverse: the recorder last).
+def scenario_nodes(setpoint_s, plant, real_time_factor, seed, normal_subscribers):
+    """The closed loop of the scenario, in start order: controller, reference, simulator.
 
-    The simulator comes last, once the controller holds the reference: a paced simulator
-    runs whoever listens, so the scenario's clock (simulated time, which the reference
-    follows) starts when everyone is there.
+    The simulator comes last, once the controller holds the reference, and holds simulated
+    time at 0 until ``normal_subscribers`` listen: the scenario's clock (simulated time, which
+    the reference follows) starts when everyone is there.
     """
     return (
-        NodeSpec('recorder', tuple(parameter_args(output_dir=str(bag_dir)))),
         NodeSpec('controller', tuple(parameter_args(controller='extended'))),
         NodeSpec('reference', tuple(parameter_args(setpoint_xy=list(SETPOINT_XY),
                                                    trajectory_start_s=setpoint_s,
                                                    trajectory_offset_s=TRAJECTORY_OFFSET_S,
                                                    use_sim_time=True))),
         NodeSpec('simulator', tuple(parameter_args(
-            plant='discrete', seed=seed, real_time_factor=real_time_factor,
-            wait_for_subscribers=DEMO_NORMAL_SUBSCRIBERS))),
+            plant=plant, seed=seed, real_time_factor=real_time_factor,
+            wait_for_subscribers=normal_subscribers))),
     )
+
+
+def demo_nodes(bag_dir, setpoint_s, real_time_factor, seed, plant=DEFAULT_PLANT):
+    """What the demo starts, in start order (stopped in reverse: the recorder last)."""
+    return (NodeSpec('recorder', tuple(parameter_args(output_dir=str(bag_dir)))),
+            *scenario_nodes(setpoint_s, plant, real_time_factor, seed,
+                            DEMO_NORMAL_SUBSCRIBERS))
 
 
 class RunLog:
@@ -82,12 +97,17 @@ class RunLog:
 
 
 def run_demo(setpoint_s=DEFAULT_SETPOINT_S, trajectory_s=DEFAULT_TRAJECTORY_S,
-             real_time_factor=DEFAULT_REAL_TIME_FACTOR, bags_dir='bags', seed=0, out=None):
-    """Run the scenario; returns 0 if the loop ran and every node exited cleanly, else 1."""
+             real_time_factor=None, bags_dir='bags', seed=0, out=None, plant=DEFAULT_PLANT):
+    """Run the scenario; returns 0 if the loop ran and every node exited cleanly, else 1.
+
+    ``real_time_factor`` defaults to the plant's (:data:`DEFAULT_REAL_TIME_FACTOR`).
+    """
     from msg_defs.topics import CONTROLLER_STATUS, SURFACE_NORMAL
     from sphere_twin.testing import TopicProbe, TwinTimeoutError
 
     out = sys.stdout if out is None else out
+    if real_time_factor is None:
+        real_time_factor = DEFAULT_REAL_TIME_FACTOR[plant]
 
     def say(line):
         print(line, file=out, flush=True)
@@ -100,10 +120,10 @@ def run_demo(setpoint_s=DEFAULT_SETPOINT_S, trajectory_s=DEFAULT_TRAJECTORY_S,
         f'{DISCOVERY_RANGE_VAR}={os.environ.get(DISCOVERY_RANGE_VAR, "LOCALHOST (default)")}')
     say(f'demo: scenario: setpoint {SETPOINT_XY} for {setpoint_s:g} s, then eq. (64) '
         f'(A_max 0.44, f1 0.02 Hz, from t = {TRAJECTORY_OFFSET_S:g} s, where it passes the '
-        f'centre) for {trajectory_s:g} s of simulated time, paced at '
+        f'centre) for {trajectory_s:g} s of simulated time, {plant} plant, paced at '
         f'{real_time_factor:g}x real time')
     problems = []
-    *others, simulator = demo_nodes(bag_dir, setpoint_s, real_time_factor, seed)
+    *others, simulator = demo_nodes(bag_dir, setpoint_s, real_time_factor, seed, plant)
     with running_nodes(*others, domain_id=domain_id) as group:
         for process in group.processes:
             say(f'demo: started {process.name} (pid {process.pid})')
@@ -133,6 +153,7 @@ def run_demo(setpoint_s=DEFAULT_SETPOINT_S, trajectory_s=DEFAULT_TRAJECTORY_S,
             f'(SIGINT to each PID)')
         group.stop_all()
     problems += _report_exits(group.processes, say)
+    _report_pace(group.processes, say)
     problems += _report_bag(bag_dir, setpoint_s, log, wall_s, say)
     say(f'demo: bag {bag_dir}')
     if problems:
@@ -155,6 +176,21 @@ def _report_exits(processes, say):
     return problems
 
 
+def _report_pace(processes, say):
+    """Say the real-time factor each node saw and the late programmes (those that started
+    later than the controller asked: the simulator fell behind), from their farewell lines."""
+    factors, late = [], None
+    for process in processes:
+        text = process.stdout_text()
+        found = REAL_TIME_FACTOR_PATTERN.findall(text)
+        if found:
+            factors.append(f'{process.name} {float(found[-1]):.2f}')
+        if process.name == 'simulator' and LATE_PATTERN.search(text):
+            late = int(LATE_PATTERN.findall(text)[-1])
+    say(f'demo: real-time factor: {", ".join(factors)}; late programmes: '
+        f'{"unknown" if late is None else late}')
+
+
 def _report_bag(bag_dir, setpoint_s, log, wall_s, say):
     """What the run did, read back from its own bag as `sphere-twin report` reads it, and a
     plot; the problems (an unreadable bag, no normal recorded)."""
@@ -172,8 +208,10 @@ def _report_bag(bag_dir, setpoint_s, log, wall_s, say):
                        title=f'{bag_dir.name}: setpoint, then eq. (64) from {setpoint_s:g} s')
     on_setpoint = (times > 0.5 * setpoint_s) & (times < setpoint_s)
     tracking = times >= setpoint_s
-    say(f'demo: {log.kicks()} kicks in {log.simulated_s():.1f} s simulated, '
-        f'{wall_s:.1f} s wall: real-time factor {log.simulated_s() / wall_s:.2f}')
+    simulated_s = log.simulated_s()
+    say(f'demo: {log.kicks()} kicks in {simulated_s:.1f} s simulated '
+        f'({log.kicks() / max(simulated_s, 1e-9):.1f} per second), {wall_s:.1f} s wall from the '
+        'simulator\'s start')
     if on_setpoint.any():
         say(f'demo: setpoint: final error {math.degrees(errors[on_setpoint][-1]):.4f} deg')
     if tracking.any():
@@ -196,8 +234,13 @@ def register(subparsers):
                         help='simulated seconds on the setpoint')
     parser.add_argument('--trajectory-s', type=positive_float, default=DEFAULT_TRAJECTORY_S,
                         help='simulated seconds on the trajectory')
-    parser.add_argument('--real-time-factor', type=positive_float, default=DEFAULT_REAL_TIME_FACTOR,
-                        help='simulated seconds per wall second')
+    parser.add_argument('--plant', choices=PLANT_KINDS, default=DEFAULT_PLANT,
+                        help='the simulator\'s plant: the continuous model of §3, or the '
+                             'discrete table of kicks (the paper\'s shortcut)')
+    parser.add_argument('--real-time-factor', type=positive_float, default=None,
+                        help='simulated seconds per wall second (default: '
+                             + ', '.join(f'{v:g} for the {k} plant'
+                                         for k, v in DEFAULT_REAL_TIME_FACTOR.items()) + ')')
     parser.add_argument('--bags-dir', default='bags', help='where the bag directory goes')
     parser.add_argument('--seed', type=int, default=0)
     parser.set_defaults(func=run)
@@ -206,4 +249,4 @@ def register(subparsers):
 def run(args):
     """Entry point of the subcommand; returns the exit code."""
     return run_demo(args.setpoint_s, args.trajectory_s, args.real_time_factor, args.bags_dir,
-                    args.seed)
+                    args.seed, plant=args.plant)

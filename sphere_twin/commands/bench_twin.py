@@ -1,0 +1,52 @@
+"""``sphere-twin bench twin``: the live twin's real-time factor over DDS, and where it goes."""
+
+import json
+import sys
+from pathlib import Path
+
+from tqdm import tqdm
+
+from sphere_sim.twin.plant_setup import PLANT_KINDS
+from sphere_twin.commands.options import CommandError, positive_float
+from sphere_twin.twin_bench import DEFAULT_DURATION_S, BenchError, run_twin_bench, summary_lines
+
+RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
+
+
+def register(sub):
+    """Add ``twin`` to the ``bench`` subcommands."""
+    parser = sub.add_parser(
+        'twin', help='the live twin\'s real-time factor, unpaced, over DDS',
+        description='Run simulator (unpaced), reference and controller as processes over DDS '
+                    'on the demo\'s scenario for a fixed simulated time; report the '
+                    'simulator\'s real-time factor, the share of its wall time spent '
+                    'integrating, publishing and in rclpy, and the latency from a pulse '
+                    'programme\'s arrival to its first effect. Writes '
+                    'bench/results/twin_<plant>.{json,md}.')
+    parser.add_argument('--plant', choices=PLANT_KINDS, default='continuous')
+    parser.add_argument('--duration-s', type=positive_float, default=DEFAULT_DURATION_S,
+                        help='simulated seconds to run')
+    parser.add_argument('--out', type=Path, default=RESULTS_DIR, help='output directory')
+    parser.set_defaults(func=run)
+
+
+def run(args):
+    with tqdm(total=args.duration_s, desc=f'bench twin ({args.plant})', unit='sim s',
+              file=sys.stderr, bar_format='{l_bar}{bar}| {n:.1f}/{total:g} sim s') as bar:
+        def progress(simulated_s):
+            bar.update(min(simulated_s, args.duration_s) - bar.n)
+
+        try:
+            result, farewell = run_twin_bench(args.plant, args.duration_s, progress=progress)
+        except BenchError as error:
+            raise CommandError(str(error)) from None
+    lines = summary_lines(result)
+    args.out.mkdir(parents=True, exist_ok=True)
+    stem = args.out / f'twin_{args.plant}'
+    stem.with_suffix('.json').write_text(json.dumps(result.to_dict(), indent=2) + '\n')
+    stem.with_suffix('.md').write_text(
+        f'# Live twin, {args.plant} plant, unpaced\n\nWritten by `sphere-twin bench twin '
+        f'--plant {args.plant} --duration-s {args.duration_s:g}`.\n\n'
+        + '\n'.join(f'- {line}' for line in lines) + f'\n- farewell: `{farewell}`\n')
+    print('\n'.join(lines))
+    return 0

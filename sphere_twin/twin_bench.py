@@ -1,0 +1,142 @@
+"""The live twin's speed: simulator, reference and controller as processes over DDS.
+
+Runs the demo's scenario (the Fig. 13 setpoint, then eq. (64)) without a recorder, the
+simulator unpaced (``real_time_factor`` 0: as fast as it can), for a fixed span of simulated
+time, and reads the simulator's periodic status on ``/diagnostics``: the real-time factor it
+achieved, where its wall time went (integrating, publishing, rclpy and the rest) and how long a
+pulse programme took from its arrival to the published sample that first shows it. The CLI
+(``sphere-twin bench twin``) prints and writes; this module measures and returns.
+"""
+
+import dataclasses
+import math
+
+from sphere_twin.commands.demo import scenario_nodes
+from sphere_twin.processes import fresh_domain_id, running_nodes
+
+DEFAULT_DURATION_S = 20.0
+# The scenario's setpoint phase, shorter than the demo's: the bench wants kicks, and the
+# trajectory phase keeps the controller kicking.
+SETPOINT_S = 4.0
+# Subscribers of /sphere/surface_normal the simulator waits for: the controller and the probe.
+NORMAL_SUBSCRIBERS = 2
+START_TIMEOUT_S = 60.0
+# An unpaced run slower than this many wall seconds per simulated second is cut.
+WALL_PER_SIMULATED_LIMIT = 10.0
+
+
+@dataclasses.dataclass(frozen=True)
+class TwinBenchResult:
+    """The simulator's figures at the end of an unpaced run."""
+
+    plant: str
+    simulated_s: float
+    wall_s: float
+    real_time_factor: float
+    programmes: int
+    late: int
+    rejected: int
+    samples: int
+    integrating_fraction: float
+    publishing_fraction: float
+    latency_median_ms: float
+    latency_max_ms: float
+
+    @property
+    def other_fraction(self):
+        """rclpy (executor, callbacks, message conversion) and everything else."""
+        return 1.0 - self.integrating_fraction - self.publishing_fraction
+
+    @property
+    def kicks_per_simulated_s(self):
+        return self.programmes / self.simulated_s if self.simulated_s > 0 else math.nan
+
+    def to_dict(self):
+        return {**dataclasses.asdict(self), 'other_fraction': self.other_fraction,
+                'kicks_per_simulated_s': self.kicks_per_simulated_s}
+
+    @classmethod
+    def from_status(cls, plant, values):
+        """From the key-values of the simulator's ``/diagnostics`` status."""
+        return cls(plant, float(values['simulated_time_s']), float(values['wall_time_s']),
+                   float(values['real_time_factor']), int(values['programmes']),
+                   int(values['late']), int(values['rejected']), int(values['samples']),
+                   float(values['integrating_fraction']), float(values['publishing_fraction']),
+                   float(values['programme_latency_median_ms']),
+                   float(values['programme_latency_max_ms']))
+
+
+class BenchError(RuntimeError):
+    """The run did not get going or did not finish."""
+
+
+def _simulator_status(diagnostics):
+    """Key-values of the simulator's newest status, or {} before one."""
+    for msg in reversed(diagnostics):
+        status = msg.status[0]
+        if status.name.startswith('simulator'):
+            return {kv.key: kv.value for kv in status.values}
+    return {}
+
+
+def run_twin_bench(plant='continuous', duration_s=DEFAULT_DURATION_S, seed=0,
+                   progress=None):
+    """Run the loop unpaced until the simulator reports ``duration_s`` of simulated time.
+
+    ``progress(simulated_s)`` is called as the status comes in. Returns a
+    :class:`TwinBenchResult` and the simulator's farewell line.
+
+    Raises
+    ------
+    BenchError
+        When the loop does not start, or the run does not finish in time.
+    """
+    from msg_defs.topics import CONTROLLER_STATUS, DIAGNOSTICS
+    from sphere_twin.commands.demo import RunLog
+    from sphere_twin.testing import TopicProbe, TwinTimeoutError
+
+    domain_id = fresh_domain_id()
+    *others, simulator = scenario_nodes(SETPOINT_S, plant, 0.0, seed, NORMAL_SUBSCRIBERS)
+    with running_nodes(*others, domain_id=domain_id) as group:
+        from msg_defs.topics import SURFACE_NORMAL
+
+        probe = TopicProbe(domain_id, (SURFACE_NORMAL, CONTROLLER_STATUS, DIAGNOSTICS))
+        diagnostics = probe.messages[DIAGNOSTICS.name]
+
+        def finished():
+            status = _simulator_status(diagnostics)
+            simulated = float(status.get('simulated_time_s', 0.0))
+            if progress is not None and status:
+                progress(simulated)
+            return simulated >= duration_s
+
+        try:
+            probe.spin_until(RunLog(probe).controller_ready, START_TIMEOUT_S,
+                             'controller holding the reference')
+            process = group.start(simulator.executable, simulator.args)
+            probe.process = process
+            probe.spin_until(finished, START_TIMEOUT_S + WALL_PER_SIMULATED_LIMIT * duration_s,
+                             f'{duration_s:g} s of simulated time')
+        except TwinTimeoutError as error:
+            raise BenchError(str(error).splitlines()[0]) from None
+        finally:
+            probe.close()
+        status = _simulator_status(diagnostics)
+    farewell = next((line for line in process.stdout_text().splitlines()
+                     if line.startswith('simulator:')), '')
+    return TwinBenchResult.from_status(plant, status), farewell
+
+
+def summary_lines(result):
+    """What ``sphere-twin bench twin`` prints; the last line is the headline."""
+    r = result
+    return [
+        f'simulator ({r.plant} plant, unpaced): {r.simulated_s:.2f} s simulated in '
+        f'{r.wall_s:.2f} s wall, {r.programmes} programmes ({r.kicks_per_simulated_s:.1f} per '
+        f'simulated second), {r.rejected} rejected, {r.samples} samples',
+        f'wall time: integrating {r.integrating_fraction:.1%}, publishing '
+        f'{r.publishing_fraction:.1%}, rclpy and the rest {r.other_fraction:.1%}',
+        f'programme latency, arrival to the first published sample showing it: median '
+        f'{r.latency_median_ms:.2f} ms, largest {r.latency_max_ms:.2f} ms (wall)',
+        f'twin real-time factor: {r.real_time_factor:.2f} unpaced ({r.plant})',
+    ]

@@ -1,0 +1,109 @@
+"""SIGINT or SIGTERM at any moment ends every node with exit code 0 and no traceback.
+
+Each node is signalled while it works: the simulator while it integrates kicks of the
+continuous plant (unpaced and fed a kick every few milliseconds, it spends most of its time
+inside the compiled integrator), the controller while samples stream in and it decides, the
+reference while it publishes, the recorder while it writes, whose bag must then be complete.
+"""
+
+import signal
+import time
+
+import pytest
+
+from msg_defs.topics import DIAGNOSTICS, PULSE_PROGRAM
+from sphere_twin.bag.reader import has_footer, read_messages, read_metadata, storage_files
+from sphere_twin.commands.demo import RunLog, scenario_nodes
+from sphere_twin.processes import parameter_args
+from sphere_twin.testing import TopicProbe
+
+pytestmark = pytest.mark.ros
+
+READY_TIMEOUT_S = 60.0
+EXIT_TIMEOUT_S = 10.0
+SIGNALS = [signal.SIGINT, signal.SIGTERM]
+SIGNAL_IDS = ['SIGINT', 'SIGTERM']
+# Wall times after the first kick at which the simulator is signalled: spread over a kick's
+# compute (tens of ms, most of it in its first simulated milliseconds).
+SIMULATOR_SIGNAL_DELAYS_S = (0.013, 0.171)
+KICK_EVERY_S = 0.005
+# The simulator starts once the recorder, the controller and the probe listen to the normal.
+NORMAL_SUBSCRIBERS = 3
+BUSY_FRACTION = 0.3  # of wall time integrating, by the simulator's periodic status
+
+
+def _assert_clean_exit(process):
+    assert process.wait(EXIT_TIMEOUT_S) == 0, process.stderr_text()[-2000:]
+    assert 'Traceback' not in process.stderr_text() + process.stdout_text()
+
+
+def _integrating_fraction(probe):
+    for msg in reversed(probe.messages[DIAGNOSTICS.name]):
+        values = {kv.key: kv.value for kv in msg.status[0].values}
+        if 'integrating_fraction' in values:
+            return float(values['integrating_fraction'])
+    return 0.0
+
+
+@pytest.mark.parametrize('delay_s', SIMULATOR_SIGNAL_DELAYS_S)
+@pytest.mark.parametrize('signum', SIGNALS, ids=SIGNAL_IDS)
+def test_the_simulator_stops_cleanly_in_the_middle_of_integrating(ros_nodes, signum, delay_s):
+    from msg_defs.conversions import programme_to_msg
+    from sphere_sim.twin.plant_setup import load_kick_model
+
+    simulator = ros_nodes.start('simulator', parameter_args(plant='continuous',
+                                                           real_time_factor=0.0))
+    simulator.wait_for_output('publishing /sphere/surface_normal', READY_TIMEOUT_S)
+    kick = programme_to_msg(*load_kick_model().programme(0, 1.0).segments())
+    probe = TopicProbe(ros_nodes.domain_id, (DIAGNOSTICS,), simulator)
+    try:
+        probe.wait_for_subscribers(PULSE_PROGRAM, READY_TIMEOUT_S)
+        publisher = probe.publisher(PULSE_PROGRAM)
+        # Kicks until the simulator's status shows it busy integrating, then on for delay_s.
+        deadline, give_up = None, time.monotonic() + READY_TIMEOUT_S
+        while deadline is None or time.monotonic() < deadline:
+            publisher.publish(kick)
+            probe.spin_once(KICK_EVERY_S)
+            if deadline is None and _integrating_fraction(probe) > BUSY_FRACTION:
+                deadline = time.monotonic() + delay_s
+            assert simulator.running() and time.monotonic() < give_up
+        simulator.send_signal(signum)
+    finally:
+        probe.close()
+    _assert_clean_exit(simulator)
+    assert simulator.stdout_text().splitlines()[-1].startswith('simulator: simulated')
+
+
+@pytest.mark.parametrize('signum', SIGNALS, ids=SIGNAL_IDS)
+def test_controller_reference_and_recorder_stop_cleanly_while_the_loop_runs(
+        ros_nodes, tmp_path, signum):
+    from msg_defs.topics import CONTROLLER_STATUS, SURFACE_NORMAL
+
+    recorder = ros_nodes.start('recorder', parameter_args(output_dir=str(tmp_path / 'bag')))
+    nodes = {spec.executable: ros_nodes.start(spec.executable, spec.args)
+             for spec in scenario_nodes(1.0, 'discrete', 5.0, 0, NORMAL_SUBSCRIBERS)}
+    probe = TopicProbe(ros_nodes.domain_id, (SURFACE_NORMAL, CONTROLLER_STATUS))
+    try:
+        log = RunLog(probe)
+        probe.spin_until(lambda: log.kicks() >= 3, READY_TIMEOUT_S, 'three kicks')
+    finally:
+        probe.close()
+    # Each while the others still run: the controller amid samples, the reference on its
+    # timer, the recorder amid the simulator's stream.
+    for name in ('controller', 'reference'):
+        nodes[name].send_signal(signum)
+        _assert_clean_exit(nodes[name])
+    recorder.send_signal(signum)
+    _assert_clean_exit(recorder)
+    assert nodes['simulator'].running()
+
+    bag = tmp_path / 'bag'
+    (path,) = storage_files(bag)
+    assert has_footer(path)
+    counts = {t['topic_metadata']['name']: t['message_count']
+              for t in read_metadata(bag)['topics_with_message_count']}
+    read = {}
+    for message in read_messages(bag):
+        read[message.topic] = read.get(message.topic, 0) + 1
+    assert read == {topic: n for topic, n in counts.items() if n}
+    assert read.get(SURFACE_NORMAL.name, 0) > 10, read

@@ -1,0 +1,62 @@
+"""``sphere-twin bench twin``: the live loop over DDS, unpaced, and the simulator's accounts."""
+
+import json
+import math
+
+import pytest
+
+from sphere_twin.cli import main
+from sphere_twin.twin_bench import TwinBenchResult, run_twin_bench, summary_lines
+
+pytestmark = pytest.mark.ros
+
+DURATION_S = 3.0
+
+
+@pytest.fixture(scope='module')
+def runs():
+    return {plant: run_twin_bench(plant, DURATION_S) for plant in ('discrete', 'continuous')}
+
+
+@pytest.mark.parametrize('plant', ['discrete', 'continuous'])
+def test_the_status_accounts_for_the_run(runs, plant):
+    result, farewell = runs[plant]
+    assert result.plant == plant
+    assert result.simulated_s >= DURATION_S
+    assert result.real_time_factor == pytest.approx(result.simulated_s / result.wall_s, rel=1e-3)
+    assert result.programmes > 0
+    # One sample per 20 ms of simulated time, and the initial one.
+    assert result.samples == pytest.approx(result.simulated_s / 0.02 + 1, abs=1)
+    assert 0.0 < result.integrating_fraction < 1.0 and 0.0 < result.publishing_fraction < 1.0
+    assert 0.0 <= result.other_fraction < 1.0
+    assert 0.0 < result.latency_median_ms <= result.latency_max_ms
+    assert farewell.startswith('simulator: simulated')
+
+
+def test_the_physics_costs_integration_time_the_table_does_not(runs):
+    continuous, discrete = runs['continuous'][0], runs['discrete'][0]
+    assert continuous.integrating_fraction > 5 * discrete.integrating_fraction
+    assert continuous.real_time_factor < discrete.real_time_factor
+    # The physics takes any programme at any time; only the table refuses overlapping kicks.
+    assert continuous.rejected == 0
+
+
+def test_summary_ends_with_the_headline_and_the_result_round_trips(runs):
+    result, _ = runs['continuous']
+    lines = summary_lines(result)
+    assert lines[-1] == f'twin real-time factor: {result.real_time_factor:.2f} unpaced (continuous)'
+    data = result.to_dict()
+    assert math.isclose(data['other_fraction'], result.other_fraction)
+    fields = {k: v for k, v in data.items() if k in TwinBenchResult.__dataclass_fields__}
+    assert TwinBenchResult(**fields) == result
+
+
+def test_cli_writes_the_results_and_prints_the_headline_last(tmp_path, capsys):
+    assert main(['bench', 'twin', '--plant', 'discrete', '--duration-s', '1', '--out',
+                 str(tmp_path)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[-1].startswith('twin real-time factor: ') and out[-1].endswith(
+        ' unpaced (discrete)')
+    data = json.loads((tmp_path / 'twin_discrete.json').read_text())
+    assert data['simulated_s'] >= 1.0
+    assert (tmp_path / 'twin_discrete.md').read_text().count('twin real-time factor') == 1
