@@ -6,6 +6,7 @@ unless the user chose a range explicitly.
 
 import os
 import signal
+import sys
 
 DISCOVERY_RANGE_VAR = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
 DEFAULT_DISCOVERY_RANGE = 'LOCALHOST'
@@ -66,7 +67,71 @@ def install_shutdown_signal_handlers():
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
 
 
-def run_node(build, args=None, spin=None, farewell=None):
+# What a missing Python module is called where a ROS user installs it (rosdep keys of
+# package.xml); the rest are pip names.
+MODULE_TO_ROSDEP = {'scipy': 'python3-scipy', 'numpy': 'python3-numpy', 'yaml': 'python3-yaml',
+                    'matplotlib': 'python3-matplotlib', 'mcap': 'python3-mcap (or pip install '
+                    'mcap)', 'numba': 'python3-numba (or pip install numba)',
+                    'zstandard': 'python3-zstandard', 'tqdm': 'python3-tqdm'}
+
+
+class StartupError(ValueError):
+    """A node cannot start with the parameters or files it was given."""
+
+
+def startup_error_line(node_name, error):
+    """The one line a node prints when it cannot start, naming what to fix."""
+    if isinstance(error, ModuleNotFoundError):
+        module = (error.name or '').split('.')[0]
+        remedy = MODULE_TO_ROSDEP.get(module, f'pip install {module}')
+        return (f'{node_name}: error: the Python module {module!r} is missing: install '
+                f'{remedy} (on a ROS install: rosdep install --from-paths src -y)')
+    return f'{node_name}: error: {str(error).splitlines()[0] if str(error) else error!r}'
+
+
+def _startup_errors():
+    """What a node's start-up raises for a bad parameter, file or installation (not a bug)."""
+    from rclpy.exceptions import ParameterException
+
+    return (ValueError, OSError, ModuleNotFoundError, ParameterException)
+
+
+def declare_node_parameters(node, specs):
+    """Declare every parameter of ``specs`` on ``node``; returns {name: value}.
+
+    ``specs`` maps a name to (default, ParameterDescriptor). A parameter whose default is a
+    float also takes an integer (``-p publish_rate_hz:=50``, what a ROS user writes), returned
+    as a float and checked against the descriptor's range here, since ROS checks the range of
+    a double only.
+
+    Raises
+    ------
+    StartupError
+        For a value of the wrong type or out of range, naming the parameter.
+    """
+    values = {}
+    for name, (default, descriptor) in specs.items():
+        if isinstance(default, float):
+            descriptor.dynamic_typing = True
+        value = node.declare_parameter(name, default, descriptor).value
+        if isinstance(default, float):
+            value = _as_float(name, value, descriptor)
+        values[name] = value
+    return values
+
+
+def _as_float(name, value, descriptor):
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise StartupError(f'parameter {name} must be a number, got {value!r}')
+    value = float(value)
+    for bounds in descriptor.floating_point_range:
+        if not bounds.from_value <= value <= bounds.to_value:
+            raise StartupError(f'parameter {name} = {value:g} is outside '
+                               f'[{bounds.from_value:g}, {bounds.to_value:g}]')
+    return value
+
+
+def run_node(build, args=None, spin=None, farewell=None, name=None):
     """The ``main()`` of every executable: hygiene, init, build, spin, clean shutdown.
 
     Follows ros2/demos: the node is built inside the ``try`` so that a signal during start-up
@@ -84,6 +149,14 @@ def run_node(build, args=None, spin=None, farewell=None):
     farewell : callable, optional
         ``farewell(node) -> str``, printed (not logged: the context may already be shut down
         by the signal) before the node is destroyed.
+    name : str, optional
+        The executable's name, for the one line of a start-up error.
+
+    Returns
+    -------
+    int
+        The exit status: 0, or 2 when the node could not start (a bad parameter, a missing
+        file or module: one line on stderr, ``<name>: error: ...``, no traceback).
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException
@@ -99,7 +172,11 @@ def run_node(build, args=None, spin=None, farewell=None):
         # simulator's ready line, while rclpy.spin was still creating its executor; the exit
         # code was still 0).
         rclpy.get_global_executor()
-        node = build()
+        try:
+            node = build()
+        except _startup_errors() as error:
+            print(startup_error_line(name or 'node', error), file=sys.stderr, flush=True)
+            return 2
         (spin or rclpy.spin)(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -112,6 +189,7 @@ def run_node(build, args=None, spin=None, farewell=None):
                 print(farewell(node), flush=True)
             node.destroy_node()
         rclpy.try_shutdown()
+    return 0
 
 
 def parameter_descriptor(description, float_range=None, int_range=None, read_only=True):

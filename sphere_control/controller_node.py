@@ -9,6 +9,7 @@ directions and widths; when the state is stale it holds, sends nothing, and says
 """
 
 import math
+import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -30,7 +31,7 @@ from msg_defs.topics import (
     VOLTAGE_COMMAND,
 )
 from node_runtime.pace import PaceMeter
-from node_runtime.ros_env import parameter_descriptor, run_node
+from node_runtime.ros_env import declare_node_parameters, parameter_descriptor, run_node
 from sphere_control.controllers import CONTROLLER_KINDS, controller_for
 from sphere_control.kick_cycle import KickCycle, Phase
 
@@ -47,8 +48,7 @@ class ControllerNode(Node):
         from sphere_sim.twin.plant_setup import load_kick_model
 
         super().__init__('controller', **node_kwargs)
-        p = {name: self.declare_parameter(name, default, descriptor).value
-             for name, (default, descriptor) in {
+        p = declare_node_parameters(self, {
                  'controller': ('extended', parameter_descriptor(
                      f'Control law: {" or ".join(CONTROLLER_KINDS)} (§4.2).')),
                  'phi_min_deg': (0.05, parameter_descriptor(
@@ -68,7 +68,7 @@ class ControllerNode(Node):
                      'Aim where the reference will be when the kick has settled, estimated '
                      'from its recent samples (a jump is not extrapolated), not at its newest '
                      'sample (beyond the paper).')),
-             }.items()}
+             })
         table = load_kick_model([t for t in p['tables'] if t])
         self.kicks = table
         self.controller_kind = p['controller']
@@ -125,13 +125,16 @@ class ControllerNode(Node):
             # One hold in flight at a time: a lockstep simulator advances one sample per
             # command, and holds queued behind a later kick would delay it.
             self._hold_sent_at_s = sample_s
-            self._voltage_pub.publish(voltages_to_msg([0.0] * BEAM_COUNT))
+            self._voltage_pub.publish(voltages_to_msg([0.0] * BEAM_COUNT, msg.header.stamp))
         self._publish_status(decision, msg.header.stamp)
 
     def on_stale_check(self):
         decision = self.cycle.check_stale(time.monotonic())
         if decision is not None:
-            self._publish_status(decision, self.get_clock().now().to_msg())
+            # Stamped with the newest sample's time (0 before one): the node's own clock
+            # would be the wall's unless use_sim_time, and every stamp is simulated time.
+            latest_s = self.cycle.samples[-1][0] if self.cycle.samples else 0.0
+            self._publish_status(decision, time_from_ns(round(latest_s * NS_PER_S)))
 
     def _publish_status(self, decision, stamp):
         phase = decision.phase
@@ -186,8 +189,8 @@ class ControllerNode(Node):
 
 
 def main(args=None):
-    run_node(ControllerNode, args, farewell=ControllerNode.summary)
+    return run_node(ControllerNode, args, farewell=ControllerNode.summary, name='controller')
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -4,13 +4,15 @@ Time is the node's clock, so with ``use_sim_time`` it follows the simulator's ``
 reference beyond the reachable cone is clamped to its edge with a warning.
 """
 
+import sys
+
 from rclpy.node import Node
 
 from msg_defs.conversions import surface_normal_to_msg
 from msg_defs.device import NS_PER_S
-from msg_defs.topics import SPHERE_REFERENCE
+from msg_defs.topics import CLOCK, SPHERE_REFERENCE
 from node_runtime.pace import PaceMeter
-from node_runtime.ros_env import parameter_descriptor, run_node
+from node_runtime.ros_env import declare_node_parameters, parameter_descriptor, run_node
 from sphere_control.reference import CircleTrajectory, Setpoint, sample
 
 DEFAULT_PUBLISH_RATE_HZ = 10.0
@@ -23,8 +25,7 @@ class ReferenceNode(Node):
 
     def __init__(self, **node_kwargs):
         super().__init__('reference', **node_kwargs)
-        p = {name: self.declare_parameter(name, default, descriptor).value
-             for name, (default, descriptor) in {
+        p = declare_node_parameters(self, {
                  'setpoint_xy': ([0.01, 0.02], parameter_descriptor(
                      'x and y of the setpoint normal (Fig. 13: [0.01, 0.02]).')),
                  'trajectory_start_s': (NEVER, parameter_descriptor(
@@ -37,7 +38,7 @@ class ReferenceNode(Node):
                  'frequency_hz': (0.02, parameter_descriptor('f1 of eq. (64) (Hz).', (0.0, 10.0))),
                  'publish_rate_hz': (DEFAULT_PUBLISH_RATE_HZ, parameter_descriptor(
                      'Publications per second of the node clock (Hz).', (0.1, 1000.0))),
-             }.items()}
+             })
         if len(p['setpoint_xy']) != 2:
             raise ValueError(f'setpoint_xy needs 2 values, got {list(p["setpoint_xy"])}')
         self.setpoint = Setpoint(tuple(float(v) for v in p['setpoint_xy']))
@@ -48,6 +49,7 @@ class ReferenceNode(Node):
             SPHERE_REFERENCE.msg_type, SPHERE_REFERENCE.name, SPHERE_REFERENCE.qos.to_profile())
         self._start_ns = None
         self._warned_clamp = False
+        self._clock_checked = False
         self.pace = PaceMeter()
         self.create_timer(1.0 / p['publish_rate_hz'], self.on_timer)
         # Latched at once: with use_sim_time the timer waits for /clock, and a controller
@@ -77,6 +79,18 @@ class ReferenceNode(Node):
                 f'reachable cone; clamped to its edge')
         self._warned_clamp = reference.clamped
         self._publisher.publish(surface_normal_to_msg(reference.normal, now.to_msg()))
+        self._check_clock()
+
+    def _check_clock(self):
+        """Warn once when a simulator publishes /clock but this node stamps wall time: every
+        stamp of the twin is simulated time, so the reference should follow /clock."""
+        if self._clock_checked or self.get_parameter('use_sim_time').value:
+            return
+        if self.count_publishers(CLOCK.name) > 0:
+            self._clock_checked = True
+            self.get_logger().warning(
+                f'{CLOCK.name} is published (a simulator runs) but this node stamps wall time: '
+                'start it with use_sim_time:=true so its stamps are simulated time')
 
     def summary(self):
         return (f'reference: setpoint {self.setpoint.xy}, trajectory from '
@@ -85,9 +99,9 @@ class ReferenceNode(Node):
 
 
 def main(args=None):
-    run_node(ReferenceNode, args, farewell=ReferenceNode.summary)
+    return run_node(ReferenceNode, args, farewell=ReferenceNode.summary, name='reference')
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())
 

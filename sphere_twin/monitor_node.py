@@ -5,6 +5,8 @@ On exit, by a signal or after ``max_messages``, it prints the line
 the tests read (see :mod:`sphere_twin.monitor_summary`).
 """
 
+import sys
+
 import numpy as np
 import rclpy
 from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
@@ -84,10 +86,10 @@ class MonitorNode(Node):
 
 def main(args=None):
     # Never completes when max_messages is 0, so the node then runs until signalled.
-    run_node(MonitorNode, args,
-             spin=lambda node: rclpy.spin_until_future_complete(node, node.done),
-             farewell=MonitorNode.summary)
+    return run_node(MonitorNode, args,
+                    spin=lambda node: rclpy.spin_until_future_complete(node, node.done),
+                    farewell=MonitorNode.summary, name='monitor')
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

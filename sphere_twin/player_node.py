@@ -15,6 +15,7 @@ memory when the node starts; a bag left by a killed recorder plays its completed
 """
 
 import dataclasses
+import sys
 import time
 
 from rclpy.duration import Duration
@@ -24,7 +25,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from msg_defs.device import NS_PER_S
 from msg_defs.topics import ALL_TOPICS, CLOCK
-from node_runtime.ros_env import parameter_descriptor, run_node
+from node_runtime.ros_env import declare_node_parameters, parameter_descriptor, run_node
 from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.reader import BagError, message_class, read_messages, read_metadata
 
@@ -211,8 +212,7 @@ class PlayerNode(Node):
                 'subscriber slightly before that subscriber accepts its messages.',
                 (0.0, MAX_WAIT_S))),
         }
-        return {name: self.declare_parameter(name, default, descriptor).value
-                for name, (default, descriptor) in specs.items()}
+        return declare_node_parameters(self, specs)
 
     def publish_item(self, item):
         """Publish one :class:`PlaybackItem` (the recorded bytes, or a made-up /clock tick)."""
@@ -279,12 +279,12 @@ def main(args=None):
     import rclpy
 
     try:
-        run_node(_build, args, spin=PlayerNode.play, farewell=PlayerNode.summary)
+        return run_node(_build, args, spin=PlayerNode.play, farewell=PlayerNode.summary,
+                        name='player')
     except (BagError, ValueError) as error:
         rclpy.logging.get_logger('player').error(str(error))
         return 1
-    return 0
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -17,6 +17,7 @@ so a recorder killed outright loses at most that much.
 import datetime
 import functools
 import signal
+import sys
 import time
 from pathlib import Path
 
@@ -27,7 +28,11 @@ from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
 from msg_defs.topics import ALL_TOPICS, topic_by_name
-from node_runtime.ros_env import ensure_localhost_discovery, parameter_descriptor
+from node_runtime.ros_env import (
+    declare_node_parameters,
+    ensure_localhost_discovery,
+    parameter_descriptor,
+)
 from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.writer import COMPRESSIONS, DEFAULT_CHUNK_SIZE_BYTES, BagWriter
 
@@ -123,8 +128,7 @@ class RecorderNode(Node):
                 'what a crash can lose; 0 writes chunks only when full.',
                 float_range=(0.0, MAX_FLUSH_PERIOD_S))),
         }
-        return {name: self.declare_parameter(name, default, descriptor).value
-                for name, (default, descriptor) in specs.items()}
+        return declare_node_parameters(self, specs)
 
     # --- recording ----------------------------------------------------------------------
 
@@ -282,4 +286,4 @@ def main(args=None):
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

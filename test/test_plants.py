@@ -20,7 +20,7 @@ from sphere_sim.twin.plants import (
     PlantError,
     decode_kick,
 )
-from sphere_sim.twin.runner import CommandError, TwinRunner
+from sphere_sim.twin.runner import MAX_START_AHEAD_S, CommandError, TwinRunner
 
 
 @pytest.fixture(scope='module')
@@ -139,6 +139,36 @@ def test_rejected_programme_never_reaches_the_plant(table):
     runner.tick()
     runner.tick()
     assert plant.kicks == 0
+
+
+def test_a_wall_clock_stamp_is_refused_with_a_message_that_says_so(table):
+    plant = DiscretePlant(table)
+    runner = TwinRunner(plant, period_s=0.02)
+    runner.tick()
+    wall_clock_s = 1.8e9
+    with pytest.raises(CommandError, match=r'after the simulated now .*stamps are simulated'):
+        runner.command_programme(*table.programme(0, 1.0).segments(), start_s=wall_clock_s)
+    runner.command_programme(*table.programme(0, 1.0).segments(),
+                             start_s=MAX_START_AHEAD_S - 1.0)  # far, but simulated time
+    assert runner.counters.late == 0 and plant.kicks == 0
+
+
+def test_a_voltage_command_cuts_a_running_programme_and_says_so(table):
+    plant = ContinuousPlant(build_plant('continuous').model)
+    runner = TwinRunner(plant, period_s=1e-3)
+    runner.tick()
+    assert runner.command_voltages([0.0] * 4) is None  # nothing to cut
+    runner.tick()
+    runner.command_programme(*table.programme(0, 1.0).segments())
+    runner.tick()  # the kick starts
+    report = runner.command_voltages([0.0] * 4)
+    assert 'cut the programme running until' in report and runner.counters.cut == 1
+    runner.tick()
+    np.testing.assert_array_equal(plant.snapshot().voltages_v, np.zeros(4))
+    # A programme still queued is dropped by a hold too.
+    runner.command_programme(*table.programme(1, 1.0).segments(), start_s=runner.time_s + 0.01)
+    assert '1 queued programme(s)' in runner.command_voltages([0.0] * 4)
+    assert runner.counters.cut == 2 and runner.counters.programmes == 1
 
 
 def test_measurement_noise_is_seeded_and_has_the_stated_spread():

@@ -52,3 +52,14 @@ def test_lockstep_runs_with_the_same_seed_are_identical():
     distinct = [dict(first), dict(second)]
     assert distinct[0] == distinct[1]
     assert len(distinct[0]) == 1 + 3 * 3  # the initial sample and three 60 ms windows
+
+
+def test_a_healthy_twin_reports_its_status_every_second(twin):
+    twin.wait_for_normal()
+    twin.spin_until(lambda: len(twin.diagnostics) >= 2, timeout_s=5.0, what='two statuses')
+    assert twin.rejections == []
+    status = twin.status()
+    assert int(status['samples']) >= 1 and int(status['rejected']) == 0
+    assert float(status['wall_time_s']) > 1.0
+    assert {'real_time_factor', 'integrating_fraction', 'publishing_fraction', 'late', 'cut',
+            'programme_latency_median_ms'} <= status.keys()

@@ -16,6 +16,11 @@ from msg_defs.voltage_rules import VoltageRuleError, check_voltages
 from sphere_sim.model.programme import ProgrammeError, PulseProgramme
 from sphere_sim.twin.plants import TIME_TOL_S, PlantError
 
+# A programme may start at most this far after the simulated now. Stamps are simulated time;
+# one far ahead is a wall-clock stamp (`stamp: now` in `ros2 topic pub`), which would wait
+# decades of simulated time: refused, with a message that says so.
+MAX_START_AHEAD_S = 60.0
+
 
 class CommandError(ValueError):
     """A command that breaks the contract or the plant's limits; nothing was changed."""
@@ -36,6 +41,7 @@ class TwinCounters:
     rejected: int = 0
     programmes: int = 0
     late: int = 0  # programmes whose start time had passed when they arrived
+    cut: int = 0  # programmes a later voltage command cut short or dropped
 
 
 @dataclasses.dataclass
@@ -96,6 +102,7 @@ class TwinRunner:
         # (start_s, kind, payload, asked_s, arrival_wall_s), applied at the next sample boundary
         self._queued = []
         self._acted = []  # (arrival_wall_s) of programmes applied in this tick
+        self._programme_end_s = -1.0  # when the last programme applied switches off
         self._step = 0
         self._idle_published = False
 
@@ -107,6 +114,14 @@ class TwinRunner:
     def command_voltages(self, voltages_v):
         """Queue voltages to hold from the next sample on.
 
+        A hold replaces whatever the beams were given from then on, so it cuts a programme that
+        is still running or queued (the device's drivers take the latest command).
+
+        Returns
+        -------
+        str or None
+            What the hold cut, if anything, to report.
+
         Raises
         ------
         CommandError
@@ -116,7 +131,26 @@ class TwinRunner:
             volts = check_voltages(voltages_v, self.voltage_limit_v)
         except VoltageRuleError as error:
             raise CommandError(str(error)) from None
+        cut = self._cut_by_hold()
         self._queue(self.time_s, 'hold', volts, self.time_s)
+        return cut
+
+    def _cut_by_hold(self):
+        """Drop the queued programmes a hold now overrides; say what it cut."""
+        queued = [item for item in self._queued if item[1] == 'programme']
+        self._queued = [item for item in self._queued if item[1] != 'programme']
+        running = self.time_s < self._programme_end_s - TIME_TOL_S
+        if not (queued or running):
+            return None
+        self.counters.cut += len(queued) + running
+        what = []
+        if running:
+            what.append(f'the programme running until t = {self._programme_end_s:.4f} s')
+            self._programme_end_s = self.time_s
+        if queued:
+            what.append(f'{len(queued)} queued programme(s)')
+        return (f'a voltage command at t = {self.time_s:.4f} s cut {" and ".join(what)}: the '
+                'latest command holds the beams')
 
     def command_programme(self, times_s, voltages_v, start_s=0.0):
         """Queue a programme (segments relative to its start) starting at ``start_s``
@@ -131,6 +165,11 @@ class TwinRunner:
             programme = PulseProgramme.from_segments(times_s, voltages_v, self.voltage_limit_v)
         except ProgrammeError as error:
             raise CommandError(str(error)) from None
+        if start_s > self.time_s + MAX_START_AHEAD_S:
+            raise CommandError(
+                f'starts at t = {start_s:.6g} s, {start_s - self.time_s:.6g} s after the '
+                f'simulated now (t = {self.time_s:.4f} s): stamps are simulated time (/clock); '
+                'stamp 0 starts a programme at once')
         if 0.0 < start_s < self.time_s - 1e-9:
             self.counters.late += 1  # started now instead
         self._queue(max(start_s, self.time_s), 'programme', programme, start_s)
@@ -150,6 +189,7 @@ class TwinRunner:
                     self.plant.hold(payload)
                 else:
                     self.plant.run_programme(payload)
+                    self._programme_end_s = self.time_s + payload.duration_s
                     self.counters.programmes += 1
                     self._acted.append(arrival_wall_s)
                     self.timings.delays_sim_s.append(self.time_s - max(asked_s, 0.0))

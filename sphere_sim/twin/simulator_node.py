@@ -8,6 +8,7 @@ rejected with a logged error and a diagnostics entry; it never reaches the plant
 """
 
 import os
+import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -37,7 +38,13 @@ from msg_defs.topics import (
     SURFACE_NORMAL,
     VOLTAGE_COMMAND,
 )
-from node_runtime.ros_env import DISCOVERY_RANGE_VAR, parameter_descriptor, run_node
+from node_runtime.ros_env import (
+    DISCOVERY_RANGE_VAR,
+    StartupError,
+    declare_node_parameters,
+    parameter_descriptor,
+    run_node,
+)
 from sphere_sim.twin.plant_setup import PLANT_KINDS
 
 # The physics (scipy, numba, the kick table) is imported when the node is built, not with this
@@ -80,6 +87,9 @@ class SimulatorNode(Node):
         from sphere_sim.twin.runner import TwinRunner
 
         super().__init__('simulator', **node_kwargs)
+        if self.get_parameter('use_sim_time').value:
+            raise StartupError('the simulator is the clock (it publishes /clock): run it '
+                               'without use_sim_time; the other nodes take use_sim_time:=true')
         p = self._declare_parameters()
         self.publish_rate_hz = p['publish_rate_hz']
         self.period_s = 1.0 / self.publish_rate_hz
@@ -140,14 +150,15 @@ class SimulatorNode(Node):
                 'Advance simulated time only while a command is in effect: runs are then '
                 'identical whatever the wall-clock timing.')),
         }
-        return {name: self.declare_parameter(name, default, descriptor).value
-                for name, (default, descriptor) in specs.items()}
+        return declare_node_parameters(self, specs)
 
     # --- commands ----------------------------------------------------------------------
     def on_voltage_command(self, msg):
         # ValueError covers both the contract (conversions) and the runner's CommandError.
         try:
-            self.runner.command_voltages(voltages_from_msg(msg))
+            cut = self.runner.command_voltages(voltages_from_msg(msg))
+            if cut is not None:
+                self._publish_diagnostics(DiagnosticStatus.WARN, cut)
         except ValueError as error:
             self.runner.counters.rejected += 1
             self._report_rejection(VOLTAGE_COMMAND.name, str(error))
@@ -156,7 +167,12 @@ class SimulatorNode(Node):
         try:
             times, volts = programme_from_msg(msg)
             start_s = ns_from_time(msg.header.stamp) / NS_PER_S
+            late = self.runner.counters.late
             self.runner.command_programme(times, volts, start_s)
+            if self.runner.counters.late > late:
+                self.get_logger().warning(
+                    f'{PULSE_PROGRAM.name} for t = {start_s:.4f} s arrived at t = '
+                    f'{self.runner.time_s:.4f} s: started late, at the next sample')
         except ValueError as error:
             self.runner.counters.rejected += 1
             self._report_rejection(PULSE_PROGRAM.name, str(error))
@@ -178,7 +194,7 @@ class SimulatorNode(Node):
         median_ms, max_ms = (1e3 * v for v in t.latency_summary())
         return (
             ('accepted', c.accepted), ('rejected', c.rejected), ('programmes', c.programmes),
-            ('late', c.late), ('samples', c.samples),
+            ('late', c.late), ('cut', c.cut), ('samples', c.samples),
             ('simulated_time_s', f'{self.runner.time_s:.6f}'), ('wall_time_s', f'{wall:.3f}'),
             ('real_time_factor', f'{self.runner.time_s / wall:.4f}'),
             ('integrating_fraction', f'{t.integrating_s / wall:.4f}'),
@@ -252,8 +268,8 @@ class SimulatorNode(Node):
 
 
 def main(args=None):
-    run_node(SimulatorNode, args, farewell=SimulatorNode.summary)
+    return run_node(SimulatorNode, args, farewell=SimulatorNode.summary, name='simulator')
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())
