@@ -15,6 +15,11 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE_NAME]),
         ('share/' + PACKAGE_NAME, ['package.xml']),
         ('share/' + PACKAGE_NAME + '/scenes', glob('sphere_sim/scenes/*.yaml')),
+        ('share/' + PACKAGE_NAME + '/launch', glob('launch/*.launch.py')),
+        ('share/' + PACKAGE_NAME + '/rviz', glob('rviz/*.rviz')),
+        ('share/' + PACKAGE_NAME + '/config', glob('config/*.yaml')),
+        # The example recording, found by name: `sphere-twin report example`, `bag:=example`.
+        ('share/' + PACKAGE_NAME + '/bags/example', glob('bags/example/*')),
     ],
     install_requires=['setuptools'],
     zip_safe=True,

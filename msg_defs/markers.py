@@ -21,6 +21,9 @@ BEAM_WIDTH_M = 200e-6
 BEAM_THICKNESS_M = 50e-6
 BEAM_SUSPENSION_RADIUS_M = 1.4e-3 + 0.4e-3  # tip at d_B / 2 from the centre
 NAMESPACE = 'sphere_twin'
+# The normal's arrow: out of the mirror face, long enough to read a tenth of a degree.
+NORMAL_ARROW_LENGTH_M = 3e-3
+NORMAL_ARROW_SHAFT_M = 50e-6
 
 
 def _quaternion_from_normal(normal):
@@ -92,4 +95,15 @@ def twin_markers(normal, stamp, sphere_position_m=None, beam_z_m=None, beam_phi_
         out.markers.append(_marker(2 + k, Marker.CUBE, stamp, mid, qb,
                                    [BEAM_LENGTH_M, BEAM_WIDTH_M, BEAM_THICKNESS_M],
                                    (0.85, 0.55, 0.2, 1.0)))
+    out.markers.append(_normal_arrow(6, stamp, centre, np.asarray(normal, dtype=float)))
     return out
+
+
+def _normal_arrow(marker_id, stamp, centre, normal):
+    """The measured surface normal as an arrow from the sphere's centre (RViz has no display
+    for a Vector3Stamped)."""
+    arrow = _marker(marker_id, Marker.ARROW, stamp, np.zeros(3), np.array([1.0, 0, 0, 0]),
+                    [NORMAL_ARROW_SHAFT_M, 2 * NORMAL_ARROW_SHAFT_M, 0.0], (0.9, 0.9, 0.2, 1.0))
+    tip = centre + NORMAL_ARROW_LENGTH_M * normal / np.linalg.norm(normal)
+    arrow.points = [Point(x=float(a), y=float(b), z=float(c)) for a, b, c in (centre, tip)]
+    return arrow

@@ -27,6 +27,7 @@ from msg_defs.device import NS_PER_S
 from msg_defs.topics import ALL_TOPICS, CLOCK
 from node_runtime.ros_env import declare_node_parameters, parameter_descriptor, run_node
 from sphere_twin.bag import format as bag_format
+from sphere_twin.bag.locate import locate_bag
 from sphere_twin.bag.reader import BagError, message_class, read_messages, read_metadata
 
 MAX_RATE = 1000.0
@@ -159,7 +160,10 @@ class PlayerNode(Node):
         p = self._declare_parameters()
         if not p['bag']:
             raise ValueError('parameter bag (the bag directory to play) is required')
-        self.bag = p['bag']
+        located = locate_bag(p['bag'])
+        if located.note:
+            self.get_logger().info(located.note)
+        self.bag = str(located.directory)
         self.loop = p['loop']
         self.wait_for_subscribers_s = p['wait_for_subscribers_s']
         self.delay_s = p['delay_s']
@@ -193,7 +197,9 @@ class PlayerNode(Node):
 
     def _declare_parameters(self):
         specs = {
-            'bag': ('', parameter_descriptor('Bag directory to play (with metadata.yaml).')),
+            'bag': ('', parameter_descriptor(
+                'Bag to play: its directory, one of its .mcap files, a bare .mcap file, or '
+                'the name of a bag installed with the package (example).')),
             'rate': (1.0, parameter_descriptor(
                 'Playback speed: 2 plays twice as fast as recorded.', (MIN_RATE, MAX_RATE))),
             'start_offset_s': (0.0, parameter_descriptor(

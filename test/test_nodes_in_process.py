@@ -1,5 +1,7 @@
 """Simulator and monitor node logic, driven directly in this process (callbacks, parameters)."""
 
+import time
+
 import numpy as np
 import pytest
 from builtin_interfaces.msg import Duration
@@ -43,9 +45,29 @@ class RecordingPlant:
 
 @pytest.fixture
 def simulator(context):
-    node = SimulatorNode(plant=RecordingPlant(), context=context)
+    """Unpaced: each call of on_timer is one sample, whatever the wall clock."""
+    node = SimulatorNode(plant=RecordingPlant(), context=context,
+                         parameter_overrides=[Parameter('real_time_factor', value=0.0)])
     yield node
     node.destroy_node()
+
+
+def test_a_paced_simulator_never_runs_ahead_of_the_wall_clock_and_catches_up(context):
+    node = SimulatorNode(plant=RecordingPlant(), context=context,
+                         parameter_overrides=[Parameter('real_time_factor', value=1.0)])
+    try:
+        started = time.perf_counter()
+        while time.perf_counter() - started < 0.2:  # called far more often than due
+            node.on_timer()
+        assert node.runner.time_s == pytest.approx(0.2, abs=0.02 + 1e-9)
+        time.sleep(0.1)  # falls behind by five samples
+        before = node.runner.time_s
+        for _ in range(3):
+            node.on_timer()
+        # Each call while behind makes one sample: caught up one sample per call, not all.
+        assert node.runner.time_s - before == pytest.approx(0.06)
+    finally:
+        node.destroy_node()
 
 
 def test_simulator_holds_valid_commands_from_the_next_sample_on(simulator):

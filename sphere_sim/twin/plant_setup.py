@@ -23,8 +23,11 @@ def load_kick_model(table_paths=(), params=None):
     return tables[0] if len(tables) == 1 else CombinedKickPlant(tables)
 
 
-def build_plant(kind, scene_name='rest', table_paths=()):
+def build_plant(kind, scene_name='rest', table_paths=(), params_name=''):
     """The plant of ``kind`` for the scene's parameters and initial tilt.
+
+    ``params_name`` (a shipped set or a YAML file) replaces the scene's parameter set; '' keeps
+    it.
 
     The discrete plant executes the kicks of its tables and refuses tables built for other
     parameters than the scene's (:class:`~sphere_sim.kicks.lookup_table.TableError`).
@@ -36,14 +39,16 @@ def build_plant(kind, scene_name='rest', table_paths=()):
     """
     from sphere_sim.kicks.discrete import normal_from_cardan
     from sphere_sim.model.assembly import assemble
+    from sphere_sim.model.parameters import load_parameter_set
     from sphere_sim.model.scene import load_scene
     from sphere_sim.twin.plants import ContinuousPlant, DiscretePlant, PlantError
 
     if kind not in PLANT_KINDS:
         raise PlantError(f'unknown plant {kind!r}; choose one of {", ".join(PLANT_KINDS)}')
     scene = load_scene(scene_name)
+    params = scene.parameters(load_parameter_set(params_name) if params_name else None)
     if kind == 'continuous':
-        return ContinuousPlant(assemble(scene))
-    kicks = load_kick_model(table_paths, scene.parameters())
+        return ContinuousPlant(assemble(scene, params))
+    kicks = load_kick_model(table_paths, params)
     alpha, beta, _ = scene.initial.sphere_angles_deg
     return DiscretePlant(kicks, normal_from_cardan(alpha, beta), kicks.spec.window_s)

@@ -95,7 +95,8 @@ class SimulatorNode(Node):
         self.period_s = 1.0 / self.publish_rate_hz
         self.real_time_factor = p['real_time_factor']
         if plant is None:
-            plant = build_plant(p['plant'], p['scene'], [t for t in p['tables'] if t])
+            plant = build_plant(p['plant'], p['scene'], [t for t in p['tables'] if t],
+                                p['params'])
         self.runner = TwinRunner(plant, self.period_s, p['noise_std_rad'], p['seed'],
                                  p['lockstep'])
         self._topic_publishers = {topic.name: self.create_publisher(
@@ -127,6 +128,9 @@ class SimulatorNode(Node):
                 f'Plant to run: {" or ".join(PLANT_KINDS)} (the lookup table of kicks).')),
             'scene': ('rest', parameter_descriptor('Scene (shipped name or YAML path): parameters, '
                                           'beams, sphere and initial state.')),
+            'params': ('', parameter_descriptor(
+                'Parameter set (shipped name or YAML file with base: and overrides:) instead '
+                'of the scene\'s; "" keeps the scene\'s.')),
             'tables': ([''], parameter_descriptor(
                 'Kick tables (.npz) of the discrete plant, their actions combined (the '
                 'diagonal and the axis-parallel tables give 8 directions); [""] for the '
@@ -195,7 +199,7 @@ class SimulatorNode(Node):
         return (
             ('accepted', c.accepted), ('rejected', c.rejected), ('programmes', c.programmes),
             ('late', c.late), ('cut', c.cut), ('samples', c.samples),
-            ('simulated_time_s', f'{self.runner.time_s:.6f}'), ('wall_time_s', f'{wall:.3f}'),
+            ('simulated_time_s', f'{self.runner.time_s:.6f}'), ('wall_time_s', f'{wall:.6f}'),
             ('real_time_factor', f'{self.runner.time_s / wall:.4f}'),
             ('integrating_fraction', f'{t.integrating_s / wall:.4f}'),
             ('publishing_fraction', f'{t.publishing_s / wall:.4f}'),
@@ -219,8 +223,9 @@ class SimulatorNode(Node):
             self.get_logger().info(f'{self.wait_for_subscribers} subscribers on '
                                    f'{SURFACE_NORMAL.name}: simulated time starts')
             self.wait_for_subscribers = 0
-            self._wall_start_s = time.perf_counter()
-        if self.paced and self.runner.counters.samples > 0 and self.runner.time_s >= (
+        if self.runner.counters.samples == 0:
+            self._wall_start_s = time.perf_counter()  # simulated time 0 is now
+        elif self.paced and self.runner.time_s >= (
                 time.perf_counter() - self._wall_start_s) * self.real_time_factor:
             return  # ahead of the wall clock
         sample, refused = self.runner.tick()

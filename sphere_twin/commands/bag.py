@@ -4,6 +4,9 @@ from pathlib import Path
 
 from msg_defs.device import NS_PER_S
 
+BAG_HELP = ('bag directory, one of its .mcap files, a bare .mcap file (its summary is read), or '
+            'the name of an installed bag (example)')
+
 
 def register(subparsers):
     parser = subparsers.add_parser(
@@ -14,11 +17,12 @@ def register(subparsers):
                     'regenerates metadata.yaml with the recovered counts and times.')
     actions = parser.add_subparsers(dest='bag_command', metavar='ACTION', required=True)
     info = actions.add_parser('info', help='topics, message counts and file state of a bag')
-    info.add_argument('bag', type=Path, help='bag directory (with metadata.yaml)')
+    info.add_argument('bag', help=BAG_HELP)
     info.set_defaults(func=run_info)
     repair = actions.add_parser(
         'repair', help='rebuild the MCAP summary and metadata.yaml of a damaged bag')
-    repair.add_argument('bag', type=Path, help='bag directory (with metadata.yaml)')
+    repair.add_argument('bag', type=Path, help='bag directory, one of its .mcap files, or a bare '
+                        '.mcap file (then metadata.yaml is written beside it)')
     repair.add_argument('--no-backup', action='store_true',
                         help='do not keep the damaged MCAP file as <file>.bak')
     repair.set_defaults(func=run_repair)
@@ -54,12 +58,43 @@ def info_lines(bag_dir):
 
 
 def run_info(args):
-    print('\n'.join(info_lines(args.bag)))
+    from sphere_twin.bag.locate import locate_bag
+
+    bag = locate_bag(args.bag)
+    if bag.note:
+        print(bag.note)
+    print('\n'.join(info_lines(bag.directory)))
     return 0
 
 
 def run_repair(args):
     from sphere_twin.bag.repair import repair_bag
 
-    print(repair_bag(args.bag, backup=not args.no_backup).summary())
+    bag_dir = args.bag
+    if args.bag.is_file():
+        bag_dir = _bag_dir_of_file(args.bag)
+    print(repair_bag(bag_dir, backup=not args.no_backup).summary())
     return 0
+
+
+def _bag_dir_of_file(path):
+    """The directory of an MCAP file to repair, with a metadata.yaml that lists it (written,
+    and said, when there was none)."""
+    import yaml
+
+    from sphere_twin.bag import format as bag_format
+    from sphere_twin.bag.locate import MCAP_SUFFIX, placeholder_metadata
+    from sphere_twin.bag.reader import BagError, read_metadata
+
+    if path.suffix != MCAP_SUFFIX:
+        raise BagError(f'{path} is not a bag: give a bag directory or an {MCAP_SUFFIX} file')
+    metadata_path = path.parent / bag_format.METADATA_FILENAME
+    if not metadata_path.exists():
+        metadata_path.write_text(yaml.safe_dump(placeholder_metadata(path.name)))
+        print(f'{path} had no metadata.yaml: wrote {metadata_path} from its records')
+        return path.parent
+    listed = [Path(p).name for p in read_metadata(path.parent).get('relative_file_paths') or []]
+    if path.name not in listed:
+        raise BagError(f'{path} is not listed in {metadata_path}: repair that bag, or move the '
+                       'file to a directory of its own')
+    return path.parent

@@ -5,6 +5,7 @@ import math
 from pathlib import Path
 
 from msg_defs.device import KICK_WINDOW_S
+from sphere_twin.commands.bag import BAG_HELP
 from sphere_twin.commands.options import CommandError, add_params_option
 
 
@@ -15,7 +16,7 @@ def register(subparsers):
                     'simulator open loop, from the first recorded normal, and report the '
                     'simulated surface normal\'s error against the recorded one over time: the '
                     'way to hold the twin against recordings of the real device.')
-    parser.add_argument('bag', type=Path, help='bag directory (with metadata.yaml)')
+    parser.add_argument('bag', help=BAG_HELP)
     parser.add_argument('--plant', choices=('discrete', 'continuous'), default='discrete')
     parser.add_argument('--tables', nargs='*', default=[],
                         help='kick tables of the discrete plant (default: the shipped one)')
@@ -47,10 +48,14 @@ def build_replay_plant(kind, normal0, time0_s, params, tables=()):
 
 
 def run(args):
+    from sphere_twin.bag.locate import locate_bag
     from sphere_twin.plots import plot_lines
     from sphere_twin.run_analysis import load_run, replay, replay_start_index
 
-    recorded = load_run(args.bag)
+    bag = locate_bag(args.bag)
+    if bag.note:
+        print(bag.note)
+    recorded = load_run(bag.directory)
     start = replay_start_index(recorded, KICK_WINDOW_S)
     if start >= recorded.normal_t_s.size:
         raise CommandError(f'{args.bag}: the recording ends before a kick that began before '
@@ -58,12 +63,12 @@ def run(args):
     plant = build_replay_plant(args.plant, recorded.normals[start],
                                float(recorded.normal_t_s[start]), args.params, args.tables)
     result = replay(recorded, plant, start)
-    out = args.out or args.bag.parent
+    out = args.out or bag.output_dir
     out.mkdir(parents=True, exist_ok=True)
-    stem = out / f'{args.bag.name}_replay'
+    stem = out / f'{bag.name}_replay'
     plot_lines(result.times_s, [[max(math.degrees(e), 1e-12) for e in result.error_rad]],
                [f'{args.plant} plant'], 'time (s)', 'simulated vs recorded normal (deg)',
-               stem.with_suffix('.png'), title=f'open-loop replay of {args.bag.name}',
+               stem.with_suffix('.png'), title=f'open-loop replay of {bag.name}',
                logy=True)
     data = {'bag': str(args.bag), 'plant': args.plant, 'samples': int(result.times_s.size),
             'kicks': len(recorded.kicks), 'max_error_rad': result.max_error_rad,

@@ -4,6 +4,7 @@ import json
 import math
 from pathlib import Path
 
+from sphere_twin.commands.bag import BAG_HELP
 from sphere_twin.commands.options import positive_float
 
 
@@ -13,7 +14,7 @@ def register(subparsers):
         description='Surface-normal error against time with the kicks marked, the path in the '
                     'x-y plane beside the reference (PNG), and kicks, settle times, final, RMS '
                     'and max error (text and JSON). Works on any bag of the topic contract.')
-    parser.add_argument('bag', type=Path, help='bag directory (with metadata.yaml)')
+    parser.add_argument('bag', help=BAG_HELP)
     parser.add_argument('--out', type=Path, default=None,
                         help='output directory (default: beside the bag)')
     parser.add_argument('--band-deg', type=positive_float, default=0.05,
@@ -22,14 +23,18 @@ def register(subparsers):
 
 
 def run(args):
+    from sphere_twin.bag.locate import locate_bag
     from sphere_twin.run_analysis import load_run, plot_report, statistics
 
-    recorded = load_run(args.bag)
+    bag = locate_bag(args.bag)
+    if bag.note:
+        print(bag.note)
+    recorded = load_run(bag.directory)
     stats = statistics(recorded, math.radians(args.band_deg))
-    out = args.out or args.bag.parent
+    out = args.out or bag.output_dir
     out.mkdir(parents=True, exist_ok=True)
-    stem = out / f'{args.bag.name}_report'
-    png = plot_report(recorded, stem.with_suffix('.png'), title=args.bag.name)
+    stem = out / f'{bag.name}_report'
+    png = plot_report(recorded, stem.with_suffix('.png'), title=bag.name)
     data = {'bag': str(args.bag), **stats.to_dict()}
     stem.with_suffix('.json').write_text(json.dumps(data, indent=2) + '\n')
     settle = ', '.join('never' if s is None else f'{s:.2f} s' for s in stats.settle_times_s)

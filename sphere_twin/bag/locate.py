@@ -1,0 +1,118 @@
+"""Finding a bag by whatever a user passes: a bag directory, one of its MCAP files, a bare MCAP
+file without metadata.yaml, or the name of a bag installed with the package (``example``).
+
+``ros2 bag info`` and Foxglove accept the MCAP file of a bag as well as its directory; so do
+``sphere-twin report``, ``replay-check``, ``bag info``, ``bag repair`` and the player.
+"""
+
+import atexit
+import dataclasses
+import shutil
+import tempfile
+from pathlib import Path
+
+import yaml
+
+from sphere_twin.bag import format as bag_format
+from sphere_twin.bag.reader import BagError
+
+MCAP_SUFFIX = '.mcap'
+# The source tree's bags, for a checkout that was not installed.
+SOURCE_BAGS_DIR = Path(__file__).resolve().parents[2] / 'bags'
+
+
+@dataclasses.dataclass(frozen=True)
+class BagLocation:
+    """Where a bag's directory is, what to call it, and where its outputs go.
+
+    Attributes
+    ----------
+    directory : pathlib.Path
+        A bag directory the readers take (metadata.yaml and the MCAP file).
+    name : str
+        What the user's bag is called (outputs are named after it).
+    output_dir : pathlib.Path
+        Where outputs go by default: beside what the user passed.
+    note : str or None
+        What was done to read it, to say to the user (a bare MCAP file's recovered summary).
+    """
+
+    directory: Path
+    name: str
+    output_dir: Path
+    note: str = None
+
+
+def _lists(bag_dir, file_name):
+    """Whether the bag directory's metadata.yaml lists ``file_name``."""
+    from sphere_twin.bag.reader import read_metadata
+
+    try:
+        listed = read_metadata(bag_dir).get('relative_file_paths') or []
+    except BagError:
+        return False
+    return file_name in [Path(p).name for p in listed]
+
+
+def _installed(name):
+    """A bag of that name installed with the package (``share/sphere_twin/bags``) or in the
+    source tree, or None."""
+    if not name or '/' in name or name.endswith(MCAP_SUFFIX):
+        return None
+    places = [share / 'bags' for share in bag_format.package_share_candidates('sphere_twin')]
+    for place in [*places, SOURCE_BAGS_DIR]:
+        if (place / name / bag_format.METADATA_FILENAME).is_file():
+            return place / name
+    return None
+
+
+def placeholder_metadata(file_name):
+    """A metadata.yaml that lists ``file_name`` and nothing else; repair fills in the rest."""
+    return {'rosbag2_bagfile_information': {
+        'version': bag_format.METADATA_VERSION,
+        'storage_identifier': bag_format.STORAGE_IDENTIFIER,
+        'relative_file_paths': [file_name], 'message_count': 0,
+        'topics_with_message_count': []}}
+
+
+def _read_bare_mcap(path):
+    """A bag directory (temporary, removed at exit) that holds a link to the bare MCAP file
+    and the metadata recovered from its records."""
+    from sphere_twin.bag.repair import repair_bag
+
+    view = Path(tempfile.mkdtemp(prefix='sphere_twin_bag_'))
+    atexit.register(shutil.rmtree, view, True)
+    (view / path.name).symlink_to(path.resolve())
+    (view / bag_format.METADATA_FILENAME).write_text(yaml.safe_dump(placeholder_metadata(
+        path.name)))
+    result = repair_bag(view, backup=False)
+    state = ('closed cleanly' if result.was_complete
+             else f'not closed ({result.stop_reason})')
+    return view, (f'{path} has no metadata.yaml: read from its own records '
+                  f'({result.message_count} messages on {len(result.topic_counts)} topics, '
+                  f'{state})')
+
+
+def locate_bag(given):
+    """The bag that ``given`` (a path or an installed bag's name) names.
+
+    Raises
+    ------
+    BagError
+        If it names none, with what was looked for.
+    """
+    path = Path(given)
+    if path.is_dir():
+        return BagLocation(path, path.name, path.parent)
+    if path.is_file() and path.suffix == MCAP_SUFFIX:
+        if _lists(path.parent, path.name):
+            return BagLocation(path.parent, path.parent.name, path.parent.parent)
+        view, note = _read_bare_mcap(path)
+        return BagLocation(view, path.stem, path.parent, note)
+    if path.is_file():
+        raise BagError(f'{given} is not a bag: give a bag directory or an {MCAP_SUFFIX} file')
+    installed = _installed(str(given))
+    if installed is not None:
+        return BagLocation(installed, installed.name, Path.cwd())
+    raise BagError(f'{given} is not a bag: no such directory or {MCAP_SUFFIX} file, and no bag '
+                   'of that name is installed with sphere_twin')
