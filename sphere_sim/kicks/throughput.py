@@ -14,6 +14,7 @@ the kicks (not in ``studies``) because it drives the kick workloads, which sit i
 import contextlib
 import dataclasses
 import math
+import os
 import time
 
 import numpy as np
@@ -252,6 +253,7 @@ class Summary:
     bare_kicks_per_s: dict  # workload -> kicks/s of the bare integration, one core
     quick: bool
     machine_scaling: tuple = ()  # of a CPU loop on 2 processes, before and after the runs
+    load_average: tuple = ()  # the 1-minute load average, before and after the runs
 
     def run(self, workload, engine):
         return next(r for r in self.runs if r.workload == workload and r.engine == engine)
@@ -275,6 +277,7 @@ class Summary:
     def to_dict(self):
         return {'quick': self.quick, 'bare_kicks_per_s': self.bare_kicks_per_s,
                 'machine_scaling': list(self.machine_scaling),
+                'load_average': list(self.load_average),
                 'runs': [{**dataclasses.asdict(r),
                           'kicks_per_s_per_core': r.kicks_per_s_per_core,
                           'ratio_to_bare': self.ratio(r.workload, r.engine),
@@ -301,7 +304,7 @@ def throughput(quick=False, workloads=WORKLOADS, engines=ENGINES, progress=None)
     plan = Plan.of(quick)
     params = load_parameter_set(plan.table_spec.parameter_set)
     warm_up()
-    probes = [machine_scaling()]
+    probes, loads = [machine_scaling()], [_load_average()]
     runs, bare = [], {}
     for workload in workloads:
         for engine in engines:
@@ -312,4 +315,9 @@ def throughput(quick=False, workloads=WORKLOADS, engines=ENGINES, progress=None)
             if clock is not None:
                 bare[workload] = clock.kicks / clock.seconds
     probes.append(machine_scaling())
-    return Summary(runs, bare, quick, tuple(probes))
+    loads.append(_load_average())
+    return Summary(runs, bare, quick, tuple(probes), tuple(loads))
+
+
+def _load_average():
+    return os.getloadavg()[0] if hasattr(os, 'getloadavg') else math.nan

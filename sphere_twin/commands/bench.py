@@ -307,7 +307,8 @@ def throughput_lines(summary):
                      f'kicks/s; 1 -> 2 workers: {scaling}')
     lines.append('the machine meanwhile: a CPU loop scaled '
                  + ' and '.join(f'{x:.2f}x' for x in summary.machine_scaling)
-                 + ' from 1 to 2 processes (before and after the runs; 2 on an idle machine)')
+                 + ' from 1 to 2 processes (before and after the runs; 2 on an idle machine); '
+                 + 'load average ' + ' and '.join(f'{x:.2f}' for x in summary.load_average))
     lines.append('throughput vs bare integration: '
                  + ', '.join(f"{_ratio_text(summary, w)} {WORKLOAD_LABELS[w]}"
                              for w in ('table', 'optimisation')))
