@@ -76,6 +76,8 @@ CASES = [
     _case(['kick', 'rest', '--rtol', 'tight'], "not a number: 'tight'"),
     _case(['table', 'build', '--grid-step', '0', '--output', 'out.npz'],
           'must be a positive number'),
+    _case(['table', 'build', '--grid-step', '1.0', '--output', 'out.npz'],
+          'at x_sn^2 + y_sn^2 = 2 >= 1'),
     _case(['table', 'build', '--intensities', '0.5', '1.5', '--output', 'out.npz'],
           'must lie in [0, 1]'),
     _case(['table', 'build', '--workers', '0', '--output', 'out.npz'], 'must be at least 1'),

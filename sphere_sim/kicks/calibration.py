@@ -91,11 +91,16 @@ def threshold_v(params):
     return evaluate(params, with_beams_only=False)[0]
 
 
-def kick_deg(params, workers=1):
-    """Fig. 5's observable: the optimised diagonal kick along -45 deg (deg)."""
+def kick_deg(params, workers=1, popsize=FIT_POPSIZE, maxiter=FIT_MAXITER):
+    """Fig. 5's observable: the optimised diagonal kick along -45 deg (deg).
+
+    ``workers`` is a number of local processes or a started engine
+    (:mod:`sphere_sim.kicks.engine`); a calibration passes one engine to all its
+    optimisations, whose workers then keep their set-ups between them.
+    """
     from sphere_sim.kicks.optimization import optimise_kick
 
-    return optimise_kick(params=params, popsize=FIT_POPSIZE, maxiter=FIT_MAXITER,
+    return optimise_kick(params=params, popsize=popsize, maxiter=maxiter,
                          workers=workers).along_deg
 
 

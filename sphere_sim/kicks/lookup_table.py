@@ -54,6 +54,21 @@ class TableSpec:
     design: KickDesign = dataclasses.field(default_factory=KickDesign)
     cone_half_angle_rad: float = CONE_HALF_ANGLE_RAD
 
+    def __post_init__(self):
+        outside = [math.hypot(x, y) for _, _, x, y in self.nodes() if math.hypot(x, y) >= 1.0]
+        if outside:
+            raise TableError(
+                f'grid step {self.grid_step:g} puts table nodes at x_sn^2 + y_sn^2 = '
+                f'{max(outside) ** 2:.3g} >= 1, where no surface normal is (a tilt of 90 deg '
+                f'or more): the {math.degrees(self.cone_half_angle_rad):g} deg cone and its '
+                f'band of nodes beyond fit inside the unit disk with a grid step below '
+                f'{self.largest_safe_grid_step():.3g}')
+
+    def largest_safe_grid_step(self):
+        """Below this step every node lies inside the unit disk (a sufficient bound: the nodes
+        reach at most one step beyond the cone and its margin)."""
+        return 1.0 - CONE_MARGIN * math.sin(self.cone_half_angle_rad)
+
     def axis(self):
         """Grid nodes (shape (n,)) of x_sn and of y_sn, symmetric about 0."""
         half = math.ceil(CONE_MARGIN * math.sin(self.cone_half_angle_rad) / self.grid_step)

@@ -8,11 +8,13 @@ from rest at zero tilt, over the kick window.
 
 import dataclasses
 import math
+from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import differential_evolution
 
-from sphere_sim.kicks.design import KickDesign, simulate_kick
+from sphere_sim.kicks.design import KICK_RELAXATION, KickDesign, final_normal, simulate_kick
+from sphere_sim.kicks.engine import engine_for
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.rotations import angle_between
@@ -21,6 +23,7 @@ from sphere_sim.model.scene import load_scene
 WIDTH_BOUNDS_S = (0.2e-3, 8e-3)
 DELAY_BOUNDS_S = (-6e-3, 6e-3)
 OPTIMISATION_RTOL = 1e-5  # the outcome changes by < 1e-4 deg between 1e-5 and 1e-7 here
+NORMAL_AT_REST = np.array([0.0, 0.0, 1.0])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -40,36 +43,47 @@ class OptimisedKick:
         return out
 
 
+# Models and rest states of the scenes and parameter sets this process has optimised for; a
+# calibration moves between a few parameter sets, each with its own.
+SETUP_CACHE_SIZE = 8
+
+
+@lru_cache(maxsize=SETUP_CACHE_SIZE)
+def _setup(scene_name, params):
+    """Model and rest state, built once per process (not once per unpickled objective)."""
+    model = assemble(load_scene(scene_name), params)
+    return model, rest_state(model, relaxation=KICK_RELAXATION)
+
+
 class _Objective:
-    """Picklable objective for parallel workers: -(displacement along the nominal direction)."""
+    """Picklable objective for parallel workers: -(displacement along the nominal direction).
+
+    It carries only its inputs; each process builds the model and rest state once
+    (:func:`_setup`), however many times the objective is unpickled there.
+    """
 
     def __init__(self, scene_name, params, template):
         self.scene_name = scene_name
         self.params = params
         self.template = template
-        self._model = None
-        self._rest = None
-
-    def _setup(self):
-        if self._model is None:
-            self._model = assemble(load_scene(self.scene_name), self.params)
-            self._rest = rest_state(self._model)
 
     def design(self, v):
         return dataclasses.replace(self.template, width_low_s=float(v[0]),
                                    width_high_s=float(v[1]), delay_s=float(v[2]))
 
     def outcome(self, v):
-        self._setup()
-        normal0 = np.array([0.0, 0.0, 1.0])
-        result, _ = simulate_kick(self._model, normal0, self.design(v).programme(),
-                                  rtol=OPTIMISATION_RTOL, x_rest=self._rest)
+        model, x_rest = _setup(self.scene_name, self.params)
+        result, _ = simulate_kick(model, NORMAL_AT_REST, self.design(v).programme(),
+                                  rtol=OPTIMISATION_RTOL, x_rest=x_rest)
         return result
 
     def __call__(self, v):
-        result = self.outcome(v)
+        # The final normal alone: the transient's peak and settling time are not searched on.
+        model, x_rest = _setup(self.scene_name, self.params)
+        normal = final_normal(model, NORMAL_AT_REST, self.design(v).programme(),
+                              rtol=OPTIMISATION_RTOL, x_rest=x_rest)
         d = self.template.direction_rad
-        return -float(result.normal[0] * math.cos(d) + result.normal[1] * math.sin(d))
+        return -float(normal[0] * math.cos(d) + normal[1] * math.sin(d))
 
 
 def optimise_kick(template=None, params=None, seed=1, popsize=8,
@@ -80,6 +94,9 @@ def optimise_kick(template=None, params=None, seed=1, popsize=8,
     ----------
     params : ParameterSet, optional
         The default set unless given (the calibration passes candidates).
+    workers : int or engine
+        Local processes, or a started engine of :mod:`sphere_sim.kicks.engine` (left open);
+        with more than one worker the population is evaluated a generation at a time.
 
     Returns
     -------
@@ -93,12 +110,16 @@ def optimise_kick(template=None, params=None, seed=1, popsize=8,
         if progress is not None:
             progress(-intermediate_result.fun)
 
-    result = differential_evolution(objective, bounds, seed=seed, popsize=popsize,
-                                    maxiter=maxiter, tol=1e-3, polish=False, workers=workers,
-                                    updating='deferred' if workers != 1 else 'immediate',
-                                    callback=callback)
-    best = objective.outcome(result.x)
-    normal0 = np.array([0.0, 0.0, 1.0])
+    with engine_for(workers) as engine:
+        parallel = engine.workers > 1
+        result = differential_evolution(objective, bounds, seed=seed, popsize=popsize,
+                                        maxiter=maxiter, tol=1e-3, polish=False,
+                                        workers=engine if parallel else 1,
+                                        updating='deferred' if parallel else 'immediate',
+                                        callback=callback)
+        # On a worker, which has the model and rest state already.
+        best = engine(objective.outcome, [result.x])[0]
+    normal0 = NORMAL_AT_REST
     d = best.normal[:2]
     return OptimisedKick(
         design=objective.design(result.x),

@@ -16,8 +16,9 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from sphere_sim.kicks.design import cardan_of_normal, simulate_kick
+from sphere_sim.kicks.design import KICK_RELAXATION, cardan_of_normal, simulate_kick
 from sphere_sim.kicks.discrete import normal_from_xy
+from sphere_sim.kicks.engine import DaskEngine, PoolEngine, engine_for
 from sphere_sim.kicks.lookup_table import TABLE_FORMAT_VERSION, LookupTable, TableSpec
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import rest_state
@@ -64,7 +65,8 @@ def _model(params):
 @lru_cache(maxsize=256)
 def _rest(params, x_sn, y_sn):
     model = _model(params)
-    return rest_state(model, cardan_of_normal(normal_from_xy(x_sn, y_sn)))
+    return rest_state(model, cardan_of_normal(normal_from_xy(x_sn, y_sn)),
+                      relaxation=KICK_RELAXATION)
 
 
 # LAPACK's LU gives results that differ in the last bits with the BLAS thread count, and a kick
@@ -73,19 +75,29 @@ def _rest(params, x_sn, y_sn):
 BLAS_THREADS_PER_KICK = 1
 
 
-def run_kick_job(spec_data, params, job):
-    """Simulate one entry; returns a JSON-able dict (pure: same inputs, same output)."""
+def run_kick_job(spec_data, params, job, x_rest=None):
+    """Simulate one entry; returns a JSON-able dict (pure: same inputs, same output).
+
+    ``x_rest`` is the rest state of the job's node (:func:`node_rest`), computed here (and
+    cached in this process) unless given.
+    """
     with threadpool_limits(limits=BLAS_THREADS_PER_KICK):
-        return _run_kick_job(spec_data, params, job)
+        return _run_kick_job(spec_data, params, job, x_rest)
 
 
-def _run_kick_job(spec_data, params, job):
+def node_rest(params, x_sn, y_sn):
+    """The rest state at one grid node: a task of its own, shared by the node's kicks."""
+    with threadpool_limits(limits=BLAS_THREADS_PER_KICK):
+        return _rest(params, x_sn, y_sn)
+
+
+def _run_kick_job(spec_data, params, job, x_rest):
     spec = spec_from_dict(spec_data)
     model = _model(params)
     normal = normal_from_xy(job.x_sn, job.y_sn)
+    x_rest = _rest(params, job.x_sn, job.y_sn) if x_rest is None else x_rest
     result, _ = simulate_kick(model, normal, spec.design.programme(job.intensity),
-                              window_s=spec.window_s, rtol=spec.rtol,
-                              x_rest=_rest(params, job.x_sn, job.y_sn))
+                              window_s=spec.window_s, rtol=spec.rtol, x_rest=x_rest)
     return {'key': list(job.key), 'dx': float(result.normal[0] - normal[0]),
             'dy': float(result.normal[1] - normal[1]), 'peak_rad': result.peak_deviation_rad,
             'settle_s': result.settle_time_s}
@@ -108,39 +120,58 @@ def _read_partial(path, digest):
     return done
 
 
-def run_kick_jobs(spec_data, params, jobs):
-    """The entries of several jobs, in order (one task: the jobs of one resting state)."""
-    return [run_kick_job(spec_data, params, job) for job in jobs]
-
-
 def _by_state(jobs):
-    """Jobs grouped by grid node: one task per resting state, whose rest state (the costly
-    relaxation) is then computed once, in one process."""
+    """Jobs grouped by grid node, whose rest state (the costly relaxation) is computed once."""
     groups = {}
     for job in jobs:
         groups.setdefault((job.i, job.j), []).append(job)
     return list(groups.values())
 
 
-def _engine_map(jobs, spec_data, params, workers, scheduler):
-    """Yield results as they complete, from Dask, a process pool or this process."""
-    groups = _by_state(jobs)
-    if scheduler is not None:
-        from distributed import Client, as_completed
+def _engine_map(jobs, spec_data, params, engine):
+    """Yield results as they complete, from Dask, a process pool or this process.
 
-        with Client(scheduler) as client:
-            futures = client.map(run_kick_jobs, [spec_data] * len(groups),
-                                 [params] * len(groups), groups, pure=False)
-            for future in as_completed(futures):
-                yield from future.result()
-    elif workers > 1:
-        with concurrent.futures.ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = [pool.submit(run_kick_jobs, spec_data, params, group) for group in groups]
-            for future in concurrent.futures.as_completed(futures):
-                yield from future.result()
+    On a pool or Dask, each node's rest state is one task and each kick another, fed with it:
+    the kicks of a node spread over all workers (a whole node per task left one worker idle
+    for the last node's kicks) and no rest state is computed twice.
+    """
+    groups = _by_state(jobs)
+    if isinstance(engine, DaskEngine):
+        yield from _dask_map(groups, spec_data, params, engine.client)
+    elif isinstance(engine, PoolEngine):
+        yield from _pool_map(groups, spec_data, params, engine.pool)
     else:
         for group in groups:
-            yield from run_kick_jobs(spec_data, params, group)
+            for job in group:
+                yield run_kick_job(spec_data, params, job)
+
+
+def _pool_map(groups, spec_data, params, pool):
+    rests = {pool.submit(node_rest, params, group[0].x_sn, group[0].y_sn): group
+             for group in groups}
+    pending = set(rests)
+    while pending:
+        done, pending = concurrent.futures.wait(
+            pending, return_when=concurrent.futures.FIRST_COMPLETED)
+        for future in done:
+            if future in rests:
+                x_rest = future.result()
+                pending |= {pool.submit(run_kick_job, spec_data, params, job, x_rest)
+                            for job in rests[future]}
+            else:
+                yield future.result()
+
+
+def _dask_map(groups, spec_data, params, client):
+    from distributed import as_completed
+
+    futures = []
+    for group in groups:
+        rest = client.submit(node_rest, params, group[0].x_sn, group[0].y_sn, pure=False)
+        futures += [client.submit(run_kick_job, spec_data, params, job, rest, pure=False)
+                    for job in group]
+    for future in as_completed(futures):
+        yield future.result()
 
 
 def build_table(spec, params=None, workers=1, scheduler=None, partial_path=None,
@@ -152,8 +183,9 @@ def build_table(spec, params=None, workers=1, scheduler=None, partial_path=None,
     spec : TableSpec
     params : ParameterSet, optional
         The set named by ``spec.parameter_set`` unless given (the workers receive it whole).
-    workers : int
-        Local processes (ignored with ``scheduler``).
+    workers : int or engine
+        Local processes (ignored with ``scheduler``), or a started engine of
+        :mod:`sphere_sim.kicks.engine`, which is left open.
     scheduler : str, optional
         Address of a Dask scheduler, e.g. ``tcp://127.0.0.1:8786``.
     partial_path : path, optional
@@ -176,17 +208,22 @@ def build_table(spec, params=None, workers=1, scheduler=None, partial_path=None,
     try:
         if progress is not None:
             progress(len(done), len(jobs))
-        for entry in _engine_map(todo, spec_data, params, workers, scheduler):
-            done[tuple(entry['key'])] = entry
-            if stream is not None:
-                stream.write(json.dumps(entry) + '\n')
-                stream.flush()
-            if progress is not None:
-                progress(len(done), len(jobs))
+        with engine_for(workers, scheduler) as engine:
+            for entry in _engine_map(todo, spec_data, params, engine):
+                _record(entry, done, stream)
+                if progress is not None:
+                    progress(len(done), len(jobs))
     finally:
         if stream is not None:
             stream.close()
     return _assemble(spec, params, digest, done)
+
+
+def _record(entry, done, stream):
+    done[tuple(entry['key'])] = entry
+    if stream is not None:
+        stream.write(json.dumps(entry) + '\n')
+        stream.flush()
 
 
 def _assemble(spec, params, digest, entries):
@@ -223,7 +260,7 @@ def direct_kick(spec, params, normal, action, intensity):
     model = _model(params)
     programme = Symmetry(action % 4).apply_programme(spec.design.programme(intensity))
     with threadpool_limits(limits=BLAS_THREADS_PER_KICK):
-        x_rest = rest_state(model, cardan_of_normal(normal))
+        x_rest = rest_state(model, cardan_of_normal(normal), relaxation=KICK_RELAXATION)
         result, _ = simulate_kick(model, normal, programme, window_s=spec.window_s,
                                   rtol=spec.rtol, x_rest=x_rest)
     return result

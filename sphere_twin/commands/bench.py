@@ -9,6 +9,11 @@ different methods at the tightest tolerance, whose agreement is printed. Its las
 
 ``bench regularisation`` runs the convergence study of the friction regularisations (the
 viscous onset ramp and epsilon of eq. 51) and writes ``bench/results/regularisation.{csv,md}``.
+
+``bench throughput`` runs the kick workloads (table build, kick optimisation, calibration) on
+one worker, a two-process pool and a two-worker Dask cluster, against the bare integration rate
+of their kicks, and writes ``bench/results/throughput.{json,md}``. Its last line is
+``throughput vs bare integration: <a> table build, <b> optimisation``.
 """
 
 import csv
@@ -22,6 +27,7 @@ from tqdm import tqdm
 
 from msg_defs.device import KICK_WINDOW_S
 from sphere_sim.integrate.solve import DEFAULT_METHOD, DEFAULT_RTOL
+from sphere_sim.kicks import throughput as tp
 from sphere_sim.kicks.design import KickDesign
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.scene import load_scene
@@ -234,6 +240,14 @@ def register(subparsers):
     reg.add_argument('--quick', action='store_true', help='one tolerance only')
     reg.add_argument('--out', type=Path, default=RESULTS_DIR, help='output directory')
     reg.set_defaults(func=run_regularisation)
+    thr = sub.add_parser('throughput', help='kicks/s of the kick workloads against bare '
+                                            'integration',
+                         description='Table build, kick optimisation and calibration on one '
+                                     'worker, a 2-process pool and a 2-worker Dask cluster; '
+                                     'writes bench/results/throughput.{json,md}.')
+    thr.add_argument('--quick', action='store_true', help='tiny workloads (< 1 min)')
+    thr.add_argument('--out', type=Path, default=RESULTS_DIR, help='output directory')
+    thr.set_defaults(func=run_throughput)
     bench_twin.register(sub)
 
 
@@ -245,3 +259,76 @@ def run_work_precision(args):
 def run_regularisation(args):
     run_regularisation_study(quick=args.quick, out_dir=args.out)
     return 0
+
+
+# --- throughput of the kick workloads ------------------------------------------------------
+WORKLOAD_LABELS = {'table': 'table build', 'optimisation': 'optimisation',
+                   'calibration': 'calibration'}
+ENGINE_LABELS = {'serial': '1 worker', 'pool': '2-process pool', 'dask': '2 Dask workers'}
+
+
+def run_throughput(args):
+    run_throughput_bench(quick=args.quick, out_dir=args.out)
+    return 0
+
+
+def run_throughput_bench(quick=False, out_dir=RESULTS_DIR, stream=sys.stdout, **kwargs):
+    """The throughput study with a progress bar; writes throughput{,_quick}.{json,md}."""
+    n_runs = len(kwargs.get('workloads', tp.WORKLOADS)) * len(kwargs.get('engines', tp.ENGINES))
+    with tqdm(total=n_runs, desc='throughput', unit='run', file=sys.stderr) as bar:
+        def progress(workload, engine, done):
+            bar.set_postfix_str(f'{workload} on {engine}')
+            bar.update(done - bar.n)
+
+        summary = tp.throughput(quick=quick, progress=progress, **kwargs)
+        bar.update(bar.total - bar.n)
+    lines = throughput_lines(summary)
+    stem = 'throughput_quick' if quick else 'throughput'
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / f'{stem}.json').write_text(json.dumps(summary.to_dict(), indent=2) + '\n')
+    (out_dir / f'{stem}.md').write_text(throughput_markdown(summary, lines))
+    print('\n'.join(lines), file=stream, flush=True)
+    return summary
+
+
+def throughput_lines(summary):
+    """The table of runs, the scaling, and the summary line last."""
+    lines = [f"{'workload':<13} {'engine':<15} {'kicks':>5} {'wall (s)':>8} "
+             f"{'start-up (s)':>12} {'kicks/s/core':>12} {'vs bare':>7} {'CPU s/kick':>10} "
+             f"{'CPU eff.':>8}"]
+    for r in summary.runs:
+        lines.append(f'{r.workload:<13} {ENGINE_LABELS[r.engine]:<15} {r.kicks:>5} '
+                     f'{r.wall_s:>8.2f} {r.startup_s:>12.2f} {r.kicks_per_s_per_core:>12.2f} '
+                     f'{summary.ratio(r.workload, r.engine):>7.2f} {r.cpu_s_per_kick:>10.3f} '
+                     f'{summary.cpu_efficiency(r.workload, r.engine):>8.2f}')
+    for workload in summary.workloads():
+        scaling = ', '.join(f'{ENGINE_LABELS[e]} {summary.scaling(workload, e):.2f}x'
+                            for e in summary.engines() if e != 'serial')
+        lines.append(f'{workload}: bare integration {summary.bare_kicks_per_s[workload]:.2f} '
+                     f'kicks/s; 1 -> 2 workers: {scaling}')
+    lines.append('the machine meanwhile: a CPU loop scaled '
+                 + ' and '.join(f'{x:.2f}x' for x in summary.machine_scaling)
+                 + ' from 1 to 2 processes (before and after the runs; 2 on an idle machine); '
+                 + 'load average ' + ' and '.join(f'{x:.2f}' for x in summary.load_average))
+    lines.append('throughput vs bare integration: '
+                 + ', '.join(f"{_ratio_text(summary, w)} {WORKLOAD_LABELS[w]}"
+                             for w in ('table', 'optimisation')))
+    return lines
+
+
+def _ratio_text(summary, workload):
+    return f'{summary.ratio(workload):.2f}' if workload in summary.bare_kicks_per_s else 'n/a'
+
+
+def throughput_markdown(summary, lines):
+    return '\n'.join([
+        '# Throughput of the kick workloads', '',
+        'Written by `sphere-twin bench throughput' + (' --quick' if summary.quick else '')
+        + '`. kicks/s/core is a workload\'s kicks over its wall time and workers; "vs bare" '
+        'divides it by the rate of the same kicks\' `simulate` calls alone, timed in the '
+        'one-worker run. Engine start-up (processes, cluster, a warm-up kick in each worker) is '
+        'outside the wall time and listed beside it. CPU s/kick counts this process and the '
+        'workers; "CPU eff." is the one-worker run\'s CPU per kick over the run\'s: the work '
+        'a pool or Dask adds per kick, which other load on the machine hardly changes (the '
+        'wall-time scaling it does).', '', '```', *lines, '```', ''])

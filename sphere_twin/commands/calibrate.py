@@ -16,6 +16,7 @@ from sphere_sim.kicks.calibration import (
     threshold_v,
     with_value,
 )
+from sphere_sim.kicks.engine import engine_of
 from sphere_sim.model.parameters import (
     CALIBRATION_TARGETS,
     ESTIMATE_TARGET,
@@ -54,13 +55,15 @@ def run(args):
             bar.set_postfix_str(f'{value:.4g} -> {observed:.4g}')
             bar.update()
 
-        params, fits, checks = calibrate(calibrated, specs, args.workers, progress)
-    print_fits(fits, checks)
-    for spec in specs:
-        if spec.target == 'fig4_threshold':
-            print_threshold_hypotheses(params, base, spec)
-        if spec.target == ESTIMATE_TARGET:
-            print_estimate_sensitivity(params, spec, args.workers)
+        # One pool for all the kick optimisations: its workers keep their models and rest states.
+        with engine_of(args.workers) as engine:
+            params, fits, checks = calibrate(calibrated, specs, engine, progress)
+            print_fits(fits, checks)
+            for spec in specs:
+                if spec.target == 'fig4_threshold':
+                    print_threshold_hypotheses(params, base, spec)
+                if spec.target == ESTIMATE_TARGET:
+                    print_estimate_sensitivity(params, spec, engine)
     if args.write:
         write_overrides(params, specs)
     return 0

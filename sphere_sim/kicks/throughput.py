@@ -1,0 +1,323 @@
+"""Kicks per second of the kick workloads against the bare integration of the same kicks.
+
+Three workloads run thousands of kicks: a table build, a kick optimisation and the calibration's
+kick observations. Each runs on one worker (this process) and on two (a process pool, and a
+Dask LocalCluster of two single-threaded workers). The *bare* rate is that of the same kicks'
+``simulate`` calls alone, timed in this process during the one-worker run (no set-up, no
+post-processing); a workload's rate is its kicks over its wall time and its workers (kicks/s
+per core), and their ratio says how much of a core the integration gets.
+
+Computes and returns; the CLI (``sphere-twin bench throughput``) prints and writes. Lives with
+the kicks (not in ``studies``) because it drives the kick workloads, which sit in this room.
+"""
+
+import contextlib
+import dataclasses
+import math
+import os
+import time
+
+import numpy as np
+
+from sphere_sim.kicks import design as design_module
+from sphere_sim.kicks import optimization, table_build
+from sphere_sim.kicks.calibration import with_value
+from sphere_sim.kicks.design import KickDesign, simulate_kick
+from sphere_sim.kicks.engine import DaskEngine, PoolEngine, SerialEngine
+from sphere_sim.kicks.lookup_table import TableSpec
+from sphere_sim.kicks.optimization import optimise_kick
+from sphere_sim.kicks.table_build import build_table, jobs_of
+from sphere_sim.model.assembly import assemble
+from sphere_sim.model.initial_state import explicit_state
+from sphere_sim.model.parameters import load_parameter_set
+from sphere_sim.model.scene import load_scene
+
+ENGINES = ('serial', 'pool', 'dask')
+ENGINE_WORKERS = {'serial': 1, 'pool': 2, 'dask': 2}
+WORKLOADS = ('table', 'optimisation', 'calibration')
+# The bench's Dask workers without their statistical profiler (a sample of every thread each
+# 10 ms) and with the system monitor at 1 s: measured idle, the two workers then use 0.034
+# instead of 0.07 CPU s per s, which a kick-bound worker would otherwise give up.
+DASK_QUIET = {'distributed.worker.profile.enabled': False,
+              'distributed.admin.system-monitor.interval': '1s'}
+# The parameter a calibration bisection moves in the bench: the calibrated set's friction
+# estimate, whose sensitivity run optimises a kick at each end of its range, as a fit's first
+# bisection step does (sphere_sim.kicks.calibration.bisect looks at both ends first).
+CALIBRATION_PATH = 'friction.coulomb'
+
+
+@dataclasses.dataclass(frozen=True)
+class Plan:
+    """How big each workload is: small enough for a few minutes in all (quick: one)."""
+
+    table_spec: TableSpec
+    popsize: int
+    maxiter: int
+    calibration_maxiter: int
+    quick: bool
+
+    @classmethod
+    def of(cls, quick):
+        if quick:
+            # 5 nodes within 23.6 deg x 1 intensity; DE of 12 per generation.
+            return cls(TableSpec(grid_step=0.4, intensities=(1.0,),
+                                 cone_half_angle_rad=math.radians(8.0)),
+                       popsize=4, maxiter=1, calibration_maxiter=0, quick=True)
+        # 9 nodes within 16.4 deg x 3 intensities: a small table with the real window and rtol.
+        return cls(TableSpec(grid_step=0.2, intensities=(0.5, 0.9, 1.0),
+                             cone_half_angle_rad=math.radians(10.0)),
+                   popsize=4, maxiter=5, calibration_maxiter=2, quick=False)
+
+
+@dataclasses.dataclass
+class Run:
+    """One workload on one engine."""
+
+    workload: str
+    engine: str
+    workers: int
+    kicks: int
+    wall_s: float
+    startup_s: float = 0.0  # the engine's start-up, not in wall_s
+    integrated_kicks: int = 0  # kicks integrated in this process (all of them on one worker)
+    cpu_s: float = 0.0  # CPU time of this process and the workers over wall_s
+
+    @property
+    def cpu_s_per_kick(self):
+        return self.cpu_s / self.kicks
+
+    @property
+    def kicks_per_s_per_core(self):
+        return self.kicks / (self.wall_s * self.workers)
+
+
+class _IntegrationClock:
+    """Counts and times the ``simulate`` calls of kicks made in this process."""
+
+    def __init__(self):
+        self.kicks = 0
+        self.seconds = 0.0
+
+    def wrap(self, simulate):
+        def timed(*args, **kwargs):
+            started = time.perf_counter()
+            try:
+                return simulate(*args, **kwargs)
+            finally:
+                self.seconds += time.perf_counter() - started
+                self.kicks += 1
+        return timed
+
+
+@contextlib.contextmanager
+def integration_clock():
+    """Times every kick's integration in this process while the block runs."""
+    clock = _IntegrationClock()
+    original = design_module.simulate
+    design_module.simulate = clock.wrap(original)
+    try:
+        yield clock
+    finally:
+        design_module.simulate = original
+
+
+# --- engines -------------------------------------------------------------------------------
+class _Engine:
+    """A started engine of :mod:`sphere_sim.kicks.engine` for one run, with its start-up
+    (processes, imports, the compiled kernels loaded by a warm-up kick) timed apart."""
+
+    def __init__(self, name):
+        self.name = name
+        self.engine = None
+        self.startup_s = 0.0
+        self._cluster = None
+
+    def __enter__(self):
+        started = time.perf_counter()
+        if self.name == 'dask':
+            import dask
+            from distributed import LocalCluster
+
+            with dask.config.set(DASK_QUIET):
+                self._cluster = LocalCluster(n_workers=ENGINE_WORKERS['dask'],
+                                             threads_per_worker=1, processes=True,
+                                             host='127.0.0.1', dashboard_address=None)
+            self.engine = DaskEngine(self._cluster.scheduler_address).start(_warm_worker)
+        elif self.name == 'pool':
+            self.engine = PoolEngine(ENGINE_WORKERS['pool']).start(_warm_worker)
+        else:
+            self.engine = SerialEngine()
+        self.startup_s = time.perf_counter() - started
+        return self.engine
+
+    def __exit__(self, *exc):
+        self.engine.close()
+        if self._cluster is not None:
+            self._cluster.close()
+
+
+def _warm_worker():
+    """Load the compiled kernels in a fresh worker, as any long-running worker has."""
+    warm_up()
+
+
+def warm_up():
+    """One short kick: the compiled kernels are then loaded (their compilation is cached)."""
+    model = assemble(load_scene('rest'))
+    simulate_kick(model, np.array([0.0, 0.0, 1.0]), KickDesign().programme(1.0),
+                  window_s=1e-3, x_rest=explicit_state(model))
+
+
+def clear_caches():
+    """Forget the set-ups a previous run left in this process (models, rest states): each
+    run pays for its own, and a pool forked afterwards starts without them."""
+    table_build._model.cache_clear()
+    table_build._rest.cache_clear()
+    optimization._setup.cache_clear()
+
+
+# --- workloads -----------------------------------------------------------------------------
+def _table(plan, params, engine):
+    build_table(plan.table_spec, params, workers=engine)
+    return len(jobs_of(plan.table_spec))
+
+
+def _optimisation(plan, params, engine, maxiter=None):
+    kick = optimise_kick(params=params, popsize=plan.popsize,
+                         maxiter=plan.maxiter if maxiter is None else maxiter, workers=engine)
+    return kick.evaluations + 1  # and the best design's outcome, simulated once more
+
+
+def _calibration(plan, params, engine):
+    """The first step of a bisection on the kick: an optimisation at each end of the range,
+    as :func:`sphere_sim.kicks.calibration.kick_deg` runs it, on one engine."""
+    spec = next(s for s in params.uncertain if s.path == CALIBRATION_PATH)
+    return sum(_optimisation(plan, with_value(params, spec, value), engine,
+                             plan.calibration_maxiter) for value in (spec.low, spec.high))
+
+
+RUNNERS = {'table': _table, 'optimisation': _optimisation, 'calibration': _calibration}
+
+
+def run_workload(workload, engine_name, plan, params):
+    """Time one workload on a started engine; returns (Run, bare clock or None)."""
+    clear_caches()
+    runner = _Engine(engine_name)
+    with runner as engine, integration_clock() as clock:
+        cpu_started = _cpu_s(engine)
+        started = time.perf_counter()
+        kicks = RUNNERS[workload](plan, params, engine)
+        wall_s = time.perf_counter() - started
+        cpu_s = _cpu_s(engine) - cpu_started
+    bare = clock if engine_name == 'serial' else None
+    return Run(workload, engine_name, engine.workers, kicks, wall_s, runner.startup_s,
+               clock.kicks, cpu_s), bare
+
+
+def _cpu_s(engine):
+    """CPU seconds used so far by this process and, on a pool or Dask, by the workers: a
+    machine busy with other work slows a run's wall time, much less its CPU time."""
+    own = time.process_time()
+    return own + engine.worker_cpu_s() if isinstance(engine, (PoolEngine, DaskEngine)) else own
+
+
+# A pure-Python loop of about 0.3 s: two of them, one after the other and then on a 2-process
+# pool, give the 1 -> 2 scaling the machine itself offers at that moment (2 on an idle machine
+# with two cores; less while other work shares them), against which the workloads' is read.
+PROBE_ITERATIONS = 3_000_000
+
+
+def _probe(n):
+    total = 0
+    for i in range(n):
+        total += i * i
+    return total
+
+
+def machine_scaling():
+    """1 -> 2 process scaling of a pure CPU loop on this machine now."""
+    started = time.perf_counter()
+    _probe(PROBE_ITERATIONS)
+    _probe(PROBE_ITERATIONS)
+    serial_s = time.perf_counter() - started
+    with PoolEngine(2) as pool:
+        pool.start()
+        started = time.perf_counter()
+        pool(_probe, [PROBE_ITERATIONS, PROBE_ITERATIONS])
+        return serial_s / (time.perf_counter() - started)
+
+
+@dataclasses.dataclass
+class Summary:
+    runs: list
+    bare_kicks_per_s: dict  # workload -> kicks/s of the bare integration, one core
+    quick: bool
+    machine_scaling: tuple = ()  # of a CPU loop on 2 processes, before and after the runs
+    load_average: tuple = ()  # the 1-minute load average, before and after the runs
+
+    def run(self, workload, engine):
+        return next(r for r in self.runs if r.workload == workload and r.engine == engine)
+
+    def ratio(self, workload, engine='serial'):
+        """Kicks/s per core of the workload over the bare integration rate of its kicks."""
+        return self.run(workload, engine).kicks_per_s_per_core / self.bare_kicks_per_s[workload]
+
+    def cpu_efficiency(self, workload, engine):
+        """CPU per kick on one worker over that on ``engine``: 1 when the workers do no more
+        work per kick than one process does (what the 1 -> 2 scaling is on an idle machine,
+        but for a worker waiting)."""
+        return (self.run(workload, 'serial').cpu_s_per_kick
+                / self.run(workload, engine).cpu_s_per_kick)
+
+    def scaling(self, workload, engine):
+        """Total kicks/s on ``engine``'s two workers over that on one."""
+        one, two = self.run(workload, 'serial'), self.run(workload, engine)
+        return (two.kicks / two.wall_s) / (one.kicks / one.wall_s)
+
+    def to_dict(self):
+        return {'quick': self.quick, 'bare_kicks_per_s': self.bare_kicks_per_s,
+                'machine_scaling': list(self.machine_scaling),
+                'load_average': list(self.load_average),
+                'runs': [{**dataclasses.asdict(r),
+                          'kicks_per_s_per_core': r.kicks_per_s_per_core,
+                          'ratio_to_bare': self.ratio(r.workload, r.engine),
+                          'cpu_efficiency': self.cpu_efficiency(r.workload, r.engine)}
+                         for r in self.runs],
+                'scaling': {w: {e: self.scaling(w, e) for e in self.engines() if e != 'serial'}
+                            for w in self.workloads()}}
+
+    def engines(self):
+        return list(dict.fromkeys(r.engine for r in self.runs))
+
+    def workloads(self):
+        return list(self.bare_kicks_per_s)
+
+
+def throughput(quick=False, workloads=WORKLOADS, engines=ENGINES, progress=None):
+    """Every workload on every engine; returns a :class:`Summary`.
+
+    ``progress`` is called with (workload, engine, runs done so far) before each run.
+    ``engines`` starts with 'serial': it times the bare integration of each workload's kicks.
+    """
+    if engines[0] != 'serial':
+        raise ValueError("the engines must start with 'serial'")
+    plan = Plan.of(quick)
+    params = load_parameter_set(plan.table_spec.parameter_set)
+    warm_up()
+    probes, loads = [machine_scaling()], [_load_average()]
+    runs, bare = [], {}
+    for workload in workloads:
+        for engine in engines:
+            if progress is not None:
+                progress(workload, engine, len(runs))
+            run, clock = run_workload(workload, engine, plan, params)
+            runs.append(run)
+            if clock is not None:
+                bare[workload] = clock.kicks / clock.seconds
+    probes.append(machine_scaling())
+    loads.append(_load_average())
+    return Summary(runs, bare, quick, tuple(probes), tuple(loads))
+
+
+def _load_average():
+    return os.getloadavg()[0] if hasattr(os, 'getloadavg') else math.nan
