@@ -60,6 +60,12 @@ class PlaybackItem:
     log_time_ns: int
 
 
+# Through a gap in a bag without /clock, made-up ticks come at least this often (recorded
+# time): ros2 bag play's --clock publishes at a fixed rate for the same reason.
+CLOCK_GAP_TICK_S = 0.1
+CLOCK_GAP_TICK_NS = round(CLOCK_GAP_TICK_S * NS_PER_S)
+
+
 def playback_plan(messages, rate=1.0, start_offset_s=0.0, topics=None, publish_clock=True):
     """What the player publishes and when.
 
@@ -77,7 +83,9 @@ def playback_plan(messages, rate=1.0, start_offset_s=0.0, topics=None, publish_c
         Only these topics; all by default.
     publish_clock : bool
         If the bag has no /clock messages, add a /clock tick with each message's log time
-        just before it. A bag that has /clock messages plays those (if /clock is selected).
+        just before it, and ticks at least every ``CLOCK_GAP_TICK_S`` of recorded time through
+        a gap, so that nodes on simulated time see it run on. A bag that has /clock messages
+        plays those (if /clock is selected).
 
     Returns
     -------
@@ -103,6 +111,11 @@ def playback_plan(messages, rate=1.0, start_offset_s=0.0, topics=None, publish_c
             continue
         due_s = (message.log_time_ns - start_ns) / NS_PER_S / rate
         if make_clock:
+            previous_ns = plan[-1].log_time_ns if plan else message.log_time_ns
+            for tick_ns in range(previous_ns + CLOCK_GAP_TICK_NS, message.log_time_ns,
+                                 CLOCK_GAP_TICK_NS):
+                plan.append(PlaybackItem(CLOCK.name, (tick_ns - start_ns) / NS_PER_S / rate,
+                                         None, tick_ns))
             plan.append(PlaybackItem(CLOCK.name, due_s, None, message.log_time_ns))
         plan.append(PlaybackItem(message.topic, due_s, message.data, message.log_time_ns))
     return plan

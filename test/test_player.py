@@ -6,6 +6,7 @@ second recorder records it, and the two bags must hold the same messages, byte f
 in the same order on every topic.
 """
 
+import itertools
 import signal
 import time
 
@@ -35,7 +36,12 @@ from msg_defs.topics import (
 from node_runtime.ros_env import DISCOVERY_RANGE_VAR
 from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.reader import RecordedMessage, deserialize, read_messages
-from sphere_twin.player_node import playback_plan, played_line, recorded_qos
+from sphere_twin.player_node import (
+    CLOCK_GAP_TICK_S,
+    playback_plan,
+    played_line,
+    recorded_qos,
+)
 from sphere_twin.processes import parameter_args, stop
 from sphere_twin.recorder_node import summary_line
 
@@ -73,13 +79,29 @@ def test_start_offset_skips_the_beginning_and_topics_select():
 
 def test_clock_ticks_carry_the_log_times_when_the_bag_has_no_clock():
     plan = playback_plan(BAG, rate=4.0)
-    assert [i.topic for i in plan] == [CLOCK.name, SURFACE_NORMAL.name,
-                                       CLOCK.name, BEAM_VOLTAGE.name] + [
-        CLOCK.name, SURFACE_NORMAL.name] * 2
+    messages = [i for i in plan if i.topic != CLOCK.name]
+    assert [i.data for i in messages] == [m.data for m in BAG]
     ticks = [i for i in plan if i.topic == CLOCK.name]
     assert all(i.data is None for i in ticks)
-    assert [i.log_time_ns for i in ticks] == [m.log_time_ns for m in BAG]
-    assert [i.due_s for i in ticks] == [i.due_s for i in plan if i.topic != CLOCK.name]
+    # A tick with each message's log time, just before it ...
+    for message in messages:
+        before = plan[plan.index(message) - 1]
+        assert (before.topic, before.log_time_ns, before.due_s) == (
+            CLOCK.name, message.log_time_ns, message.due_s)
+    # ... and through every gap (1 s from 300 to 1300 ms) one every CLOCK_GAP_TICK_S.
+    times_ms = [(i.log_time_ns - T0_NS) / 1e6 for i in ticks]
+    assert times_ms == list(range(0, 1301, 100))
+    assert all(b.due_s >= a.due_s for a, b in itertools.pairwise(plan))
+
+
+def test_a_ten_second_gap_is_crossed_by_the_clock_and_played_on():
+    gap = [_recorded(SURFACE_NORMAL.name, 0), _recorded(SURFACE_NORMAL.name, 10_000)]
+    plan = playback_plan(gap, rate=10.0)
+    ticks = [i for i in plan if i.topic == CLOCK.name]
+    assert len(ticks) == 2 + round(10.0 / CLOCK_GAP_TICK_S) - 1
+    assert max(b.due_s - a.due_s for a, b in itertools.pairwise(ticks)) == pytest.approx(
+        CLOCK_GAP_TICK_S / 10.0)
+    assert plan[-1].data is not None and plan[-1].due_s == pytest.approx(1.0)
 
 
 def test_a_bag_with_clock_plays_its_own_clock_and_no_made_up_one():

@@ -6,6 +6,7 @@ it. Every command is checked here against the device's rules (:mod:`msg_defs.vol
 where it enters the twin, and a rejected one leaves the plant untouched.
 """
 
+import collections
 import dataclasses
 import time
 
@@ -20,6 +21,11 @@ from sphere_sim.twin.plants import TIME_TOL_S, PlantError
 # one far ahead is a wall-clock stamp (`stamp: now` in `ros2 topic pub`), which would wait
 # decades of simulated time: refused, with a message that says so.
 MAX_START_AHEAD_S = 60.0
+# Commands waiting for their start; a publisher that floods the twin with future programmes
+# is refused beyond this, so the queue (and the node's memory) stays bounded.
+MAX_QUEUED_COMMANDS = 100
+# Latencies kept for the status's median and maximum: the most recent ones, memory bounded.
+LATENCY_HISTORY = 10_000
 
 
 class CommandError(ValueError):
@@ -56,8 +62,10 @@ class TwinTimings:
 
     integrating_s: float = 0.0
     publishing_s: float = 0.0
-    latencies_wall_s: list = dataclasses.field(default_factory=list)
-    delays_sim_s: list = dataclasses.field(default_factory=list)
+    latencies_wall_s: collections.deque = dataclasses.field(
+        default_factory=lambda: collections.deque(maxlen=LATENCY_HISTORY))
+    delays_sim_s: collections.deque = dataclasses.field(
+        default_factory=lambda: collections.deque(maxlen=LATENCY_HISTORY))
 
     def latency_summary(self):
         """(median, largest) wall latency in s; NaNs before the first programme."""
@@ -132,6 +140,9 @@ class TwinRunner:
         except VoltageRuleError as error:
             raise CommandError(str(error)) from None
         cut = self._cut_by_hold()
+        # Holds due at the same sample: only the latest would count, so it replaces them (a
+        # burst of commands then never fills the queue).
+        self._queued = [item for item in self._queued if item[1] != 'hold']
         self._queue(self.time_s, 'hold', volts, self.time_s)
         return cut
 
@@ -175,6 +186,9 @@ class TwinRunner:
         self._queue(max(start_s, self.time_s), 'programme', programme, start_s)
 
     def _queue(self, start_s, kind, payload, asked_s):
+        if len(self._queued) >= MAX_QUEUED_COMMANDS:
+            raise CommandError(f'{MAX_QUEUED_COMMANDS} commands are already waiting for their '
+                               'start; this one is refused')
         self._queued.append((start_s, kind, payload, asked_s, time.perf_counter()))
         self._queued.sort(key=lambda item: item[0])
         self._idle_published = False
@@ -230,7 +244,7 @@ class TwinRunner:
         """Call once the tick's sample is published: the programmes applied in that tick have
         now shown their effect, and their wall latency is recorded."""
         now = time.perf_counter()
-        self.timings.latencies_wall_s += [now - arrival for arrival in self._acted]
+        self.timings.latencies_wall_s.extend(now - arrival for arrival in self._acted)
         self._acted.clear()
 
     def measure(self, normal):

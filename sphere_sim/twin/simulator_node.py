@@ -46,6 +46,7 @@ from node_runtime.ros_env import (
     run_node,
 )
 from sphere_sim.twin.plant_setup import PLANT_KINDS
+from sphere_sim.twin.report_limit import ReportLimit
 
 # The physics (scipy, numba, the kick table) is imported when the node is built, not with this
 # module, so that main() installs its signal handlers first: a SIGINT during the seconds of
@@ -114,6 +115,7 @@ class SimulatorNode(Node):
         self.create_timer(STATUS_PERIOD_S, self.on_status_timer)
         self.wait_for_subscribers = p['wait_for_subscribers']
         self._last_sample = None
+        self._rejection_reports = ReportLimit()
         self._last_repeat_wall_s = 0.0
         self._wall_start_s = time.perf_counter()
         self.get_logger().info(
@@ -182,9 +184,14 @@ class SimulatorNode(Node):
             self._report_rejection(PULSE_PROGRAM.name, str(error))
 
     def _report_rejection(self, topic, reason):
-        """Log and publish a rejection (already counted)."""
-        self.get_logger().error(f'rejected {topic}: {reason}')
-        self._publish_diagnostics(DiagnosticStatus.ERROR, f'rejected {topic}: {reason}')
+        """Log and publish a rejection (already counted), at most REPORTS_PER_WINDOW a
+        second; the next report says how many were left out."""
+        if not self._rejection_reports.allow():
+            return
+        left_out = self._rejection_reports.take_suppressed()
+        more = f' ({left_out} more rejections not reported one by one)' if left_out else ''
+        self.get_logger().error(f'rejected {topic}: {reason}{more}')
+        self._publish_diagnostics(DiagnosticStatus.ERROR, f'rejected {topic}: {reason}{more}')
 
     def on_status_timer(self):
         self._publish_diagnostics(DiagnosticStatus.OK, 'running' if self.wait_for_subscribers
