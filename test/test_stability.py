@@ -241,14 +241,15 @@ def test_impossible_budget_is_a_typed_error_not_a_hang(model, x_rest):
     assert info.value.state is not None
 
 
-def test_scipy_lsoda_with_cost_limit(model, x_rest):
+@pytest.mark.parametrize('method', ['LSODA', 'odeint'])
+def test_scipy_lsoda_with_cost_limit(model, x_rest, method):
     """The library path on the same kick: same physics checks, bounded cost."""
-    traj = simulate(model, x_rest, 3e-3, KICK, rtol=1e-6, method='LSODA', sample_period_s=2e-5)
+    traj = simulate(model, x_rest, 3e-3, KICK, rtol=1e-6, method=method, sample_period_s=2e-5)
     check_physics(traj)
     assert traj.stats.nfev < 20_000
 
 
-@pytest.mark.parametrize('method', ['LSODA', 'CVODE'])
+@pytest.mark.parametrize('method', ['LSODA', 'odeint', 'CVODE'])
 def test_library_methods_stop_where_the_model_ends_too(method):
     """Stepped from Python (LSODA) or checked at CVODE's Jacobians, the soft-contact crash
     ends in the same typed error as with the compiled method."""

@@ -16,6 +16,8 @@ Radau     scipy's Radau IIA, BDF, LSODA and the explicit DOP853, stepped one ste
 BDF       from Python on the same compiled right-hand side and Jacobian
 LSODA
 DOP853
+odeint    the same Fortran LSODA through ``scipy.integrate.odeint``: its step loop runs in
+          Fortran and calls back only for the right-hand side and the Jacobian
 CVODE     SUNDIALS CVODE (BDF, dense direct solver) through scikit-sundae
 ========  ====================================================================================
 
@@ -25,7 +27,11 @@ close deeper than ``onset_depth_m`` within it. The compiled method checks every 
 step and rejects such a step. The library methods check the end of each step (a check of
 interior points on every step would cost scipy more than its own stepping) and, when it is
 closed too deep, stop at the onset, found by root finding on the dense output, and restart
-there; CVODE does the same with its own root finding.
+there; CVODE does the same with its own root finding. odeint returns only at the times it is
+asked for, so it is asked for a grid of check points (ODEINT_CHECK_PERIOD_S) besides the
+samples: a contact open at one check point may not close deeper than ``onset_depth_m`` by
+the next; when one does, the interval is integrated again on finer grids down to the onset,
+and odeint restarts there.
 Each run is bounded by a wall-clock and a step budget and ends either with a
 :class:`Trajectory` or with a :class:`SolverError` that says where and why it stopped.
 """
@@ -35,6 +41,7 @@ import enum
 import itertools
 import math
 import time
+import warnings
 
 import numpy as np
 import scipy.integrate
@@ -45,8 +52,8 @@ from sphere_sim.model.initial_state import initial_state
 from sphere_sim.model.programme import PulseProgramme, VoltageSchedule
 from sphere_sim.model.scaling import state_scale
 
-METHODS = ('fast', 'Radau', 'BDF', 'LSODA', 'DOP853', 'CVODE')
-SCIPY_METHODS = ('Radau', 'BDF', 'LSODA', 'DOP853')
+METHODS = ('fast', 'Radau', 'BDF', 'LSODA', 'odeint', 'DOP853', 'CVODE')
+SCIPY_METHODS = ('Radau', 'BDF', 'LSODA', 'odeint', 'DOP853')
 IMPLICIT_METHODS = ('Radau', 'BDF', 'LSODA')
 DEFAULT_METHOD = 'fast'
 # rtol of solve(): the final surface normal of the optimised kick is then within about 1e-8 rad
@@ -68,6 +75,31 @@ ONSET_CHECK_POINTS = np.array([0.25, 0.5, 0.75, 1.0])
 # stalls them for thousands of steps, and a check on every step cost LSODA 3-5 % of its time,
 # which would flatter the compiled method in the benchmarks.
 DOMAIN_CHECK_STEPS = 32
+# odeint's onset test runs on check points this far apart (and at the samples): it returns
+# only at the times it is asked for. LSODA interpolates to them instead of stepping to them;
+# each costs 55 ns to interpolate and store and 140 ns for the compiled gap test, about 6 ms
+# for the 30 000 points of the 60 ms kick, 4 % of odeint's time there (docs/numerics.md).
+ODEINT_CHECK_PERIOD_S = 2e-6
+# Check points per odeint call (10 ms of simulated time): the call's output holds them all,
+# and the next call restarts LSODA at order 1. Calls of 1 ms took the diagonal kick 19 % more
+# steps at rtol 1e-3, calls of 5 ms none more; an onset throws away the rest of its call.
+ODEINT_CHUNK_POINTS = 5000
+# An onset between two check points is found by integrating the interval again on a grid
+# of this many points, then the subinterval where the gap jumped past the allowed depth, and
+# so on: each level narrows the time by this factor (2 us to 8 ns in two levels).
+ODEINT_LOCATE_POINTS = 16
+ODEINT_LOCATE_LEVELS = 8
+# A call whose contact gaps after a closure agree with a fresh start's within this fraction of
+# the allowed depth resolved the onset. Measured: 0.02-0.26 nm on the kicks at rtol 1e-3, up
+# to 1.2 nm for the sphere dropped on the tips at 1e-2. Restarting at every closure instead
+# cost the drop 2.7 times the steps for a landing depth 5.5 % off rather than 7.8 %.
+ODEINT_ONSET_AGREEMENT = 1.0
+# LSODA's mxstep is a 32-bit count of steps per output interval.
+ODEINT_MAX_MXSTEP = 2**31 - 1
+ODEINT_SUCCESS = 'Integration successful.'
+# The model's Jacobian has a row per equation (d f_i / d x_j at [i, j]), which odeint reads
+# with col_deriv=False; True would read it transposed.
+ODEINT_COL_DERIV = False
 # Newton contraction rate above which the compiled Radau refreshes its Jacobian: Hairer's
 # recommendation (THET = 0.1) when a Jacobian costs many right-hand sides; ours costs n + 1.
 FAST_JACOBIAN_RATE = 0.1
@@ -334,6 +366,147 @@ def _count_scipy(solver, stats):
     stats.nlu += int(solver.nlu)
 
 
+def _odeint_functions(model, u, budget, gaps_start):
+    """odeint's right-hand side and Jacobian at the voltages ``u``.
+
+    odeint returns only between its output times: the wall clock and the model's domain are
+    checked where it asks for a Jacobian (as CVODE's are; a stall asks for many), and an
+    error raised there ends the call. The Jacobian is d f_i / d x_j in row i, column j, as
+    the model returns it: odeint's ``col_deriv=False`` (``ODEINT_COL_DERIV``) reads it so.
+    """
+    fun, jac = model.at_voltages(u)
+
+    def dfun(t, x):
+        budget.check(t, x)
+        check_domain(model, t, x, u, gaps_start)
+        return jac(t, x)
+
+    return fun, dfun
+
+
+
+def _odeint_status(message):
+    if message.startswith('Excess work'):  # mxstep: the step budget
+        return SolverStatus.BUDGET_EXCEEDED
+    if message.startswith('Repeated'):  # LSODA's error or Newton failures at the minimum step
+        return SolverStatus.STEP_TOO_SMALL
+    return SolverStatus.FAILED
+
+
+def _odeint_call(fun, dfun, x, times, rtol, atol, budget, stats):
+    """States at ``times`` (rows) from ``x`` at times[0], one odeint call that never steps
+    past times[-1]; counts its work into ``stats`` and the budget."""
+    mxstep = int(min(ODEINT_MAX_MXSTEP, max(1, budget.max_steps - budget.steps)))
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore', scipy.integrate.ODEintWarning)
+        ys, info = scipy.integrate.odeint(
+            fun, x, times, Dfun=dfun, col_deriv=ODEINT_COL_DERIV, full_output=True,
+            rtol=rtol, atol=atol, tcrit=times[-1:], mxstep=mxstep, tfirst=True)
+    ok = info['message'] == ODEINT_SUCCESS
+    # On a failure the entries after the failed output time are not written.
+    last = times.size - 2 if ok else int(np.argmin(info['tcur'] >= times[1:]))
+    stats.nfev += int(info['nfe'][last])
+    stats.njev += int(info['nje'][last])
+    stats.n_steps += int(info['nst'][last])
+    budget.steps += int(info['nst'][last])
+    if not ok:
+        # LSODA leaves the state where it stopped in the failed output time's row.
+        t_fail, x_fail = float(info['tcur'][last]), ys[last + 1].copy()
+        raise SolverError(f'odeint failed at t = {t_fail} s: {info["message"]}', t_fail,
+                          x_fail, _odeint_status(info['message']))
+    return ys
+
+
+def _odeint_grid(t, t1, t_eval):
+    """The next call's times from ``t``: check points and the samples up to at most
+    ODEINT_CHUNK_POINTS check periods later; no call is left a sliver before ``t1``."""
+    t_stop = t + ODEINT_CHUNK_POINTS * ODEINT_CHECK_PERIOD_S
+    if t_stop >= t1 - ODEINT_CHECK_PERIOD_S:
+        t_stop = t1
+    n = max(1, math.ceil((t_stop - t) / ODEINT_CHECK_PERIOD_S))
+    checks = np.linspace(t, t_stop, n + 1)
+    checks[-1] = t_stop
+    return np.union1d(checks, t_eval[(t_eval > t) & (t_eval <= t_stop)])
+
+
+def _odeint_onset(model, call, t_a, x_a, t_b, x_b, onset_depth_m):
+    """Where to go on after a contact open at ``t_a`` was found closed deeper than the allowed
+    depth at the next check point ``t_b`` (state ``x_b``): ``(restarted, t, x)``.
+
+    The interval is integrated again from ``t_a``, where LSODA starts afresh with a small step.
+    If that lands on the call's contact gaps at ``t_b`` within the allowed depth, the call
+    resolved the onset (a closure at several cm/s covers the depth many times over between
+    check points) and goes on from ``t_b``. If not, it stepped over the onset: the search
+    narrows the interval on ever finer grids to a point where the contact has closed by half
+    to all of the allowed depth, and odeint restarts there (or at the end of the search's
+    integration, if that closes nothing).
+    """
+    open_mask = model.contact_gaps(x_a) > 0.0
+    times = np.linspace(t_a, t_b, ODEINT_LOCATE_POINTS + 1)
+    ys = call(x_a, times)
+    agreement_m = ODEINT_ONSET_AGREEMENT * onset_depth_m
+    if np.max(np.abs(model.contact_gaps(ys[-1]) - model.contact_gaps(x_b))) <= agreement_m:
+        return False, t_b, x_b
+    for _ in range(ODEINT_LOCATE_LEVELS):
+        shallowest = np.array([np.min(model.contact_gaps(y)[open_mask]) for y in ys[1:]])
+        closed = np.flatnonzero(shallowest <= -0.5 * onset_depth_m)
+        if closed.size == 0:
+            return True, times[-1], ys[-1]
+        j = int(closed[0]) + 1
+        if shallowest[j - 1] >= -onset_depth_m:
+            break
+        times = np.linspace(times[j - 1], times[j], ODEINT_LOCATE_POINTS + 1)
+        ys = call(ys[j - 1], times)
+    return True, times[j], ys[j]
+
+
+def _odeint_scan(model, call, times, ys, onset_depth_m, scratch, stats):
+    """``(row, t, x)``: the last row of a call's states ``ys`` that stands, and the time and
+    state to go on from (the last row's, or a restart at an onset the call stepped over)."""
+    k0 = 0
+    while True:
+        k = gap_kernels.first_deep_closure(ys[k0:], model.p, model.flags,
+                                           model.beam_directions, onset_depth_m, *scratch)
+        if k < 0:
+            return times.size - 1, times[-1], ys[-1]
+        k += k0
+        restarted, t_next, x_next = _odeint_onset(model, call, times[k - 1], ys[k - 1],
+                                                  times[k], ys[k], onset_depth_m)
+        if restarted:
+            stats.n_onset_restarts += 1
+            return k - 1, t_next, x_next
+        k0 = k
+
+
+def _segment_odeint(model, x, t0, t1, u, rtol, atol, t_eval, onset_depth_m, budget, stats):
+    """Integrate one segment with scipy's odeint (LSODA), restarting at contact onsets."""
+    stats.n_rejected = stats.n_newton_failed = stats.n_onset_bounded = None
+    fun, dfun = _odeint_functions(model, u, budget, model.electrode_gaps(x))
+
+    def call(x_start, times):
+        return _odeint_call(fun, dfun, x_start, times, rtol, atol, budget, stats)
+
+    n_gaps = gap_kernels.n_contacts(model.flags)
+    check_onset = onset_depth_m > 0 and n_gaps > 0
+    scratch = (np.empty(max(1, n_gaps)), np.empty(max(1, n_gaps)))
+    samples, t, x = [], t0, np.array(x, dtype=float)
+    while t < t1:
+        budget.check(t, x)
+        times = _odeint_grid(t, t1, t_eval)
+        ys = call(x, times)
+        last, t_next, x_next = (_odeint_scan(model, call, times, ys, onset_depth_m, scratch,
+                                             stats) if check_onset
+                                else (times.size - 1, times[-1], ys[-1]))
+        rows = np.flatnonzero(np.isin(times[:last + 1], t_eval) & (times[:last + 1] > t)
+                              & (times[:last + 1] < t_next))
+        samples.extend(ys[rows])
+        if np.any(t_eval == t_next):
+            samples.append(x_next)
+        t, x = t_next, np.array(x_next)
+    budget.check(t, x)
+    x_eval = np.array(samples).T if samples else np.empty((model.n_states, 0))
+    return x, x_eval
+
 def _cvode_events(model, open_index, onset_depth_m):
     """CVODE's root functions: the gaps of the contacts open at the segment's start, plus half
     the onset depth. CVODE evaluates them at every step, so they make one compiled call."""
@@ -469,6 +642,9 @@ def simulate(model, x0, t_end_s, programme=None, rtol=1e-6, atol=None, method='f
         if method == 'fast':
             x, x_eval = _segment_fast(model, x, t0, t1, u, rtol, atol, t_eval, onset, budget,
                                       stats)
+        elif method == 'odeint':
+            x, x_eval = _segment_odeint(model, x, t0, t1, u, rtol, atol, t_eval, onset, budget,
+                                        stats)
         elif method == 'CVODE':
             x, x_eval = _segment_cvode(model, x, t0, t1, u, rtol, atol, t_eval, onset, budget,
                                        stats)

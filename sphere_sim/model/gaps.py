@@ -73,6 +73,22 @@ def closed_too_deep(gaps_start, x, p, flags, directions, depth_m, gaps_end):
     return False
 
 
+@numba.njit(cache=True)
+def first_deep_closure(xs, p, flags, directions, depth_m, gaps_a, gaps_b):
+    """Index i >= 1 of the first row of ``xs`` (shape (n_rows, n_states)) at which a contact
+    open at row i - 1 is closed deeper than ``depth_m`` (m), or -1: odeint's onset test, which
+    sees only the states at the times it was asked for. ``gaps_a`` and ``gaps_b`` are scratch
+    arrays of :func:`n_contacts` entries (at least one)."""
+    if xs.shape[0] == 0:
+        return -1
+    contact_gaps(xs[0], p, flags, directions, gaps_a)
+    for i in range(1, xs.shape[0]):
+        if closed_too_deep(gaps_a, xs[i], p, flags, directions, depth_m, gaps_b):
+            return i
+        gaps_a, gaps_b = gaps_b, gaps_a
+    return -1
+
+
 @numba.njit(cache=True, inline='always')
 def _electrode_gap(x, p, k):
     gap = x[2 * k] - p[dyn.P_GROUND_Z]

@@ -1,0 +1,180 @@
+"""What a cheaper Jacobian, fewer Newton iterations or fewer right-hand sides would buy `fast`.
+
+Runs the compiled Radau IIA on the three work-precision scenes at rtol 1e-3 ... 1e-6 (half
+decades) as it is and with its simplified Newton iteration capped at 4, 3 and 2 iterations
+(scipy's and ours: 6). The cap is a
+compile-time constant of ``radau_compiled``, so each capped variant runs in its own process
+with its own numba cache. Times are CPU seconds, fastest of ``REPEATS``; errors are the
+benchmark's final-angle errors against ``fast`` at rtol 1e-9; times at 1e-6 rad are
+interpolated as the benchmark does. The right-hand side's and the Jacobian's cost per call are
+timed on the states an odeint run evaluates (compiled replay, ``kernel_replay``); times their
+counts in a run of ``fast``, they are what a free right-hand side or a free (analytic)
+Jacobian would save it at most. An exact Jacobian would not change the steps: central
+differences, 1e4 times more accurate, did not (docs/numerics.md, "Jacobian").
+
+    .venv/bin/python bench/fast_costs.py      # about 5 minutes; writes bench/results/fast_costs.md
+"""
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+RESULTS = Path(__file__).resolve().parent / 'results' / 'fast_costs.md'
+RTOLS = (1e-3, 3e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6)
+REFERENCE_RTOL = 1e-9
+REPEATS = 3  # CPU time of a run: the fastest of this many (the machine is shared)
+REPLAY_REPEATS = 7
+VARIANTS = ('as is', 'newton<=4', 'newton<=3', 'newton<=2')
+
+
+def _scenes():
+    from sphere_twin.commands.bench import scenes_of_this_tree
+    return scenes_of_this_tree()
+
+
+def _cpu_s(run):
+    best = np.inf
+    for _ in range(REPEATS):
+        started = time.process_time()
+        run()
+        best = min(best, time.process_time() - started)
+    return best
+
+
+def _measure(variant):
+    """One JSON line per (scene, rtol) of ``variant``, run in this process."""
+    from sphere_sim.integrate import radau_compiled, solve
+    from sphere_sim.studies import work_precision as wp
+    if variant.startswith('newton<='):
+        radau_compiled.NEWTON_MAXITER = int(variant.removeprefix('newton<='))
+    for scene in _scenes():
+        def run(rtol, scene=scene):
+            return solve.simulate(scene.model, scene.x0, scene.duration_s, scene.programme,
+                                  rtol=rtol, method='fast', sample_period_s=wp.SAMPLE_PERIOD_S)
+        reference = run(REFERENCE_RTOL)
+        for rtol in RTOLS:
+            traj = run(rtol)
+            s = traj.stats
+            print(json.dumps({
+                'variant': variant, 'scene': scene.name, 'rtol': rtol,
+                'cpu_s': _cpu_s(lambda rtol=rtol: run(rtol)),
+                'angle_error_rad': wp.errors(scene, traj, reference)[0], 'steps': s.n_steps,
+                'rejected': s.n_rejected, 'nfev': s.nfev, 'njev': s.njev, 'nlu': s.nlu,
+                'newton_failed': s.n_newton_failed}), flush=True)
+
+
+def _kernel_costs():
+    """{scene: (right-hand side s, Jacobian s)} per call, at the states odeint evaluates."""
+    from sphere_sim.integrate.kernel_replay import RecordingModel, replay
+    from sphere_sim.integrate.solve import simulate
+    costs = {}
+    for scene in _scenes():
+        recording = RecordingModel(scene.model)
+        simulate(recording, scene.x0, scene.duration_s, scene.programme, rtol=1e-5,
+                 method='odeint', sample_period_s=1e-3)
+        per_call = []
+        for calls, jacobian in ((recording.rhs_calls, False), (recording.jac_calls, True)):
+            replay(scene.model, calls[:1], jacobian)
+            best = min(replay(scene.model, calls, jacobian)[1] for _ in range(REPLAY_REPEATS))
+            per_call.append(best / len(calls))
+        costs[scene.name] = tuple(per_call)
+    return costs
+
+
+def _run_variant(variant):
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ)
+        if variant.startswith('newton<='):
+            env['NUMBA_CACHE_DIR'] = cache  # the cap is compiled in: no cached kernel may serve
+        out = subprocess.run([sys.executable, __file__, '--variant', variant], env=env,
+                             check=True, capture_output=True, text=True).stdout
+    return [json.loads(line) for line in out.splitlines() if line.startswith('{')]
+
+
+def _time_at_error(rows, scene, variant):
+    from sphere_sim.studies.work_precision import TARGET_ANGLE_ERROR_RAD, time_at_error
+    rows = [{**r, 'method': r['variant'], 'status': 'ok', 'wall_s': r['cpu_s']} for r in rows]
+    return time_at_error(rows, scene, variant, TARGET_ANGLE_ERROR_RAD)
+
+
+def _reaching(rows, scene, variant):
+    """The loosest run of ``variant`` that reaches 1e-6 rad (the benchmark's bound)."""
+    from sphere_sim.studies.work_precision import TARGET_ANGLE_ERROR_RAD
+    runs = sorted((r for r in rows if r['scene'] == scene and r['variant'] == variant),
+                  key=lambda r: -r['rtol'])
+    return next(r for r in runs if r['angle_error_rad'] <= TARGET_ANGLE_ERROR_RAD)
+
+
+def _shares(run, rhs_s, jac_s):
+    """Fractions of ``run``'s CPU time in right-hand sides, in Jacobians, and in the
+    right-hand sides of Newton iterations beyond the first of each attempted step."""
+    attempts = run['steps'] + run['rejected']
+    # Each Newton iteration evaluates the three stages; one more f at each step's end.
+    iterations = (run['nfev'] - run['steps']) / 3
+    beyond_first = 3 * (iterations - attempts) * rhs_s / run['cpu_s']
+    return (run['nfev'] * rhs_s / run['cpu_s'], run['njev'] * jac_s / run['cpu_s'],
+            beyond_first, iterations / attempts)
+
+
+def _per_step_lines(rows, costs):
+    lines = ['| scene | rtol | CPU (ms) | steps | rejected | f per step | Newton iterations per '
+             'attempt | Jacobians | f: µs per call, share | Jacobian: µs per call, share | '
+             'f of iterations beyond the first | rest |', '|---|' * 12]
+    lines[-1] = lines[-1].replace('||', '|')
+    for scene, (rhs_s, jac_s) in costs.items():
+        r = _reaching(rows, scene, 'as is')
+        rhs, jac, beyond, per_attempt = _shares(r, rhs_s, jac_s)
+        lines.append(f"| {scene} | {r['rtol']:g} | {r['cpu_s'] * 1e3:.1f} | {r['steps']} | "
+                     f"{r['rejected']} | {r['nfev'] / r['steps']:.2f} | {per_attempt:.2f} | "
+                     f"{r['njev']} | {rhs_s * 1e6:.2f}, {rhs:.0%} | {jac_s * 1e6:.1f}, "
+                     f'{jac:.0%} | {beyond:.0%} | {1 - rhs - jac:.0%} |')
+    return lines
+
+
+def _time_lines(rows, scenes, costs):
+    lines = ['| variant | ' + ' | '.join(scenes) + ' |', '|---|' + '---|' * len(scenes)]
+    base = {s: _time_at_error(rows, s, 'as is') for s in scenes}
+    for variant in VARIANTS:
+        cells = []
+        for s in scenes:
+            t = _time_at_error(rows, s, variant)
+            cells.append(f'{t * 1e3:.1f} ms ({t / base[s]:.2f})')
+        lines.append(f'| {variant} | ' + ' | '.join(cells) + ' |')
+    for label, index in (('free Jacobians', 1), ('free right-hand sides', 0)):
+        cells = []
+        for s in scenes:
+            # The shares of the run that bounds the interpolation, applied to its time.
+            t = base[s] * (1 - _shares(_reaching(rows, s, 'as is'), *costs[s])[index])
+            cells.append(f'{t * 1e3:.1f} ms ({t / base[s]:.2f})')
+        lines.append(f'| as is, {label} (at most) | ' + ' | '.join(cells) + ' |')
+    return lines
+
+
+def main():
+    rows = [row for variant in VARIANTS for row in _run_variant(variant)]
+    costs = _kernel_costs()
+    scenes = list(costs)
+    lines = ['# What a cheaper Jacobian, fewer Newton iterations or fewer right-hand sides '
+             'would buy `fast`', '', 'Written by `.venv/bin/python bench/fast_costs.py`; see '
+             'docs/numerics.md. CPU time, fastest of '
+             f'{REPEATS}; time at 1e-6 rad interpolated as in the work-precision benchmark '
+             f'(ratio to `fast` as it is in brackets).', '', *_time_lines(rows, scenes, costs), '',
+             'At the loosest tolerance that reaches 1e-6 rad (`fast` as it is). The shares '
+             'are the counts times the cost per call, over the CPU time:', '',
+             *_per_step_lines(rows, costs), '', '## Runs', '',
+             '```', *(json.dumps(r) for r in rows), '```', '']
+    RESULTS.write_text('\n'.join(lines))
+    print('\n'.join(lines[:lines.index('## Runs')]))
+
+
+if __name__ == '__main__':
+    if len(sys.argv) == 3 and sys.argv[1] == '--variant':
+        _measure(sys.argv[2])
+    else:
+        main()
