@@ -45,7 +45,7 @@ from sphere_sim.studies.work_precision import (
     bench_scenes,
     work_precision,
 )
-from sphere_twin.commands import bench_twin
+from sphere_twin.commands import bench_levers, bench_twin
 
 RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
 KICK_FILE = RESULTS_DIR / 'kick_optimization.json'
@@ -258,6 +258,7 @@ def register(subparsers):
     thr.add_argument('--out', type=Path, default=RESULTS_DIR, help='output directory')
     thr.set_defaults(func=run_throughput)
     bench_twin.register(sub)
+    bench_levers.register(sub)
 
 
 def run_work_precision(args):

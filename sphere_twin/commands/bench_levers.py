@@ -1,4 +1,5 @@
-"""What a cheaper Jacobian, fewer Newton iterations or fewer right-hand sides would buy `fast`.
+"""``sphere-twin bench levers``: what a cheaper Jacobian, fewer Newton iterations or fewer
+right-hand sides would buy `fast`.
 
 Runs the compiled Radau IIA on the three work-precision scenes at rtol 1e-3 ... 1e-6 (half
 decades) as it is and with its simplified Newton iteration capped at 4, 3 and 2 iterations
@@ -12,7 +13,7 @@ counts in a run of ``fast``, they are what a free right-hand side or a free (ana
 Jacobian would save it at most. An exact Jacobian would not change the steps: central
 differences, 1e4 times more accurate, did not (docs/numerics.md, "Jacobian").
 
-    .venv/bin/python bench/fast_costs.py      # about 5 minutes; writes bench/results/fast_costs.md
+    sphere-twin bench levers      # about 5 minutes; writes bench/results/fast_costs.md
 """
 
 import json
@@ -25,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-RESULTS = Path(__file__).resolve().parent / 'results' / 'fast_costs.md'
+RESULTS = Path(__file__).resolve().parents[2] / 'bench' / 'results' / 'fast_costs.md'
 RTOLS = (1e-3, 3e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6)
 REFERENCE_RTOL = 1e-9
 REPEATS = 3  # CPU time of a run: the fastest of this many (the machine is shared)
@@ -92,7 +93,7 @@ def _run_variant(variant):
         env = dict(os.environ)
         if variant.startswith('newton<='):
             env['NUMBA_CACHE_DIR'] = cache  # the cap is compiled in: no cached kernel may serve
-        out = subprocess.run([sys.executable, __file__, '--variant', variant], env=env,
+        out = subprocess.run([sys.executable, '-m', __name__, '--variant', variant], env=env,
                              check=True, capture_output=True, text=True).stdout
     return [json.loads(line) for line in out.splitlines() if line.startswith('{')]
 
@@ -156,12 +157,28 @@ def _time_lines(rows, scenes, costs):
     return lines
 
 
+def register(sub):
+    """Add ``levers`` to the ``bench`` subcommands."""
+    parser = sub.add_parser(
+        'levers', help='what a cheaper Jacobian, fewer Newton iterations or fewer right-hand '
+                       'sides would buy the compiled Radau',
+        description='Runs fast with its Newton iterations capped at 4, 3 and 2 (each in a '
+                    'process of its own, with its own numba cache) and times the kernels; '
+                    'writes bench/results/fast_costs.md (about 5 minutes).')
+    parser.set_defaults(func=run)
+
+
+def run(_args):
+    main()
+    return 0
+
+
 def main():
     rows = [row for variant in VARIANTS for row in _run_variant(variant)]
     costs = _kernel_costs()
     scenes = list(costs)
     lines = ['# What a cheaper Jacobian, fewer Newton iterations or fewer right-hand sides '
-             'would buy `fast`', '', 'Written by `.venv/bin/python bench/fast_costs.py`; see '
+             'would buy `fast`', '', 'Written by `sphere-twin bench levers`; see '
              'docs/numerics.md. CPU time, fastest of '
              f'{REPEATS}; time at 1e-6 rad interpolated as in the work-precision benchmark '
              f'(ratio to `fast` as it is in brackets).', '', *_time_lines(rows, scenes, costs), '',
