@@ -19,7 +19,6 @@ of their kicks, and writes ``bench/results/throughput.{json,md}``. Its last line
 """
 
 import csv
-import dataclasses
 import json
 import math
 import sys
@@ -30,8 +29,6 @@ from tqdm import tqdm
 from msg_defs.device import KICK_WINDOW_S
 from sphere_sim.integrate.solve import DEFAULT_METHOD, DEFAULT_RTOL
 from sphere_sim.kicks import throughput as tp
-from sphere_sim.kicks.design import KickDesign
-from sphere_sim.model.assembly import assemble
 from sphere_sim.model.scene import load_scene
 from sphere_sim.studies.regularisation import STUDIES, STUDY_RTOLS, regularisation_rows
 from sphere_sim.studies.work_precision import (
@@ -42,33 +39,12 @@ from sphere_sim.studies.work_precision import (
     RTF_DURATION_S,
     TARGET_ANGLE_ERROR_RAD,
     Plan,
-    bench_scenes,
     work_precision,
 )
 from sphere_twin.commands import bench_levers, bench_twin
+from sphere_twin.commands.bench_scenes import optimised_design, scenes_of_this_tree
 
 RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
-KICK_FILE = RESULTS_DIR / 'kick_optimization.json'
-
-
-def optimised_design():
-    """The optimised diagonal kick of bench/results/kick_optimization.json (or the paper's)."""
-    if not KICK_FILE.exists():
-        return KickDesign(), False
-    data = json.loads(KICK_FILE.read_text())['design']
-    fields = {f.name for f in dataclasses.fields(KickDesign)}
-    kwargs = {k: (tuple(v) if isinstance(v, list) else v) for k, v in data.items() if k in fields}
-    return KickDesign(**kwargs), True
-
-
-def scenes_of_this_tree():
-    """The benchmark's scenes with the optimised diagonal kick of bench/results (or the
-    paper's template when none was optimised)."""
-    design, optimised = optimised_design()
-    label = 'optimised diagonal kick' if optimised else '35 V / 80 V asymmetric pulse pair'
-    return bench_scenes(assemble(load_scene('rest')), design.programme(), label)
-
-
 def run_work_precision_bench(quick=False, out_dir=RESULTS_DIR, stream=sys.stdout):
     """Run the benchmark with a progress bar, write its results; returns (rows, summary)."""
     scenes = scenes_of_this_tree()

@@ -35,7 +35,7 @@ VARIANTS = ('as is', 'newton<=4', 'newton<=3', 'newton<=2')
 
 
 def _scenes():
-    from sphere_twin.commands.bench import scenes_of_this_tree
+    from sphere_twin.commands.bench_scenes import scenes_of_this_tree
     return scenes_of_this_tree()
 
 

@@ -1,0 +1,35 @@
+"""The work-precision scenes of this tree: the optimised diagonal kick of bench/results (or the
+paper's template when none was optimised), shared by ``bench work-precision`` and
+``bench levers``."""
+
+import dataclasses
+import json
+from pathlib import Path
+
+from sphere_sim.kicks.design import KickDesign
+from sphere_sim.model.assembly import assemble
+from sphere_sim.model.scene import load_scene
+from sphere_sim.studies.work_precision import bench_scenes
+
+RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
+KICK_FILE = RESULTS_DIR / 'kick_optimization.json'
+
+
+def optimised_design():
+    """The optimised diagonal kick of bench/results/kick_optimization.json (or the paper's)."""
+    if not KICK_FILE.exists():
+        return KickDesign(), False
+    data = json.loads(KICK_FILE.read_text())['design']
+    fields = {f.name for f in dataclasses.fields(KickDesign)}
+    kwargs = {k: (tuple(v) if isinstance(v, list) else v) for k, v in data.items() if k in fields}
+    return KickDesign(**kwargs), True
+
+
+def scenes_of_this_tree():
+    """The benchmark's scenes with the optimised diagonal kick of bench/results (or the
+    paper's template when none was optimised)."""
+    design, optimised = optimised_design()
+    label = 'optimised diagonal kick' if optimised else '35 V / 80 V asymmetric pulse pair'
+    return bench_scenes(assemble(load_scene('rest')), design.programme(), label)
+
+
