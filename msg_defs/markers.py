@@ -24,6 +24,11 @@ NAMESPACE = 'sphere_twin'
 # The normal's arrow: out of the mirror face, long enough to read a tenth of a degree.
 NORMAL_ARROW_LENGTH_M = 3e-3
 NORMAL_ARROW_SHAFT_M = 50e-6
+REFERENCE_NAMESPACE = 'sphere_twin/reference'
+REFERENCE_RGBA = (0.2, 0.9, 0.3, 0.8)
+# Where the reference's arrow starts: the centre of a sphere resting level on undeflected tips
+# (tips at d_B / 2 = 0.4 mm from the axis); the reference node knows no state.
+NOMINAL_CENTRE_M = np.array([0.0, 0.0, math.sqrt(SPHERE_RADIUS_M**2 - 0.4e-3**2)])
 
 
 def _quaternion_from_normal(normal):
@@ -99,11 +104,23 @@ def twin_markers(normal, stamp, sphere_position_m=None, beam_z_m=None, beam_phi_
     return out
 
 
-def _normal_arrow(marker_id, stamp, centre, normal):
-    """The measured surface normal as an arrow from the sphere's centre (RViz has no display
-    for a Vector3Stamped)."""
+def reference_markers(reference_normal, stamp):
+    """MarkerArray of the reference normal: an arrow from the sphere's nominal centre, in a
+    namespace of its own, so that it sits beside the simulator's markers on the same topic."""
+    out = MarkerArray()
+    out.markers.append(_normal_arrow(0, stamp, NOMINAL_CENTRE_M,
+                                     np.asarray(reference_normal, dtype=float),
+                                     REFERENCE_RGBA, REFERENCE_NAMESPACE))
+    return out
+
+
+def _normal_arrow(marker_id, stamp, centre, normal, rgba=(0.9, 0.9, 0.2, 1.0),
+                  namespace=NAMESPACE):
+    """A normal as an arrow from the sphere's centre (RViz has no display for a
+    Vector3Stamped)."""
     arrow = _marker(marker_id, Marker.ARROW, stamp, np.zeros(3), np.array([1.0, 0, 0, 0]),
-                    [NORMAL_ARROW_SHAFT_M, 2 * NORMAL_ARROW_SHAFT_M, 0.0], (0.9, 0.9, 0.2, 1.0))
+                    [NORMAL_ARROW_SHAFT_M, 2 * NORMAL_ARROW_SHAFT_M, 0.0], rgba)
+    arrow.ns = namespace
     tip = centre + NORMAL_ARROW_LENGTH_M * normal / np.linalg.norm(normal)
     arrow.points = [Point(x=float(a), y=float(b), z=float(c)) for a, b, c in (centre, tip)]
     return arrow

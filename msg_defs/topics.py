@@ -202,7 +202,8 @@ MARKERS = Topic(
     qos=STREAM_QOS,
     frame_id=WORLD_FRAME,
     units='m',
-    description='Mirror, sphere and beams as markers for RViz or Foxglove.',
+    description='Mirror, sphere, beams and measured normal (simulator) and the reference '
+                'normal (reference node) as markers for RViz or Foxglove.',
 )
 CLOCK = Topic(
     name='/clock',

@@ -10,7 +10,8 @@ from rclpy.node import Node
 
 from msg_defs.conversions import surface_normal_to_msg
 from msg_defs.device import NS_PER_S
-from msg_defs.topics import CLOCK, SPHERE_REFERENCE
+from msg_defs.markers import reference_markers
+from msg_defs.topics import CLOCK, MARKERS, SPHERE_REFERENCE
 from node_runtime.pace import PaceMeter
 from node_runtime.ros_env import declare_node_parameters, parameter_descriptor, run_node
 from sphere_control.reference import CircleTrajectory, Setpoint, sample
@@ -47,6 +48,8 @@ class ReferenceNode(Node):
         self.trajectory_offset_s = p['trajectory_offset_s']
         self._publisher = self.create_publisher(
             SPHERE_REFERENCE.msg_type, SPHERE_REFERENCE.name, SPHERE_REFERENCE.qos.to_profile())
+        self._marker_publisher = self.create_publisher(MARKERS.msg_type, MARKERS.name,
+                                                       MARKERS.qos.to_profile())
         self._start_ns = None
         self._warned_clamp = False
         self._clock_checked = False
@@ -79,6 +82,7 @@ class ReferenceNode(Node):
                 f'reachable cone; clamped to its edge')
         self._warned_clamp = reference.clamped
         self._publisher.publish(surface_normal_to_msg(reference.normal, now.to_msg()))
+        self._marker_publisher.publish(reference_markers(reference.normal, now.to_msg()))
         self._check_clock()
 
     def _check_clock(self):

@@ -11,8 +11,14 @@ import time
 
 import pytest
 
-from msg_defs.topics import DIAGNOSTICS, PULSE_PROGRAM
-from sphere_twin.bag.reader import has_footer, read_messages, read_metadata, storage_files
+from msg_defs.topics import CLOCK, DIAGNOSTICS, PULSE_PROGRAM, SPHERE_REFERENCE
+from sphere_twin.bag.reader import (
+    deserialize,
+    has_footer,
+    read_messages,
+    read_metadata,
+    storage_files,
+)
 from sphere_twin.commands.demo import RunLog, scenario_nodes
 from sphere_twin.processes import parameter_args
 from sphere_twin.testing import TopicProbe
@@ -107,3 +113,17 @@ def test_controller_reference_and_recorder_stop_cleanly_while_the_loop_runs(
         read[message.topic] = read.get(message.topic, 0) + 1
     assert read == {topic: n for topic, n in counts.items() if n}
     assert read.get(SURFACE_NORMAL.name, 0) > 10, read
+    # One clock rule: every stamp on every contract topic is simulated time (/clock), none is
+    # the wall clock's (1.8e9 s), whoever published it.
+    stamps = {}
+    for message in read_messages(bag):
+        msg = deserialize(message)
+        stamp = msg.clock if message.topic == CLOCK.name else getattr(msg, 'header', None)
+        if stamp is not None:
+            stamp = getattr(stamp, 'stamp', stamp)
+            stamps.setdefault(message.topic, []).append(stamp.sec + stamp.nanosec * 1e-9)
+    assert {SURFACE_NORMAL.name, CLOCK.name, SPHERE_REFERENCE.name, CONTROLLER_STATUS.name,
+            PULSE_PROGRAM.name} <= stamps.keys()
+    simulated_s = max(stamps[CLOCK.name])
+    assert all(0.0 <= t <= simulated_s + 1.0 for ts in stamps.values() for t in ts), {
+        topic: max(ts) for topic, ts in stamps.items()}

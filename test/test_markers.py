@@ -3,12 +3,15 @@
 import math
 
 import numpy as np
+import pytest
 from builtin_interfaces.msg import Time
 
 from msg_defs.markers import (
     BEAM_LENGTH_M,
+    NOMINAL_CENTRE_M,
     NORMAL_ARROW_LENGTH_M,
     SPHERE_RADIUS_M,
+    reference_markers,
     twin_markers,
 )
 from msg_defs.topics import WORLD_FRAME
@@ -50,3 +53,15 @@ def test_beams_point_inwards_and_tilt_with_phi():
         np.testing.assert_allclose(axis[:2] / np.hypot(*axis[:2]), inward, atol=1e-12)
         assert abs(math.asin(axis[2]) - phi[k]) < 1e-12
         assert marker.scale.x == BEAM_LENGTH_M
+
+
+def test_the_reference_arrow_has_a_namespace_of_its_own_and_points_along_the_reference():
+    reference = normal_from_xy(-0.1, 0.2)
+    (arrow,) = reference_markers(reference, Time(sec=7)).markers
+    simulator_namespaces = {m.ns for m in twin_markers(reference, Time()).markers}
+    assert arrow.ns not in simulator_namespaces and arrow.header.frame_id == WORLD_FRAME
+    tail, tip = (np.array([p.x, p.y, p.z]) for p in arrow.points)
+    np.testing.assert_allclose(tail, NOMINAL_CENTRE_M)
+    np.testing.assert_allclose((tip - tail) / NORMAL_ARROW_LENGTH_M, reference, atol=1e-12)
+    # The nominal centre is a level sphere's, resting on tips 0.4 mm from the axis.
+    assert np.hypot(0.4e-3, NOMINAL_CENTRE_M[2]) == pytest.approx(SPHERE_RADIUS_M)

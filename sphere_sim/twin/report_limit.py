@@ -2,7 +2,7 @@
 
 A burst of bad commands (a runaway publisher) must not turn into a burst of log lines and
 ``/diagnostics`` messages: the first few in each wall-clock window are reported one by one,
-the rest only counted, and the next report says how many were left out. Every rejection is
+the rest only counted, and the next report says how many were left out. Every one is
 counted in the periodic status all the same.
 """
 

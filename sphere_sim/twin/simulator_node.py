@@ -115,7 +115,7 @@ class SimulatorNode(Node):
         self.create_timer(STATUS_PERIOD_S, self.on_status_timer)
         self.wait_for_subscribers = p['wait_for_subscribers']
         self._last_sample = None
-        self._rejection_reports = ReportLimit()
+        self._reports = ReportLimit()
         self._last_repeat_wall_s = 0.0
         self._wall_start_s = time.perf_counter()
         self.get_logger().info(
@@ -164,7 +164,7 @@ class SimulatorNode(Node):
         try:
             cut = self.runner.command_voltages(voltages_from_msg(msg))
             if cut is not None:
-                self._publish_diagnostics(DiagnosticStatus.WARN, cut)
+                self._report(DiagnosticStatus.WARN, cut)
         except ValueError as error:
             self.runner.counters.rejected += 1
             self._report_rejection(VOLTAGE_COMMAND.name, str(error))
@@ -184,18 +184,28 @@ class SimulatorNode(Node):
             self._report_rejection(PULSE_PROGRAM.name, str(error))
 
     def _report_rejection(self, topic, reason):
-        """Log and publish a rejection (already counted), at most REPORTS_PER_WINDOW a
-        second; the next report says how many were left out."""
-        if not self._rejection_reports.allow():
+        """Report a rejection (already counted)."""
+        self._report(DiagnosticStatus.ERROR, f'rejected {topic}: {reason}')
+
+    def _report(self, level, text):
+        """Log and publish a rejection or a cut programme, at most REPORTS_PER_WINDOW a
+        second; the next report says how many were left out (the status counts them all)."""
+        if not self._reports.allow():
             return
-        left_out = self._rejection_reports.take_suppressed()
-        more = f' ({left_out} more rejections not reported one by one)' if left_out else ''
-        self.get_logger().error(f'rejected {topic}: {reason}{more}')
-        self._publish_diagnostics(DiagnosticStatus.ERROR, f'rejected {topic}: {reason}{more}')
+        left_out = self._reports.take_suppressed()
+        text += f' ({left_out} more reports left out)' if left_out else ''
+        # Two call sites: rclpy refuses a severity that changes at one.
+        if level == DiagnosticStatus.ERROR:
+            self.get_logger().error(text)
+        else:
+            self.get_logger().warning(text)
+        self._publish_diagnostics(level, text)
 
     def on_status_timer(self):
-        self._publish_diagnostics(DiagnosticStatus.OK, 'running' if self.wait_for_subscribers
-                                  == 0 else 'waiting for subscribers')
+        state = 'running' if self.wait_for_subscribers == 0 else 'waiting for subscribers'
+        left_out = self._reports.take_suppressed()  # a burst that ended: its count is said here
+        self._publish_diagnostics(DiagnosticStatus.OK, state + (
+            f' ({left_out} more reports left out)' if left_out else ''))
 
     def status_values(self):
         """The figures of the periodic status: counters, time, real-time factor, where the
