@@ -11,8 +11,8 @@ pulse programme took from its arrival to the published sample that first shows i
 import dataclasses
 import math
 
-from sphere_twin.commands.demo import scenario_nodes
 from sphere_twin.processes import fresh_domain_id, running_nodes
+from sphere_twin.scenario import scenario_nodes
 
 DEFAULT_DURATION_S = 20.0
 # The scenario's setpoint phase, shorter than the demo's: the bench wants kicks, and the
@@ -91,15 +91,13 @@ def run_twin_bench(plant='continuous', duration_s=DEFAULT_DURATION_S, seed=0,
     BenchError
         When the loop does not start, or the run does not finish in time.
     """
-    from msg_defs.topics import CONTROLLER_STATUS, DIAGNOSTICS
-    from sphere_twin.commands.demo import RunLog
+    from msg_defs.topics import CONTROLLER_STATUS, DIAGNOSTICS, SURFACE_NORMAL
+    from sphere_twin.scenario import RunLog
     from sphere_twin.testing import TopicProbe, TwinTimeoutError
 
     domain_id = fresh_domain_id()
     *others, simulator = scenario_nodes(SETPOINT_S, plant, 0.0, seed, NORMAL_SUBSCRIBERS)
     with running_nodes(*others, domain_id=domain_id) as group:
-        from msg_defs.topics import SURFACE_NORMAL
-
         probe = TopicProbe(domain_id, (SURFACE_NORMAL, CONTROLLER_STATUS, DIAGNOSTICS))
         diagnostics = probe.messages[DIAGNOSTICS.name]
 

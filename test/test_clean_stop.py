@@ -19,8 +19,8 @@ from sphere_twin.bag.reader import (
     read_metadata,
     storage_files,
 )
-from sphere_twin.commands.demo import RunLog, scenario_nodes
 from sphere_twin.processes import parameter_args
+from sphere_twin.scenario import RunLog, scenario_nodes
 from sphere_twin.testing import TopicProbe
 
 pytestmark = pytest.mark.ros

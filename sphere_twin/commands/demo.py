@@ -18,21 +18,17 @@ from pathlib import Path
 
 import numpy as np
 
-from msg_defs.device import NS_PER_S
 from node_runtime.ros_env import DISCOVERY_RANGE_VAR
 from sphere_sim.twin.plant_setup import PLANT_KINDS
 from sphere_twin.commands.options import positive_float
 from sphere_twin.processes import NodeSpec, fresh_domain_id, parameter_args, running_nodes
+from sphere_twin.scenario import SETPOINT_XY, TRAJECTORY_OFFSET_S, RunLog, scenario_nodes
 
-SETPOINT_XY = (0.01, 0.02)  # Fig. 13
 DEFAULT_SETPOINT_S = 8.0  # simulated seconds on the setpoint before the trajectory starts
 DEFAULT_TRAJECTORY_S = 25.0  # half a period of eq. (64): out to A_max and back to the centre
 # The physics runs at the device's pace; the kick table, which costs nothing, faster.
 DEFAULT_REAL_TIME_FACTOR = {'continuous': 1.0, 'discrete': 5.0}
 DEFAULT_PLANT = 'continuous'
-# Eq. (64) entered where it passes the centre (t = 1/(4 f1)), so the trajectory takes over from
-# the setpoint without a jump to A_max.
-TRAJECTORY_OFFSET_S = 12.5
 START_TIMEOUT_S = 60.0
 WALL_MARGIN = 3.0  # the run may take this many times its paced duration before it is cut
 # Subscribers of /sphere/surface_normal the simulator waits for: recorder, controller, and the
@@ -44,56 +40,11 @@ REAL_TIME_FACTOR_PATTERN = re.compile(r'real-time factor (\S+?);?(?:\s|$)')
 LATE_PATTERN = re.compile(r'\((\d+) late\)')
 
 
-def scenario_nodes(setpoint_s, plant, real_time_factor, seed, normal_subscribers):
-    """The closed loop of the scenario, in start order: controller, reference, simulator.
-
-    The simulator comes last, once the controller holds the reference, and holds simulated
-    time at 0 until ``normal_subscribers`` listen: the scenario's clock (simulated time, which
-    the reference follows) starts when everyone is there.
-    """
-    return (
-        NodeSpec('controller', tuple(parameter_args(controller='extended'))),
-        NodeSpec('reference', tuple(parameter_args(setpoint_xy=list(SETPOINT_XY),
-                                                   trajectory_start_s=setpoint_s,
-                                                   trajectory_offset_s=TRAJECTORY_OFFSET_S,
-                                                   use_sim_time=True))),
-        NodeSpec('simulator', tuple(parameter_args(
-            plant=plant, seed=seed, real_time_factor=real_time_factor,
-            wait_for_subscribers=normal_subscribers))),
-    )
-
-
 def demo_nodes(bag_dir, setpoint_s, real_time_factor, seed, plant=DEFAULT_PLANT):
     """What the demo starts, in start order (stopped in reverse: the recorder last)."""
     return (NodeSpec('recorder', tuple(parameter_args(output_dir=str(bag_dir)))),
             *scenario_nodes(setpoint_s, plant, real_time_factor, seed,
                             DEMO_NORMAL_SUBSCRIBERS))
-
-
-class RunLog:
-    """What the demo watches while the run goes: measured normals and controller status."""
-
-    def __init__(self, probe):
-        from msg_defs.topics import CONTROLLER_STATUS, SURFACE_NORMAL
-
-        self.normals = probe.messages[SURFACE_NORMAL.name]
-        self.statuses = probe.messages[CONTROLLER_STATUS.name]
-
-    def simulated_s(self):
-        from msg_defs.conversions import ns_from_time
-
-        return ns_from_time(self.normals[-1].header.stamp) / NS_PER_S if self.normals else 0.0
-
-    def controller_ready(self):
-        """The controller has the reference and waits for the first sample."""
-        return any(m.status[0].message == 'no state' for m in self.statuses[-3:])
-
-    def kicks(self):
-        for msg in reversed(self.statuses):
-            values = {kv.key: kv.value for kv in msg.status[0].values}
-            if 'kicks' in values:
-                return int(values['kicks'])
-        return 0
 
 
 def run_demo(setpoint_s=DEFAULT_SETPOINT_S, trajectory_s=DEFAULT_TRAJECTORY_S,

@@ -1,0 +1,55 @@
+"""The closed-loop scenario the demo and ``bench twin`` run: the Fig. 13 setpoint, then the
+trajectory of eq. (64); which nodes it takes, and what a run's observer reads off it."""
+
+from msg_defs.device import NS_PER_S
+from sphere_twin.processes import NodeSpec, parameter_args
+
+SETPOINT_XY = (0.01, 0.02)  # Fig. 13
+# Eq. (64) entered where it passes the centre (t = 1/(4 f1)), so the trajectory takes over from
+# the setpoint without a jump to A_max.
+TRAJECTORY_OFFSET_S = 12.5
+
+
+def scenario_nodes(setpoint_s, plant, real_time_factor, seed, normal_subscribers):
+    """The closed loop of the scenario, in start order: controller, reference, simulator.
+
+    The simulator comes last, once the controller holds the reference, and holds simulated
+    time at 0 until ``normal_subscribers`` listen: the scenario's clock (simulated time, which
+    the reference follows) starts when everyone is there.
+    """
+    return (
+        NodeSpec('controller', tuple(parameter_args(controller='extended'))),
+        NodeSpec('reference', tuple(parameter_args(setpoint_xy=list(SETPOINT_XY),
+                                                   trajectory_start_s=setpoint_s,
+                                                   trajectory_offset_s=TRAJECTORY_OFFSET_S,
+                                                   use_sim_time=True))),
+        NodeSpec('simulator', tuple(parameter_args(
+            plant=plant, seed=seed, real_time_factor=real_time_factor,
+            wait_for_subscribers=normal_subscribers))),
+    )
+
+
+class RunLog:
+    """What the demo watches while the run goes: measured normals and controller status."""
+
+    def __init__(self, probe):
+        from msg_defs.topics import CONTROLLER_STATUS, SURFACE_NORMAL
+
+        self.normals = probe.messages[SURFACE_NORMAL.name]
+        self.statuses = probe.messages[CONTROLLER_STATUS.name]
+
+    def simulated_s(self):
+        from msg_defs.conversions import ns_from_time
+
+        return ns_from_time(self.normals[-1].header.stamp) / NS_PER_S if self.normals else 0.0
+
+    def controller_ready(self):
+        """The controller has the reference and waits for the first sample."""
+        return any(m.status[0].message == 'no state' for m in self.statuses[-3:])
+
+    def kicks(self):
+        for msg in reversed(self.statuses):
+            values = {kv.key: kv.value for kv in msg.status[0].values}
+            if 'kicks' in values:
+                return int(values['kicks'])
+        return 0
