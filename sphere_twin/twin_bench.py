@@ -10,6 +10,9 @@ pulse programme took from its arrival to the published sample that first shows i
 
 import dataclasses
 import math
+import time
+
+import numpy as np
 
 from sphere_twin.processes import fresh_domain_id, running_nodes
 from sphere_twin.scenario import scenario_nodes
@@ -41,6 +44,7 @@ class TwinBenchResult:
     publishing_fraction: float
     latency_median_ms: float
     latency_max_ms: float
+    cycle: 'LoopCycle' = None
 
     @property
     def other_fraction(self):
@@ -56,14 +60,50 @@ class TwinBenchResult:
                 'kicks_per_simulated_s': self.kicks_per_simulated_s}
 
     @classmethod
-    def from_status(cls, plant, values):
+    def from_dict(cls, data):
+        fields = {k: v for k, v in data.items() if k in cls.__dataclass_fields__}
+        if fields.get('cycle') is not None:
+            fields['cycle'] = LoopCycle(**fields['cycle'])
+        return cls(**fields)
+
+    @classmethod
+    def from_status(cls, plant, values, cycle=None):
         """From the key-values of the simulator's ``/diagnostics`` status."""
         return cls(plant, float(values['simulated_time_s']), float(values['wall_time_s']),
                    float(values['real_time_factor']), int(values['programmes']),
                    int(values['late']), int(values['rejected']), int(values['samples']),
                    float(values['integrating_fraction']), float(values['publishing_fraction']),
                    float(values['programme_latency_median_ms']),
-                   float(values['programme_latency_max_ms']))
+                   float(values['programme_latency_max_ms']), cycle)
+
+
+@dataclasses.dataclass(frozen=True)
+class LoopCycle:
+    """The node loop's kick cycle (medians, ms): from one programme's start to the next, in
+    simulated and wall time, and its parts in simulated time: the simulator's delay of the
+    start, the kick in effect until the controller decided on a settled sample, and the lead
+    the controller gives the next start after that sample."""
+
+    simulated_ms: float
+    wall_ms: float
+    start_delay_ms: float
+    settling_ms: float
+    lead_ms: float
+
+    @classmethod
+    def measure(cls, starts_s, arrivals_wall_s, decisions_s, start_delay_s):
+        """From the programmes' asked starts (simulated s) and arrivals (wall s) at an
+        observer, the stamps of the samples the kicks were decided on (simulated s, in the
+        same order) and the simulator's median start delay (s)."""
+        n = min(len(starts_s), len(decisions_s))
+        if n < 3:
+            return None
+        starts, decisions = np.asarray(starts_s[:n]), np.asarray(decisions_s[:n])
+        delay = 0.0 if math.isnan(start_delay_s) else start_delay_s
+        settling = decisions[1:] - (starts[:-1] + delay)
+        return cls(*(1e3 * float(np.median(v)) for v in (
+            np.diff(starts), np.diff(np.asarray(arrivals_wall_s[:n])), [delay], settling,
+            starts - decisions)))
 
 
 class BenchError(RuntimeError):
@@ -91,7 +131,9 @@ def run_twin_bench(plant='continuous', duration_s=DEFAULT_DURATION_S, seed=0,
     BenchError
         When the loop does not start, or the run does not finish in time.
     """
-    from msg_defs.topics import CONTROLLER_STATUS, DIAGNOSTICS, SURFACE_NORMAL
+    from msg_defs.conversions import ns_from_time
+    from msg_defs.device import NS_PER_S
+    from msg_defs.topics import CONTROLLER_STATUS, DIAGNOSTICS, PULSE_PROGRAM, SURFACE_NORMAL
     from sphere_twin.scenario import RunLog
     from sphere_twin.testing import TopicProbe, TwinTimeoutError
 
@@ -100,6 +142,11 @@ def run_twin_bench(plant='continuous', duration_s=DEFAULT_DURATION_S, seed=0,
     with running_nodes(*others, domain_id=domain_id) as group:
         probe = TopicProbe(domain_id, (SURFACE_NORMAL, CONTROLLER_STATUS, DIAGNOSTICS))
         diagnostics = probe.messages[DIAGNOSTICS.name]
+        programmes = []  # (wall s at arrival, asked start in simulated s)
+        probe.node.create_subscription(
+            PULSE_PROGRAM.msg_type, PULSE_PROGRAM.name,
+            lambda m: programmes.append((time.monotonic(), ns_from_time(m.header.stamp)
+                                         / NS_PER_S)), PULSE_PROGRAM.qos.to_profile())
 
         def finished():
             status = _simulator_status(diagnostics)
@@ -120,9 +167,14 @@ def run_twin_bench(plant='continuous', duration_s=DEFAULT_DURATION_S, seed=0,
         finally:
             probe.close()
         status = _simulator_status(diagnostics)
+        decisions = [ns_from_time(m.header.stamp) / NS_PER_S
+                     for m in probe.messages[CONTROLLER_STATUS.name]
+                     if m.status[0].message.startswith('kick')]
     farewell = next((line for line in process.stdout_text().splitlines()
                      if line.startswith('simulator:')), '')
-    return TwinBenchResult.from_status(plant, status), farewell
+    cycle = LoopCycle.measure([s for _, s in programmes], [w for w, _ in programmes],
+                              decisions, float(status['programme_delay_median_ms']) / 1e3)
+    return TwinBenchResult.from_status(plant, status, cycle), farewell
 
 
 def summary_lines(result):
@@ -136,5 +188,13 @@ def summary_lines(result):
         f'{r.publishing_fraction:.1%}, rclpy and the rest {r.other_fraction:.1%}',
         f'programme latency, arrival to the first published sample showing it: median '
         f'{r.latency_median_ms:.2f} ms, largest {r.latency_max_ms:.2f} ms (wall)',
+        *([] if r.cycle is None else [
+            f'node loop cycle, programme to programme (medians): {r.cycle.simulated_ms:.1f} ms '
+            f'simulated, {r.cycle.wall_ms:.1f} ms wall; in simulated time the start delayed '
+            f'{r.cycle.start_delay_ms:.1f} ms, the kick in effect until the deciding sample '
+            f'{r.cycle.settling_ms:.1f} ms'
+            + (' (negative: the next kick was decided before this one started)'
+               if r.cycle.settling_ms < 0 else '')
+            + f', the lead to the next start {r.cycle.lead_ms:.1f} ms']),
         f'twin real-time factor: {r.real_time_factor:.2f} unpaced ({r.plant})',
     ]

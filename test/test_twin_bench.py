@@ -6,7 +6,7 @@ import math
 import pytest
 
 from sphere_twin.cli import main
-from sphere_twin.twin_bench import TwinBenchResult, run_twin_bench, summary_lines
+from sphere_twin.twin_bench import LoopCycle, TwinBenchResult, run_twin_bench, summary_lines
 
 pytestmark = pytest.mark.ros
 
@@ -47,8 +47,7 @@ def test_summary_ends_with_the_headline_and_the_result_round_trips(runs):
     assert lines[-1] == f'twin real-time factor: {result.real_time_factor:.2f} unpaced (continuous)'
     data = result.to_dict()
     assert math.isclose(data['other_fraction'], result.other_fraction)
-    fields = {k: v for k, v in data.items() if k in TwinBenchResult.__dataclass_fields__}
-    assert TwinBenchResult(**fields) == result
+    assert TwinBenchResult.from_dict(data) == result
 
 
 def test_cli_writes_the_results_and_prints_the_headline_last(tmp_path, capsys):
@@ -60,3 +59,25 @@ def test_cli_writes_the_results_and_prints_the_headline_last(tmp_path, capsys):
     data = json.loads((tmp_path / 'twin_discrete.json').read_text())
     assert data['simulated_s'] >= 1.0
     assert (tmp_path / 'twin_discrete.md').read_text().count('twin real-time factor') == 1
+
+
+def test_the_loop_cycle_is_split_into_delay_settling_and_lead():
+    # Kicks decided on samples 40 ms before the starts they ask, started 5 ms late, one every
+    # 120 ms simulated and 80 ms wall.
+    starts = [0.1 + 0.12 * k for k in range(6)]
+    cycle = LoopCycle.measure(starts, [2.0 + 0.08 * k for k in range(6)],
+                              [s - 0.04 for s in starts], 0.005)
+    assert cycle.simulated_ms == pytest.approx(120.0) and cycle.wall_ms == pytest.approx(80.0)
+    assert (cycle.start_delay_ms, cycle.lead_ms) == (pytest.approx(5.0), pytest.approx(40.0))
+    assert cycle.start_delay_ms + cycle.settling_ms + cycle.lead_ms == pytest.approx(120.0)
+    assert LoopCycle.measure(starts[:2], [0.0, 1.0], starts[:2], 0.0) is None
+
+
+@pytest.mark.parametrize('plant', ['discrete', 'continuous'])
+def test_no_cycle_is_shorter_than_the_kick_window_and_the_lead(runs, plant):
+    cycle = runs[plant][0].cycle
+    # The controller decides only on a sample at or after the kick's window (60 ms) and asks
+    # the next start two sample periods (40 ms) after that sample.
+    assert cycle.lead_ms == pytest.approx(40.0)
+    assert cycle.simulated_ms >= 100.0 - 1e-6
+    assert cycle.settling_ms + cycle.start_delay_ms >= 60.0 - 1e-6

@@ -73,6 +73,10 @@ class TwinTimings:
             return float('nan'), float('nan')
         return float(np.median(self.latencies_wall_s)), float(max(self.latencies_wall_s))
 
+    def delay_median_s(self):
+        """Median simulated delay of a programme's start after the start it asked for (s)."""
+        return float(np.median(self.delays_sim_s)) if self.delays_sim_s else float('nan')
+
 
 class TwinRunner:
     """Advance a plant on a fixed grid of sample times and apply commands between samples.

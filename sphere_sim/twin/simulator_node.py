@@ -221,7 +221,8 @@ class SimulatorNode(Node):
             ('integrating_fraction', f'{t.integrating_s / wall:.4f}'),
             ('publishing_fraction', f'{t.publishing_s / wall:.4f}'),
             ('programme_latency_median_ms', f'{median_ms:.3f}'),
-            ('programme_latency_max_ms', f'{max_ms:.3f}'))
+            ('programme_latency_max_ms', f'{max_ms:.3f}'),
+            ('programme_delay_median_ms', f'{1e3 * t.delay_median_s():.3f}'))
 
     def _publish_diagnostics(self, level, message):
         status = DiagnosticStatus(level=level, name='simulator: commands',
