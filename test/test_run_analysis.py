@@ -117,11 +117,13 @@ def test_continuous_plant_replays_a_recording_to_the_integrator_tolerance(ros_no
     assert replay_check.run(args) == 0
     replayed = json.loads((tmp_path / 'continuous_replay.json').read_text())
     # The replay integrates from the rest state of the first recorded normal (the run from the
-    # scene's), sample by sample like the run, at the live tolerance: they agree to what that
-    # tolerance is chosen for, a hundredth of the noise study's sensor noise (4e-6 rad measured
-    # over three kicks; 6e-10 rad at rtol 1e-6).
+    # scene's), sample by sample like the run, at the live tolerance, which holds a kick to a
+    # hundredth of the noise study's sensor noise. Each kick adds its own integration error to
+    # the difference: at most that bound per kick (measured: 4e-6 rad after 3 kicks, 9.9e-6
+    # after 26, 7.8e-5 after the 214 of bags/example; 6e-10 rad after 3 at rtol 1e-6). The
+    # recording runs on until the nodes are stopped, so its kick count varies.
     assert replayed['kicks'] >= 2
-    assert replayed['max_error_rad'] < LIVE_ERROR_BOUND_RAD
+    assert replayed['max_error_rad'] < replayed['kicks'] * LIVE_ERROR_BOUND_RAD
 
 
 def test_recorded_commands_that_break_the_rules_are_dropped_as_the_twin_dropped_them(tmp_path):
