@@ -41,6 +41,11 @@ def ns_from_time(stamp):
     return stamp.sec * NS_PER_S + stamp.nanosec
 
 
+def status_values(status):
+    """The key-values of a ``diagnostic_msgs/DiagnosticStatus`` as a dict of strings."""
+    return {kv.key: kv.value for kv in status.values}
+
+
 def _unit_vector(values, what):
     vector = finite_vector(values, 3, what)
     norm = float(np.linalg.norm(vector))

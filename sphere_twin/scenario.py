@@ -48,8 +48,10 @@ class RunLog:
         return any(m.status[0].message == 'no state' for m in self.statuses[-3:])
 
     def kicks(self):
+        from msg_defs.conversions import status_values
+
         for msg in reversed(self.statuses):
-            values = {kv.key: kv.value for kv in msg.status[0].values}
+            values = status_values(msg.status[0])
             if 'kicks' in values:
                 return int(values['kicks'])
         return 0

@@ -167,7 +167,9 @@ class TwinClient(TopicProbe):
         """The key-values of the last ``/diagnostics`` status received, or {} before one."""
         if not self._diagnostics:
             return {}
-        return {kv.key: kv.value for kv in self._diagnostics[-1].status[0].values}
+        from msg_defs.conversions import status_values
+
+        return status_values(self._diagnostics[-1].status[0])
 
     def wait_for_normal(self, timeout_s=DEFAULT_TIMEOUT_S):
         """The latest measured normal, waiting for the first one."""

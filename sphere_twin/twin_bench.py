@@ -115,7 +115,9 @@ def _simulator_status(diagnostics):
     for msg in reversed(diagnostics):
         status = msg.status[0]
         if status.name.startswith('simulator'):
-            return {kv.key: kv.value for kv in status.values}
+            from msg_defs.conversions import status_values
+
+            return status_values(status)
     return {}
 
 

@@ -9,6 +9,7 @@ where it enters the twin, and a rejected one leaves the plant untouched.
 import collections
 import dataclasses
 import time
+import typing
 
 import numpy as np
 
@@ -26,6 +27,17 @@ MAX_START_AHEAD_S = 60.0
 MAX_QUEUED_COMMANDS = 100
 # Latencies kept for the status's median and maximum: the most recent ones, memory bounded.
 LATENCY_HISTORY = 10_000
+
+
+class _Queued(typing.NamedTuple):
+    """A command waiting for its sample: when it applies, what it is, and for the accounts
+    the start it asked for and when it arrived (wall s)."""
+
+    start_s: float
+    kind: str  # 'hold' or 'programme'
+    payload: object
+    asked_s: float
+    arrival_wall_s: float
 
 
 class CommandError(ValueError):
@@ -111,8 +123,7 @@ class TwinRunner:
         self.voltage_limit_v = voltage_limit_v
         self.counters = TwinCounters()
         self.timings = TwinTimings()
-        # (start_s, kind, payload, asked_s, arrival_wall_s), applied at the next sample boundary
-        self._queued = []
+        self._queued = []  # _Queued, in start order, applied at the sample boundary they are due
         self._acted = []  # (arrival_wall_s) of programmes applied in this tick
         self._programme_end_s = -1.0  # when the last programme applied switches off
         self._step = 0
@@ -144,16 +155,16 @@ class TwinRunner:
         except VoltageRuleError as error:
             raise CommandError(str(error)) from None
         cut = self._cut_by_hold()
-        # Holds due at the same sample: only the latest would count, so it replaces them (a
-        # burst of commands then never fills the queue).
-        self._queued = [item for item in self._queued if item[1] != 'hold']
+        # The hold overrides everything queued: programmes (reported) and earlier holds due at
+        # the same sample (only the latest would count; a burst never fills the queue).
+        self._queued.clear()
         self._queue(self.time_s, 'hold', volts, self.time_s)
         return cut
 
     def _cut_by_hold(self):
-        """Drop the queued programmes a hold now overrides; say what it cut."""
-        queued = [item for item in self._queued if item[1] == 'programme']
-        self._queued = [item for item in self._queued if item[1] != 'programme']
+        """What a hold now overrides: the running programme and the queued ones (counted and
+        said, or None)."""
+        queued = [item for item in self._queued if item.kind == 'programme']
         running = self.time_s < self._programme_end_s - TIME_TOL_S
         if not (queued or running):
             return None
@@ -193,14 +204,14 @@ class TwinRunner:
         if len(self._queued) >= MAX_QUEUED_COMMANDS:
             raise CommandError(f'{MAX_QUEUED_COMMANDS} commands are already waiting for their '
                                'start; this one is refused')
-        self._queued.append((start_s, kind, payload, asked_s, time.perf_counter()))
-        self._queued.sort(key=lambda item: item[0])
+        self._queued.append(_Queued(start_s, kind, payload, asked_s, time.perf_counter()))
+        self._queued.sort(key=lambda item: item.start_s)
         self._idle_published = False
 
     def _apply_due(self):
         """Apply queued commands due now; returns the reasons of those the plant refused."""
         refused = []
-        while self._queued and self._queued[0][0] <= self.time_s + TIME_TOL_S:
+        while self._queued and self._queued[0].start_s <= self.time_s + TIME_TOL_S:
             _, kind, payload, asked_s, arrival_wall_s = self._queued.pop(0)
             try:
                 if kind == 'hold':

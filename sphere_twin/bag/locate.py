@@ -14,7 +14,7 @@ from pathlib import Path
 import yaml
 
 from sphere_twin.bag import format as bag_format
-from sphere_twin.bag.reader import BagError
+from sphere_twin.bag.reader import BagError, read_metadata
 
 MCAP_SUFFIX = '.mcap'
 # The source tree's bags, for a checkout that was not installed.
@@ -43,10 +43,8 @@ class BagLocation:
     note: str = None
 
 
-def _lists(bag_dir, file_name):
-    """Whether the bag directory's metadata.yaml lists ``file_name``."""
-    from sphere_twin.bag.reader import read_metadata
-
+def lists_file(bag_dir, file_name):
+    """Whether the bag directory's metadata.yaml lists ``file_name`` (False without one)."""
     try:
         listed = read_metadata(bag_dir).get('relative_file_paths') or []
     except BagError:
@@ -66,13 +64,15 @@ def _installed(name):
     return None
 
 
-def placeholder_metadata(file_name):
-    """A metadata.yaml that lists ``file_name`` and nothing else; repair fills in the rest."""
-    return {'rosbag2_bagfile_information': {
-        'version': bag_format.METADATA_VERSION,
-        'storage_identifier': bag_format.STORAGE_IDENTIFIER,
-        'relative_file_paths': [file_name], 'message_count': 0,
-        'topics_with_message_count': []}}
+def write_placeholder_metadata(bag_dir, file_name):
+    """Write a metadata.yaml into ``bag_dir`` that lists ``file_name`` and nothing else;
+    ``repair_bag`` then fills in the rest from the file's records."""
+    (Path(bag_dir) / bag_format.METADATA_FILENAME).write_text(yaml.safe_dump(
+        {'rosbag2_bagfile_information': {
+            'version': bag_format.METADATA_VERSION,
+            'storage_identifier': bag_format.STORAGE_IDENTIFIER,
+            'relative_file_paths': [file_name], 'message_count': 0,
+            'topics_with_message_count': []}}))
 
 
 def _read_bare_mcap(path):
@@ -83,8 +83,7 @@ def _read_bare_mcap(path):
     view = Path(tempfile.mkdtemp(prefix='sphere_twin_bag_'))
     atexit.register(shutil.rmtree, view, True)
     (view / path.name).symlink_to(path.resolve())
-    (view / bag_format.METADATA_FILENAME).write_text(yaml.safe_dump(placeholder_metadata(
-        path.name)))
+    write_placeholder_metadata(view, path.name)
     result = repair_bag(view, backup=False)
     state = ('closed cleanly' if result.was_complete
              else f'not closed ({result.stop_reason})')
@@ -105,7 +104,7 @@ def locate_bag(given):
     if path.is_dir():
         return BagLocation(path, path.name, path.parent)
     if path.is_file() and path.suffix == MCAP_SUFFIX:
-        if _lists(path.parent, path.name):
+        if lists_file(path.parent, path.name):
             return BagLocation(path.parent, path.parent.name, path.parent.parent)
         view, note = _read_bare_mcap(path)
         return BagLocation(view, path.stem, path.parent, note)

@@ -80,21 +80,19 @@ def run_repair(args):
 def _bag_dir_of_file(path):
     """The directory of an MCAP file to repair, with a metadata.yaml that lists it (written,
     and said, when there was none)."""
-    import yaml
-
     from sphere_twin.bag import format as bag_format
-    from sphere_twin.bag.locate import MCAP_SUFFIX, placeholder_metadata
+    from sphere_twin.bag.locate import MCAP_SUFFIX, lists_file, write_placeholder_metadata
     from sphere_twin.bag.reader import BagError, read_metadata
 
     if path.suffix != MCAP_SUFFIX:
         raise BagError(f'{path} is not a bag: give a bag directory or an {MCAP_SUFFIX} file')
     metadata_path = path.parent / bag_format.METADATA_FILENAME
     if not metadata_path.exists():
-        metadata_path.write_text(yaml.safe_dump(placeholder_metadata(path.name)))
+        write_placeholder_metadata(path.parent, path.name)
         print(f'{path} had no metadata.yaml: wrote {metadata_path} from its records')
         return path.parent
-    listed = [Path(p).name for p in read_metadata(path.parent).get('relative_file_paths') or []]
-    if path.name not in listed:
+    if not lists_file(path.parent, path.name):
+        read_metadata(path.parent)  # a metadata.yaml that is no bag's says so first
         raise BagError(f'{path} is not listed in {metadata_path}: repair that bag, or move the '
                        'file to a directory of its own')
     return path.parent
