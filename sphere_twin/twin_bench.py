@@ -93,17 +93,23 @@ class LoopCycle:
     @classmethod
     def measure(cls, starts_s, arrivals_wall_s, decisions_s, start_delay_s):
         """From the programmes' asked starts (simulated s) and arrivals (wall s) at an
-        observer, the stamps of the samples the kicks were decided on (simulated s, in the
-        same order) and the simulator's median start delay (s)."""
-        n = min(len(starts_s), len(decisions_s))
-        if n < 3:
+        observer, the stamps of the samples kicks were decided on (simulated s) and the
+        simulator's median start delay (s).
+
+        Each start is matched to the decision just before it (its own: the lead is shorter
+        than a kick window) and to the first one after it (the next kick's), not by position,
+        so a status the observer missed in a fast unpaced stream shifts nothing.
+        """
+        starts, decisions = np.asarray(starts_s), np.sort(np.asarray(decisions_s))
+        before = np.searchsorted(decisions, starts, side='right') - 1  # index of own decision
+        paired = (before >= 0) & (before + 1 < decisions.size)
+        if np.count_nonzero(paired) < 2:
             return None
-        starts, decisions = np.asarray(starts_s[:n]), np.asarray(decisions_s[:n])
         delay = 0.0 if math.isnan(start_delay_s) else start_delay_s
-        settling = decisions[1:] - (starts[:-1] + delay)
+        own, following = decisions[before[paired]], decisions[before[paired] + 1]
         return cls(*(1e3 * float(np.median(v)) for v in (
-            np.diff(starts), np.diff(np.asarray(arrivals_wall_s[:n])), [delay], settling,
-            starts - decisions)))
+            np.diff(starts), np.diff(np.asarray(arrivals_wall_s)), [delay],
+            following - (starts[paired] + delay), starts[paired] - own)))
 
 
 class BenchError(RuntimeError):

@@ -5,6 +5,7 @@ import re
 
 import pytest
 
+from sphere_sim.twin.simulator_node import CATCH_UP_SPEEDUP
 from sphere_twin.cli import build_parser
 from sphere_twin.commands.demo import DEFAULT_REAL_TIME_FACTOR, run_demo
 
@@ -27,10 +28,15 @@ def test_short_demo_runs_the_loop_records_a_bag_and_reports(tmp_path, plant):
     pace = re.search(r'demo: real-time factor: controller ([\d.]+), reference ([\d.]+), '
                      r'simulator ([\d.]+); late programmes: (\d+)', text)
     assert pace, text
-    # Each node saw simulated time run at the pace asked for (a loaded machine lags a little).
-    for factor in pace.groups()[:3]:
-        assert 0.5 * DEFAULT_REAL_TIME_FACTOR[plant] < float(factor) < 1.05 * \
-            DEFAULT_REAL_TIME_FACTOR[plant]
+    # The simulator, anchored to the wall clock, never runs ahead of the pace asked for (a
+    # loaded machine lags a little). The others measure from the first sample they saw: one
+    # that came while the simulator was catching up (at most CATCH_UP_SPEEDUP times the pace)
+    # can make their span run faster than the pace.
+    pace_asked = DEFAULT_REAL_TIME_FACTOR[plant]
+    controller, reference, simulator = (float(f) for f in pace.groups()[:3])
+    assert 0.5 * pace_asked < simulator < 1.01 * pace_asked
+    for factor in (controller, reference):
+        assert 0.5 * pace_asked < factor < CATCH_UP_SPEEDUP * pace_asked
     bag = re.search(r'demo: bag (\S+)', text).group(1)
     assert (tmp_path / bag.split('/')[-1] / 'metadata.yaml').is_file()
     assert list(tmp_path.glob('*_error.png'))
