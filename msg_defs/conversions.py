@@ -11,6 +11,7 @@ something: here by a sender, in the twin by the receiver. No rclpy here; stamps 
 
 
 import numpy as np
+from actionlib_msgs.msg import GoalID, GoalStatus, GoalStatusArray
 from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Vector3Stamped
 from nav_msgs.msg import Odometry
@@ -18,6 +19,7 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from msg_defs.device import BEAM_COUNT, NS_PER_S, VOLTAGE_LIMIT_V
+from msg_defs.programme_events import ProgrammeEvent, ProgrammeState
 from msg_defs.topics import BEAM_NAMES, BEAM_STATE_JOINT_NAMES, SPHERE_FRAME, WORLD_FRAME
 from msg_defs.voltage_rules import check_segments, check_voltages, finite_vector
 
@@ -362,3 +364,53 @@ def sphere_state_from_msg(msg):
                               'position')
     o = pose.orientation
     return position, finite_vector((o.w, o.x, o.y, o.z), 4, 'quaternion')
+
+
+# How a programme's states map onto actionlib's goal states (the programme is the goal).
+_GOAL_STATUS_OF_STATE = {
+    ProgrammeState.STARTED: GoalStatus.ACTIVE,
+    ProgrammeState.ENDED: GoalStatus.SUCCEEDED,
+    ProgrammeState.CUT: GoalStatus.PREEMPTED,
+    ProgrammeState.REFUSED: GoalStatus.REJECTED,
+}
+_STATE_OF_GOAL_STATUS = {v: k for k, v in _GOAL_STATUS_OF_STATE.items()}
+
+
+def programme_event_to_msg(event):
+    """Message for ``/beams/programme_status`` from a :class:`ProgrammeEvent`.
+
+    ``header.stamp`` is when it happened; the one goal status names the programme by the stamp
+    it was sent with (``goal_id.stamp``) and the receiver's count (``goal_id.id``).
+    """
+    msg = GoalStatusArray()
+    msg.header.stamp = time_from_ns(round(event.time_s * NS_PER_S))
+    goal = GoalID(stamp=time_from_ns(round(max(event.asked_s, 0.0) * NS_PER_S)),
+                  id=str(event.number))
+    msg.status_list = [GoalStatus(goal_id=goal, status=_GOAL_STATUS_OF_STATE[event.state],
+                                  text=event.text)]
+    return msg
+
+
+def programme_events_from_msg(msg):
+    """The :class:`ProgrammeEvent` s a ``/beams/programme_status`` message carries.
+
+    Raises
+    ------
+    ValueError
+        For a goal status that is not one of the four a programme can be in, or an id that is
+        not a count.
+    """
+    time_s = ns_from_time(msg.header.stamp) / NS_PER_S
+    events = []
+    for status in msg.status_list:
+        state = _STATE_OF_GOAL_STATUS.get(status.status)
+        if state is None:
+            raise ValueError(f'goal status {status.status} is none of a programme\'s states '
+                             '(ACTIVE, SUCCEEDED, PREEMPTED, REJECTED)')
+        try:
+            number = int(status.goal_id.id)
+        except ValueError:
+            raise ValueError(f'goal id {status.goal_id.id!r} is not a programme count') from None
+        events.append(ProgrammeEvent(state, ns_from_time(status.goal_id.stamp) / NS_PER_S,
+                                     number, time_s, status.text))
+    return events

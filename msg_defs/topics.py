@@ -19,6 +19,12 @@ Pulse programme (``/beams/pulse_program``, trajectory_msgs/JointTrajectory)
     in V from its ``time_from_start`` until the next point's (zero-order hold, the last
     point's voltages hold until the programme is replaced). ``header.stamp`` is when the
     programme starts.
+Programme status (``/beams/programme_status``, actionlib_msgs/GoalStatusArray)
+    Each received programme is a goal: ``goal_id.stamp`` is the stamp it was sent with (the
+    start it asked for), ``goal_id.id`` the receiver's count of programmes. One status per
+    event, ``header.stamp`` the simulated time of the event: ACTIVE when it started, SUCCEEDED
+    when its last segment ended, PREEMPTED when a later command cut it, REJECTED when refused
+    (``text`` says why). Kick cycles are timed from these, not from the start asked for.
 Sphere state (``/sphere/state``, nav_msgs/Odometry)
     Pose of the sphere frame ``sphere`` in ``world``: the sphere centre in m and the
     orientation quaternion; the twist (m/s, rad/s) is expressed in ``sphere`` as the message
@@ -27,6 +33,7 @@ Sphere state (``/sphere/state``, nav_msgs/Odometry)
 
 import dataclasses
 
+from actionlib_msgs.msg import GoalStatusArray
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Vector3Stamped
 from nav_msgs.msg import Odometry
@@ -171,6 +178,15 @@ PULSE_PROGRAM = Topic(
     units='V (effort), s (time_from_start)',
     description='Piecewise-constant voltage programme for beam_1..beam_4.',
 )
+PROGRAMME_STATUS = Topic(
+    name='/beams/programme_status',
+    msg_type=GoalStatusArray,
+    qos=STREAM_QOS,
+    frame_id='',
+    units='s (stamps, simulated time)',
+    description='Each pulse programme\'s actual start and end, or its cut or refusal; '
+                'published by the simulator.',
+)
 SPHERE_REFERENCE = Topic(
     name='/sphere/reference',
     msg_type=Vector3Stamped,
@@ -221,6 +237,7 @@ ALL_TOPICS = (
     BEAM_VOLTAGE,
     VOLTAGE_COMMAND,
     PULSE_PROGRAM,
+    PROGRAMME_STATUS,
     SPHERE_REFERENCE,
     CONTROLLER_STATUS,
     DIAGNOSTICS,

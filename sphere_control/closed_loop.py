@@ -1,7 +1,9 @@
 """Run a controller against a KickPlant, one decision per kick period, and keep the history.
 
 Each step the (noisy, optionally filtered) normal is measured, the reference sampled, and the
-controller either rests or kicks; the next measurement teaches it what the kick did. A run ends
+controller either rests or kicks; the next measurement teaches it what the kick did. The
+sequencing is the controller node's own :class:`~sphere_control.kick_cycle.KickCycle`, with
+this loop as the plant that reports each kick's start and end. A run ends
 when a constant reference is reached and held (SETTLED), when no kick has brought the sphere
 closer for a while (STALLED), when the plant refuses a kick (PLANT_LIMIT), when a reference
 outside the reachable cone is refused (UNREACHABLE), or after its step budget (NOT_SETTLED for
@@ -17,9 +19,9 @@ import numpy as np
 from msg_defs.device import KICK_WINDOW_S
 from sphere_control import reference as ref
 from sphere_control.geometry import error_angle_rad
+from sphere_control.kick_cycle import KickCycle
 from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD
 
-KICK_PERIOD_STEP_S = 0.01  # a default kick period is a settle time rounded up to this
 NO_ACTION = -1  # the action recorded for a step spent resting
 
 
@@ -71,14 +73,6 @@ class LoopSettings:
     cone_policy: ConePolicy = ConePolicy.CLAMP
     cone_half_angle_rad: float = CONE_HALF_ANGLE_RAD
     preview: bool = False
-
-
-def settled_kick_period_s(settle_time_s):
-    """The shortest decision period after which a kick that settles in ``settle_time_s`` is
-    over: rounded up to KICK_PERIOD_STEP_S; the kick window when no settle time is known."""
-    if not (math.isfinite(settle_time_s) and settle_time_s > 0.0):
-        return KICK_WINDOW_S
-    return round(math.ceil(settle_time_s / KICK_PERIOD_STEP_S - 1e-9) * KICK_PERIOD_STEP_S, 9)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -169,7 +163,9 @@ def run_closed_loop(controller, plant, start_normal, reference, settings=LoopSet
     trace = _Trace()
     stall = _StallWatch(settings)
     outcome, settle_step, rest_streak = None, None, 0
-    pending = None  # (normal used before the kick, command) awaiting its outcome
+    # The node's kick cycle, with this loop as its plant: a kick starts at the sample it was
+    # decided on and is over, learnt from, at the next one, a kick period later.
+    cycle = KickCycle(controller, settings.kick_period_s, lead_periods=0)
 
     def measure():
         seen = true_normal if sensor is None else sensor.measure(true_normal)
@@ -179,15 +175,15 @@ def run_closed_loop(controller, plant, start_normal, reference, settings=LoopSet
         time_s = step * settings.kick_period_s
         sample = ref.sample(reference, time_s, settings.cone_half_angle_rad)
         seen = measure()
-        if pending is not None:
-            controller.observe(pending[0], pending[1], seen)
+        cycle.record(time_s, seen)
+        cycle.land()
         trace.state(time_s, true_normal, seen, sample)
         outcome = _stop(settings, reference, sample, stall, true_normal)
         if outcome is not None or step == settings.max_steps:
             break
-        command = controller.decide(seen, _target(settings, reference, sample, time_s).normal)
+        cycle.on_reference(_target(settings, reference, sample, time_s).normal)
+        command = cycle.decide().command
         if command is None:
-            pending = None
             rest_streak += 1
             trace.action(NO_ACTION, 0.0)
             if reference.is_constant and rest_streak >= settings.settle_rest_steps:
@@ -202,12 +198,12 @@ def run_closed_loop(controller, plant, start_normal, reference, settings=LoopSet
         except ValueError:  # the plant's model does not reach this far (e.g. TableError)
             outcome = Outcome.PLANT_LIMIT
             break
+        cycle.kick_ran(time_s, time_s)
         if estimator is not None:
             estimator.predict(controller.expected_displacement_xy(seen, command))
         true_normal = result.normal
         trace.action(command.action, command.intensity)
         stall.kicked()
-        pending = (seen, command)
     if outcome is None:
         outcome = Outcome.NOT_SETTLED if reference.is_constant else Outcome.COMPLETED
     return trace.history(outcome, settle_step)

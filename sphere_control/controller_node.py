@@ -1,8 +1,10 @@
 """The controller node: kicks the sphere towards the reference, talking only over topics.
 
-Subscribes to the measured ``/sphere/surface_normal`` and ``/sphere/reference``; when the last
-kick has settled it runs the basic or the extended controller (§4.2) and publishes the chosen
-kick as a ``/beams/pulse_program`` — the same voltages a real device's drivers take. While
+Subscribes to the measured ``/sphere/surface_normal``, ``/sphere/reference`` and the plant's
+``/beams/programme_status``; when the plant has reported the last kick's start and end and a
+kick period has passed since that start, it runs the basic or the extended controller (§4.2) on
+that sample and publishes the chosen kick as a ``/beams/pulse_program`` — the same voltages a
+real device's drivers take. While
 resting it sends 0 V on ``/beams/voltage_command`` (which also lets a lockstep simulator's time
 run on). ``/controller/status`` says what it did and why: chosen action, Phi, Theta, learned
 directions and widths; when the state is stale it holds, sends nothing, and says so.
@@ -17,14 +19,17 @@ from rclpy.node import Node
 
 from msg_defs.conversions import (
     ns_from_time,
+    programme_events_from_msg,
     programme_to_msg,
     surface_normal_from_msg,
     time_from_ns,
     voltages_to_msg,
 )
 from msg_defs.device import BEAM_COUNT, NS_PER_S
+from msg_defs.programme_events import ProgrammeState
 from msg_defs.topics import (
     CONTROLLER_STATUS,
+    PROGRAMME_STATUS,
     PULSE_PROGRAM,
     SPHERE_REFERENCE,
     SURFACE_NORMAL,
@@ -32,7 +37,7 @@ from msg_defs.topics import (
 )
 from node_runtime.pace import PaceMeter
 from node_runtime.ros_env import declare_node_parameters, parameter_descriptor, run_node
-from sphere_control.controllers import CONTROLLER_KINDS, controller_for
+from sphere_control.controllers import CONTROLLER_KINDS, DEFAULT_PHI_MIN_RAD, controller_for
 from sphere_control.kick_cycle import KickCycle, Phase
 
 STALE_CHECK_PERIOD_S = 0.25
@@ -45,13 +50,14 @@ class ControllerNode(Node):
     def __init__(self, **node_kwargs):
         # Physics and tables load here rather than at import, so main() installs its signal
         # handlers first and a SIGINT during start-up is a clean shutdown.
+        from sphere_sim.kicks.discrete import kick_period_s
         from sphere_sim.twin.plant_setup import load_kick_model
 
         super().__init__('controller', **node_kwargs)
         p = declare_node_parameters(self, {
                  'controller': ('extended', parameter_descriptor(
                      f'Control law: {" or ".join(CONTROLLER_KINDS)} (§4.2).')),
-                 'phi_min_deg': (0.05, parameter_descriptor(
+                 'phi_min_deg': (math.degrees(DEFAULT_PHI_MIN_RAD), parameter_descriptor(
                      'Resting band Phi_min (deg): no kick while the error is below it.',
                      (0.0, 10.0))),
                  'tables': ([''], parameter_descriptor(
@@ -61,8 +67,9 @@ class ControllerNode(Node):
                      'Wall time without a sample after which the state is stale (s).',
                      (0.05, 60.0))),
                  'kick_period_s': (0.0, parameter_descriptor(
-                     'Shortest time from a kick to the next decision (s); 0: the tables\' '
-                     'kick window (60 ms), when the simulator\'s discrete plant lands a kick.',
+                     'Time from a kick\'s reported start until it is over and the next is '
+                     'decided (s); 0: the settle time of the tables\' full kick, rounded up to '
+                     '10 ms (50 ms for the shipped table), as in the offline loop.',
                      (0.0, 10.0))),
                  'preview': (False, parameter_descriptor(
                      'Aim where the reference will be when the kick has settled, estimated '
@@ -72,13 +79,11 @@ class ControllerNode(Node):
         table = load_kick_model([t for t in p['tables'] if t])
         self.kicks = table
         self.controller_kind = p['controller']
-        # Not the settle time the offline evaluation uses (50 ms): the discrete twin lands a
-        # kick at the end of its table's window, and a decision before that would be refused.
-        self.kick_period_s = p['kick_period_s'] or table.spec.window_s
+        self.kick_period_s = p['kick_period_s'] or kick_period_s(table)
         self.cycle = KickCycle(controller_for(p['controller'], table,
                                               math.radians(p['phi_min_deg'])),
-                               window_s=self.kick_period_s,
-                               stale_timeout_s=p['stale_timeout_s'], preview=p['preview'])
+                               self.kick_period_s, stale_timeout_s=p['stale_timeout_s'],
+                               preview=p['preview'])
         self._outrun = False
         self._programme_pub = self.create_publisher(
             PULSE_PROGRAM.msg_type, PULSE_PROGRAM.name, PULSE_PROGRAM.qos.to_profile())
@@ -91,6 +96,8 @@ class ControllerNode(Node):
                                  SURFACE_NORMAL.qos.to_profile())
         self.create_subscription(SPHERE_REFERENCE.msg_type, SPHERE_REFERENCE.name,
                                  self.on_reference, SPHERE_REFERENCE.qos.to_profile())
+        self.create_subscription(PROGRAMME_STATUS.msg_type, PROGRAMME_STATUS.name,
+                                 self.on_programme_status, PROGRAMME_STATUS.qos.to_profile())
         self.create_timer(STALE_CHECK_PERIOD_S, self.on_stale_check)
         self._last_phase = None
         self._hold_sent_at_s = -1.0
@@ -115,7 +122,28 @@ class ControllerNode(Node):
             return
         sample_s = ns_from_time(msg.header.stamp) / NS_PER_S
         self.pace.note(sample_s)
-        decision = self.cycle.on_sample(sample_s, normal, time.monotonic())
+        self._act(self.cycle.on_sample(sample_s, normal, time.monotonic()))
+
+    def on_programme_status(self, msg):
+        try:
+            events = programme_events_from_msg(msg)
+        except ValueError as error:
+            self.get_logger().error(f'ignored {PROGRAMME_STATUS.name}: {error}')
+            return
+        for event in events:
+            if self.cycle.concerns(event) and event.state in (ProgrammeState.REFUSED,
+                                                              ProgrammeState.CUT):
+                self.get_logger().warning(f'our kick (programme {event.number}) '
+                                          f'{event.state.value}: {event.text}')
+            decision = self.cycle.on_programme_event(event)
+            if decision is not None:
+                self._act(decision)
+
+    def _act(self, decision):
+        """Send what the decision asks for and say so; stamped with the deciding sample's
+        (simulated) time."""
+        sample_s = self.cycle.latest[0] if self.cycle.latest is not None else 0.0
+        stamp = time_from_ns(round(sample_s * NS_PER_S))
         if decision.command is not None:
             programme = self.kicks.programme(decision.command.action,
                                              decision.command.intensity)
@@ -125,16 +153,15 @@ class ControllerNode(Node):
             # One hold in flight at a time: a lockstep simulator advances one sample per
             # command, and holds queued behind a later kick would delay it.
             self._hold_sent_at_s = sample_s
-            self._voltage_pub.publish(voltages_to_msg([0.0] * BEAM_COUNT, msg.header.stamp))
-        self._publish_status(decision, msg.header.stamp)
+            self._voltage_pub.publish(voltages_to_msg([0.0] * BEAM_COUNT, stamp))
+        self._publish_status(decision, stamp)
 
     def on_stale_check(self):
         decision = self.cycle.check_stale(time.monotonic())
         if decision is not None:
             # Stamped with the newest sample's time (0 before one): the node's own clock
             # would be the wall's unless use_sim_time, and every stamp is simulated time.
-            latest_s = self.cycle.samples[-1][0] if self.cycle.samples else 0.0
-            self._publish_status(decision, time_from_ns(round(latest_s * NS_PER_S)))
+            self._act(decision)
 
     def _publish_status(self, decision, stamp):
         phase = decision.phase
@@ -144,7 +171,10 @@ class ControllerNode(Node):
             if phase != self._last_phase:
                 self.get_logger().warning(f'holding: {phase.value}; sending nothing')
         self._last_phase = phase
-        values = [('phase', phase.value), ('kicks', self.cycle.kicks),
+        counts = self.cycle.counts
+        values = [('phase', phase.value), ('kicks', counts.kicks), ('landed', counts.landed),
+                  ('cut', counts.cut), ('refused', counts.refused),
+                  ('unanswered', counts.unanswered),
                   ('phi_deg', f'{math.degrees(decision.phi_rad):.5f}'),
                   ('theta_deg', f'{math.degrees(decision.theta_rad):.3f}'),
                   ('reference_speed_ratio', f'{self._speed_check():.3f}')]
@@ -184,8 +214,11 @@ class ControllerNode(Node):
         return ratio
 
     def summary(self):
-        return (f'controller: {self.cycle.kicks} kicks over {self.pace.simulated_span_s():.3f} s '
-                f'of samples; real-time factor {self.pace.real_time_factor():.3f}')
+        c = self.cycle.counts
+        return (f'controller: {c.kicks} kicks over {self.pace.simulated_span_s():.3f} s of '
+                f'samples ({c.landed} landed, {c.cut} cut, {c.refused} refused, '
+                f'{c.unanswered} unanswered); real-time factor '
+                f'{self.pace.real_time_factor():.3f}')
 
 
 def main(args=None):

@@ -29,7 +29,6 @@ from sphere_control.closed_loop import (
     LoopSettings,
     Outcome,
     run_closed_loop,
-    settled_kick_period_s,
 )
 from sphere_control.controllers import ControllerKind, make_controller
 from sphere_control.estimator import KalmanParams, NormalKalmanFilter
@@ -47,7 +46,12 @@ from sphere_control.reachable import (
     speed_ratios,
 )
 from sphere_control.reference import CircleTrajectory, Setpoint
-from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD, PAPER_FULL_KICK_RAD
+from sphere_sim.kicks.discrete import (
+    CONE_HALF_ANGLE_RAD,
+    LEVEL_NORMAL,
+    PAPER_FULL_KICK_RAD,
+    settled_kick_period_s,
+)
 from sphere_sim.model.rotations import angle_between
 
 # The paper's numbers (§4.1, §5).
@@ -58,7 +62,6 @@ PAPER_TRAJECTORY_MISMATCH_RAD = math.radians(33.0)
 PAPER_TRAJECTORY = CircleTrajectory(amplitude=0.44, frequency_hz=0.02)
 PAPER_MSE_RATIO = 0.2  # "the extended approach performs with a fifth of the basic controller error"
 
-LEVEL_NORMAL = np.array([0.0, 0.0, 1.0])  # "we initialize the sphere to start with zero angles"
 # An axis-parallel setpoint (as far as the paper's one, along +x), where eight directions should
 # help most.
 AXIS_SETPOINT_NORMAL = (math.hypot(0.01, 0.02), 0.0, 0.9997)

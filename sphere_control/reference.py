@@ -83,6 +83,33 @@ class CircleTrajectory:
         return self.amplitude * math.cos(phase) * np.array([math.cos(phase), math.sin(phase)])
 
 
+@dataclasses.dataclass(frozen=True)
+class ScheduledReference:
+    """A setpoint until ``switch_s``, then a trajectory entered ``offset_s`` into it: the
+    reference node's schedule (the demo's scenario), for the offline loop too.
+
+    ``switch_s`` < 0: the setpoint for ever.
+    """
+
+    setpoint: Setpoint
+    trajectory: CircleTrajectory
+    switch_s: float = -1.0
+    offset_s: float = 0.0
+
+    @property
+    def is_constant(self):
+        return self.switch_s < 0.0
+
+    def phase_at(self, time_s):
+        """'setpoint' or 'trajectory'."""
+        return 'trajectory' if 0.0 <= self.switch_s <= time_s else 'setpoint'
+
+    def xy_at(self, time_s):
+        if self.phase_at(time_s) == 'trajectory':
+            return self.trajectory.xy_at(time_s - self.switch_s + self.offset_s)
+        return self.setpoint.xy_at(time_s)
+
+
 def sample(reference, time_s, cone_half_angle_rad=CONE_HALF_ANGLE_RAD):
     """The :class:`ReferenceSample` of ``reference`` at ``time_s``."""
     requested = reference.xy_at(time_s)

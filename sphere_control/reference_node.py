@@ -14,7 +14,7 @@ from msg_defs.markers import reference_markers
 from msg_defs.topics import CLOCK, MARKERS, SPHERE_REFERENCE
 from node_runtime.pace import PaceMeter
 from node_runtime.ros_env import declare_node_parameters, parameter_descriptor, run_node
-from sphere_control.reference import CircleTrajectory, Setpoint, sample
+from sphere_control.reference import CircleTrajectory, ScheduledReference, Setpoint, sample
 
 DEFAULT_PUBLISH_RATE_HZ = 10.0
 NEVER = -1.0
@@ -42,10 +42,9 @@ class ReferenceNode(Node):
              })
         if len(p['setpoint_xy']) != 2:
             raise ValueError(f'setpoint_xy needs 2 values, got {list(p["setpoint_xy"])}')
-        self.setpoint = Setpoint(tuple(float(v) for v in p['setpoint_xy']))
-        self.trajectory = CircleTrajectory(p['amplitude'], p['frequency_hz'])
-        self.trajectory_start_s = p['trajectory_start_s']
-        self.trajectory_offset_s = p['trajectory_offset_s']
+        self.schedule = ScheduledReference(Setpoint(tuple(float(v) for v in p['setpoint_xy'])),
+                                           CircleTrajectory(p['amplitude'], p['frequency_hz']),
+                                           p['trajectory_start_s'], p['trajectory_offset_s'])
         self._publisher = self.create_publisher(
             SPHERE_REFERENCE.msg_type, SPHERE_REFERENCE.name, SPHERE_REFERENCE.qos.to_profile())
         self._marker_publisher = self.create_publisher(MARKERS.msg_type, MARKERS.name,
@@ -61,11 +60,7 @@ class ReferenceNode(Node):
 
     def reference_at(self, elapsed_s):
         """(sample, phase name) at ``elapsed_s`` since the first publication."""
-        start = self.trajectory_start_s
-        if start >= 0.0 and elapsed_s >= start:
-            return sample(self.trajectory, elapsed_s - start + self.trajectory_offset_s), \
-                'trajectory'
-        return sample(self.setpoint, elapsed_s), 'setpoint'
+        return sample(self.schedule, elapsed_s), self.schedule.phase_at(elapsed_s)
 
     def on_timer(self):
         now = self.get_clock().now()
@@ -97,8 +92,9 @@ class ReferenceNode(Node):
                 'start it with use_sim_time:=true so its stamps are simulated time')
 
     def summary(self):
-        return (f'reference: setpoint {self.setpoint.xy}, trajectory from '
-                + (f'{self.trajectory_start_s:g} s' if self.trajectory_start_s >= 0 else 'never')
+        switch_s = self.schedule.switch_s
+        return (f'reference: setpoint {self.schedule.setpoint.xy}, trajectory from '
+                + (f'{switch_s:g} s' if switch_s >= 0 else 'never')
                 + f'; real-time factor {self.pace.real_time_factor():.3f}')
 
 

@@ -3,9 +3,11 @@ open-loop replay of its commands through the twin.
 
 Works on any bag of the contract's topics (ours or one made by ``ros2 bag record``). Times are
 the surface-normal samples' header stamps (simulated time in a twin's bag, wall time on the
-device). A programme starts at its own stamp, or on receipt if it has none; references and
-voltage commands are placed by their receive time, mapped onto the stamps of the samples
-received around it, since the node that sent them may stamp with another clock.
+device). A programme starts where the device's report on ``/beams/programme_status`` says it
+started (a refused one never ran); in a bag without reports, at its own stamp, or on receipt if
+it has none. References and voltage commands are placed by their receive time, mapped onto the
+stamps of the samples received around it, since the node that sent them may stamp with another
+clock.
 """
 
 import dataclasses
@@ -15,12 +17,22 @@ import numpy as np
 
 from msg_defs.conversions import (
     ns_from_time,
+    programme_events_from_msg,
     programme_from_msg,
+    status_values,
     surface_normal_from_msg,
     voltages_from_msg,
 )
 from msg_defs.device import NS_PER_S
-from msg_defs.topics import PULSE_PROGRAM, SPHERE_REFERENCE, SURFACE_NORMAL, VOLTAGE_COMMAND
+from msg_defs.programme_events import ProgrammeState
+from msg_defs.topics import (
+    CONTROLLER_STATUS,
+    PROGRAMME_STATUS,
+    PULSE_PROGRAM,
+    SPHERE_REFERENCE,
+    SURFACE_NORMAL,
+    VOLTAGE_COMMAND,
+)
 from msg_defs.voltage_rules import check_segments, check_voltages
 from sphere_sim.model.rotations import angle_between
 from sphere_sim.twin.plants import TIME_TOL_S
@@ -29,6 +41,8 @@ from sphere_twin.bag.reader import BagError, deserialize, read_messages
 DEFAULT_BAND_RAD = math.radians(0.05)  # Fig. 13's tighter resting band
 # A reference held at least this long counts as a setpoint whose settling time is reported.
 MIN_SETPOINT_S = 0.5
+# The controller's phases in which it decided on a sample (sphere_control.kick_cycle.Phase).
+DECIDING_PHASES = ('kicking', 'resting')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -46,6 +60,9 @@ class RecordedRun:
         Pulse programmes: start time and zero-order-hold segments.
     holds : list of (time_s, voltages_v (4,))
         Voltage commands.
+    decision_t_s : ndarray, shape (d,)
+        Stamps of the samples the controller decided on (a kick or a rest; none while a kick
+        was in effect), from ``/controller/status``: where its loop saw a settled state.
     """
 
     normal_t_s: np.ndarray
@@ -54,48 +71,91 @@ class RecordedRun:
     references: np.ndarray
     kicks: list
     holds: list
+    decision_t_s: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
+
+
+class _Messages:
+    """A bag's contract messages by kind, as read (stamps and receive times, unsorted)."""
+
+    TOPICS = (SURFACE_NORMAL.name, SPHERE_REFERENCE.name, PULSE_PROGRAM.name,
+              VOLTAGE_COMMAND.name, PROGRAMME_STATUS.name, CONTROLLER_STATUS.name)
+
+    def __init__(self):
+        self.normals, self.references, self.programmes, self.holds = [], [], [], []
+        self.reports, self.decisions = [], []
+        self.receive_map = []  # (log_time_ns, stamp_s) of the normal samples
+
+    def add(self, topic, log_time_ns, msg):
+        """File one message; ValueError for one that breaks the contract."""
+        if topic == SURFACE_NORMAL.name:
+            t = ns_from_time(msg.header.stamp) / NS_PER_S
+            self.normals.append((t, surface_normal_from_msg(msg)))
+            self.receive_map.append((log_time_ns, t))
+        elif topic == SPHERE_REFERENCE.name:
+            self.references.append((log_time_ns, surface_normal_from_msg(msg)))
+        elif topic == PULSE_PROGRAM.name:
+            self.programmes.append((log_time_ns, ns_from_time(msg.header.stamp),
+                                    *check_segments(*programme_from_msg(msg))))
+        elif topic == PROGRAMME_STATUS.name:
+            self.reports.extend(programme_events_from_msg(msg))
+        elif topic == CONTROLLER_STATUS.name:
+            if status_values(msg.status[0]).get('phase') in DECIDING_PHASES:
+                self.decisions.append(ns_from_time(msg.header.stamp) / NS_PER_S)
+        else:
+            self.holds.append((log_time_ns, check_voltages(voltages_from_msg(msg))))
 
 
 def load_run(bag_dir):
     """Read the contract's signals from a bag; BagError if it has no surface normal."""
-    normals, references, programmes, holds = [], [], [], []
-    receive_map = []  # (log_time_ns, stamp_s) of the normal samples
-    topics = [SURFACE_NORMAL.name, SPHERE_REFERENCE.name, PULSE_PROGRAM.name,
-              VOLTAGE_COMMAND.name]
-    for raw in read_messages(bag_dir, topics):
-        msg = deserialize(raw)
+    read = _Messages()
+    for raw in read_messages(bag_dir, list(_Messages.TOPICS)):
         try:
-            if raw.topic == SURFACE_NORMAL.name:
-                t = ns_from_time(msg.header.stamp) / NS_PER_S
-                normals.append((t, surface_normal_from_msg(msg)))
-                receive_map.append((raw.log_time_ns, t))
-            elif raw.topic == SPHERE_REFERENCE.name:
-                references.append((raw.log_time_ns, surface_normal_from_msg(msg)))
-            elif raw.topic == PULSE_PROGRAM.name:
-                programmes.append((raw.log_time_ns, ns_from_time(msg.header.stamp),
-                                   *check_segments(*programme_from_msg(msg))))
-            else:
-                holds.append((raw.log_time_ns, check_voltages(voltages_from_msg(msg))))
+            read.add(raw.topic, raw.log_time_ns, deserialize(raw))
         except ValueError:
             # A message that breaks the contract or the command rules: the twin refused it too.
             continue
-    if not normals:
+    if not read.normals:
         raise BagError(f'{bag_dir}: no {SURFACE_NORMAL.name} messages to analyse')
-    log_ns = np.array([m[0] for m in receive_map], dtype=float)
-    stamps = np.array([m[1] for m in receive_map])
+    log_ns = np.array([m[0] for m in read.receive_map], dtype=float)
+    stamps = np.array([m[1] for m in read.receive_map])
 
     def on_stamps(log_time_ns):
         return float(np.interp(log_time_ns, log_ns, stamps))
 
-    normals.sort(key=lambda item: item[0])
+    normals = sorted(read.normals, key=lambda item: item[0])
     # A reference is in force from when it arrives (its node may stamp with another clock).
-    references = sorted(((on_stamps(log), n) for log, n in references), key=lambda r: r[0])
-    kicks = sorted(((stamp_ns / NS_PER_S if stamp_ns else on_stamps(log_ns_), times, volts)
-                    for log_ns_, stamp_ns, times, volts in programmes), key=lambda k: k[0])
+    references = sorted(((on_stamps(log), n) for log, n in read.references),
+                        key=lambda r: r[0])
+    if read.reports:
+        kicks = _reported_starts(read.programmes, read.reports)
+    else:
+        kicks = [(stamp_ns / NS_PER_S if stamp_ns else on_stamps(log_ns_), times, volts)
+                 for log_ns_, stamp_ns, times, volts in read.programmes]
+    kicks.sort(key=lambda k: k[0])
     return RecordedRun(
         np.array([t for t, _ in normals]), np.array([n for _, n in normals]),
         np.array([t for t, _ in references]), np.array([n for _, n in references]).reshape(-1, 3),
-        kicks, sorted(((on_stamps(log), volts) for log, volts in holds), key=lambda h: h[0]))
+        kicks, sorted(((on_stamps(log), volts) for log, volts in read.holds),
+                      key=lambda h: h[0]),
+        np.unique(read.decisions))
+
+
+def _reported_starts(programmes, reports):
+    """(start_s, times, volts) of the programmes that started, at the start the device
+    reported. A report names its programme by the stamp it was sent with; programmes that
+    share a stamp (0: at once) are matched in the order they were received."""
+    outcomes = {}  # stamp in ns -> [start_s or None (refused)], in report order
+    for event in reports:
+        if event.state in (ProgrammeState.STARTED, ProgrammeState.REFUSED):
+            outcomes.setdefault(round(event.asked_s * NS_PER_S), []).append(
+                event.time_s if event.state is ProgrammeState.STARTED else None)
+    kicks = []
+    for _, stamp_ns, times, volts in sorted(programmes, key=lambda p: p[0]):
+        queue = outcomes.get(stamp_ns)
+        start_s = queue.pop(0) if queue else None
+        if start_s is not None:
+            kicks.append((start_s, times, volts))
+    return kicks
 
 
 def reference_at(run, times_s):
@@ -134,6 +194,17 @@ def errors_rad(run):
     errors = np.array([angle_between(n, r) for n, r in zip(run.normals[valid], refs[valid],
                                                              strict=True)])
     return run.normal_t_s[valid], errors
+
+
+def errors_at_decisions_rad(run):
+    """(times_s, error_rad) of the samples the controller decided on: the loop's error
+    where it saw a settled state, as the offline closed loop records it (one per decision)."""
+    times, errors = errors_rad(run)
+    if times.size == 0:
+        return times, errors
+    index = np.clip(np.searchsorted(times, run.decision_t_s - 1e-9), 0, times.size - 1)
+    index = index[np.abs(times[index] - run.decision_t_s) < 1e-6]  # a recorded sample
+    return times[index], errors[index]
 
 
 def setpoint_segments(run, min_duration_s=MIN_SETPOINT_S):

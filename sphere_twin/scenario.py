@@ -1,10 +1,12 @@
 """The closed-loop scenario the demo and ``bench twin`` run: the Fig. 13 setpoint, then the
-trajectory of eq. (64); which nodes it takes, and what a run's observer reads off it."""
+trajectory of eq. (64); which nodes it takes, what a run's observer reads off it, and the same
+scenario as an offline closed loop (no ROS), the yardstick of the node loop."""
 
 from msg_defs.device import NS_PER_S
 from sphere_twin.processes import NodeSpec, parameter_args
 
 SETPOINT_XY = (0.01, 0.02)  # Fig. 13
+CONTROLLER = 'extended'
 # Eq. (64) entered where it passes the centre (t = 1/(4 f1)), so the trajectory takes over from
 # the setpoint without a jump to A_max.
 TRAJECTORY_OFFSET_S = 12.5
@@ -18,7 +20,7 @@ def scenario_nodes(setpoint_s, plant, real_time_factor, seed, normal_subscribers
     the reference follows) starts when everyone is there.
     """
     return (
-        NodeSpec('controller', tuple(parameter_args(controller='extended'))),
+        NodeSpec('controller', tuple(parameter_args(controller=CONTROLLER))),
         NodeSpec('reference', tuple(parameter_args(setpoint_xy=list(SETPOINT_XY),
                                                    trajectory_start_s=setpoint_s,
                                                    trajectory_offset_s=TRAJECTORY_OFFSET_S,
@@ -55,3 +57,33 @@ class RunLog:
             if 'kicks' in values:
                 return int(values['kicks'])
         return 0
+
+
+def scenario_reference(setpoint_s):
+    """The reference node's schedule in the scenario: the setpoint, then eq. (64)."""
+    from sphere_control.reference import CircleTrajectory, ScheduledReference, Setpoint
+
+    return ScheduledReference(Setpoint(SETPOINT_XY), CircleTrajectory(), setpoint_s,
+                              TRAJECTORY_OFFSET_S)
+
+
+def offline_loop(setpoint_s, duration_s, plant='continuous'):
+    """The scenario as an offline closed loop (:func:`~sphere_control.closed_loop.run_closed_loop`):
+    the controller node's controller and kick period, the simulator's plant from its
+    initial state (the continuous one carrying its state from kick to kick), the reference
+    node's schedule. Returns the :class:`~sphere_control.closed_loop.LoopHistory`.
+    """
+    from sphere_control.closed_loop import LoopSettings, run_closed_loop
+    from sphere_control.controllers import controller_for
+    from sphere_control.kick_plants import TwinKickPlant
+    from sphere_sim.kicks.discrete import kick_period_s
+    from sphere_sim.twin.plant_setup import build_plant, load_kick_model
+
+    kicks = load_kick_model()
+    period_s = kick_period_s(kicks)
+    twin = build_plant(plant)
+    start = twin.snapshot().normal
+    kick_plant = TwinKickPlant(kicks, twin, period_s) if plant == 'continuous' else kicks
+    settings = LoopSettings(max_steps=round(duration_s / period_s), kick_period_s=period_s)
+    return run_closed_loop(controller_for(CONTROLLER, kicks), kick_plant, start,
+                           scenario_reference(setpoint_s), settings)

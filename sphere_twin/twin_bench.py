@@ -1,11 +1,14 @@
-"""The live twin's speed: simulator, reference and controller as processes over DDS.
+"""The live twin's speed and kick cycle: simulator, reference and controller as processes over
+DDS.
 
 Runs the demo's scenario (the Fig. 13 setpoint, then eq. (64)) without a recorder, the
-simulator unpaced (``real_time_factor`` 0: as fast as it can), for a fixed span of simulated
-time, and reads the simulator's periodic status on ``/diagnostics``: the real-time factor it
-achieved, where its wall time went (integrating, publishing, rclpy and the rest) and how long a
-pulse programme took from its arrival to the published sample that first shows it. The CLI
-(``sphere-twin bench twin``) prints and writes; this module measures and returns.
+simulator unpaced (``real_time_factor`` 0: as fast as it can) or paced, for a fixed span of
+simulated time, and reads the simulator's periodic status on ``/diagnostics``: the real-time
+factor it achieved, where its wall time went (integrating, publishing, rclpy and the rest) and
+how long a pulse programme took from its arrival to the published sample that first shows it;
+and the kick cycle from the simulator's reports of each programme's start
+(``/beams/programme_status``) and the controller's decisions. The CLI (``sphere-twin bench
+twin``) prints and writes; this module measures and returns.
 """
 
 import dataclasses
@@ -30,7 +33,7 @@ WALL_PER_SIMULATED_LIMIT = 10.0
 
 @dataclasses.dataclass(frozen=True)
 class TwinBenchResult:
-    """The simulator's figures at the end of an unpaced run."""
+    """The simulator's figures at the end of a run (``pace`` 0: unpaced)."""
 
     plant: str
     simulated_s: float
@@ -45,6 +48,11 @@ class TwinBenchResult:
     latency_median_ms: float
     latency_max_ms: float
     cycle: 'LoopCycle' = None
+    pace: float = 0.0
+
+    @property
+    def pace_name(self):
+        return 'unpaced' if self.pace == 0.0 else f'paced at {self.pace:g}'
 
     @property
     def other_fraction(self):
@@ -67,22 +75,22 @@ class TwinBenchResult:
         return cls(**fields)
 
     @classmethod
-    def from_status(cls, plant, values, cycle=None):
+    def from_status(cls, plant, values, cycle=None, pace=0.0):
         """From the key-values of the simulator's ``/diagnostics`` status."""
         return cls(plant, float(values['simulated_time_s']), float(values['wall_time_s']),
                    float(values['real_time_factor']), int(values['programmes']),
                    int(values['late']), int(values['rejected']), int(values['samples']),
                    float(values['integrating_fraction']), float(values['publishing_fraction']),
                    float(values['programme_latency_median_ms']),
-                   float(values['programme_latency_max_ms']), cycle)
+                   float(values['programme_latency_max_ms']), cycle, pace)
 
 
 @dataclasses.dataclass(frozen=True)
 class LoopCycle:
-    """The node loop's kick cycle (medians, ms): from one programme's start to the next, in
-    simulated and wall time, and its parts in simulated time: the simulator's delay of the
-    start, the kick in effect until the controller decided on a settled sample, and the lead
-    the controller gives the next start after that sample."""
+    """The node loop's kick cycle (medians, ms): from one programme's actual start to the next,
+    in simulated and wall time, and its parts in simulated time: the simulator's delay of the
+    start after the one asked for, the kick in effect until the controller decided on the
+    sample that ends it, and the lead the controller gives the next start after that sample."""
 
     simulated_ms: float
     wall_ms: float
@@ -91,25 +99,26 @@ class LoopCycle:
     lead_ms: float
 
     @classmethod
-    def measure(cls, starts_s, arrivals_wall_s, decisions_s, start_delay_s):
-        """From the programmes' asked starts (simulated s) and arrivals (wall s) at an
-        observer, the stamps of the samples kicks were decided on (simulated s) and the
-        simulator's median start delay (s).
+    def measure(cls, asked_s, started_s, started_wall_s, decisions_s):
+        """From the simulator's reports of the programmes' starts (the start each asked for
+        and the one it got, simulated s, and when the report reached an observer, wall s) and
+        the stamps of the samples kicks were decided on (simulated s).
 
-        Each start is matched to the decision just before it (its own: the lead is shorter
-        than a kick window) and to the first one after it (the next kick's), not by position,
-        so a status the observer missed in a fast unpaced stream shifts nothing.
+        Each start is matched to the decision just before its asked start (its own) and to
+        the first one after its actual start (the next kick's), not by position, so a status
+        the observer missed in a fast stream shifts nothing.
         """
-        starts, decisions = np.asarray(starts_s), np.sort(np.asarray(decisions_s))
-        before = np.searchsorted(decisions, starts, side='right') - 1  # index of own decision
-        paired = (before >= 0) & (before + 1 < decisions.size)
+        asked, started = np.asarray(asked_s), np.asarray(started_s)
+        decisions = np.sort(np.asarray(decisions_s))
+        own = np.searchsorted(decisions, asked - 1e-9, side='right') - 1
+        following = np.searchsorted(decisions, started - 1e-9, side='left')
+        paired = (own >= 0) & (following < decisions.size)
         if np.count_nonzero(paired) < 2:
             return None
-        delay = 0.0 if math.isnan(start_delay_s) else start_delay_s
-        own, following = decisions[before[paired]], decisions[before[paired] + 1]
         return cls(*(1e3 * float(np.median(v)) for v in (
-            np.diff(starts), np.diff(np.asarray(arrivals_wall_s)), [delay],
-            following - (starts[paired] + delay), starts[paired] - own)))
+            np.diff(started), np.diff(np.asarray(started_wall_s)), started - asked,
+            decisions[following[paired]] - started[paired],
+            asked[paired] - decisions[own[paired]])))
 
 
 class BenchError(RuntimeError):
@@ -128,8 +137,9 @@ def _simulator_status(diagnostics):
 
 
 def run_twin_bench(plant='continuous', duration_s=DEFAULT_DURATION_S, seed=0,
-                   progress=None):
-    """Run the loop unpaced until the simulator reports ``duration_s`` of simulated time.
+                   progress=None, real_time_factor=0.0):
+    """Run the loop (unpaced, or paced at ``real_time_factor``) until the simulator reports
+    ``duration_s`` of simulated time.
 
     ``progress(simulated_s)`` is called as the status comes in. Returns a
     :class:`TwinBenchResult` and the simulator's farewell line.
@@ -139,22 +149,28 @@ def run_twin_bench(plant='continuous', duration_s=DEFAULT_DURATION_S, seed=0,
     BenchError
         When the loop does not start, or the run does not finish in time.
     """
-    from msg_defs.conversions import ns_from_time
+    from msg_defs.conversions import ns_from_time, programme_events_from_msg
     from msg_defs.device import NS_PER_S
-    from msg_defs.topics import CONTROLLER_STATUS, DIAGNOSTICS, PULSE_PROGRAM, SURFACE_NORMAL
+    from msg_defs.programme_events import ProgrammeState
+    from msg_defs.topics import CONTROLLER_STATUS, DIAGNOSTICS, PROGRAMME_STATUS, SURFACE_NORMAL
     from sphere_twin.scenario import RunLog
     from sphere_twin.testing import TopicProbe, TwinTimeoutError
 
     domain_id = fresh_domain_id()
-    *others, simulator = scenario_nodes(SETPOINT_S, plant, 0.0, seed, NORMAL_SUBSCRIBERS)
+    *others, simulator = scenario_nodes(SETPOINT_S, plant, real_time_factor, seed,
+                                        NORMAL_SUBSCRIBERS)
     with running_nodes(*others, domain_id=domain_id) as group:
         probe = TopicProbe(domain_id, (SURFACE_NORMAL, CONTROLLER_STATUS, DIAGNOSTICS))
         diagnostics = probe.messages[DIAGNOSTICS.name]
-        programmes = []  # (wall s at arrival, asked start in simulated s)
-        probe.node.create_subscription(
-            PULSE_PROGRAM.msg_type, PULSE_PROGRAM.name,
-            lambda m: programmes.append((time.monotonic(), ns_from_time(m.header.stamp)
-                                         / NS_PER_S)), PULSE_PROGRAM.qos.to_profile())
+        starts = []  # (asked start, actual start in simulated s, wall s at arrival)
+
+        def on_programme_status(msg):
+            starts.extend((e.asked_s, e.time_s, time.monotonic())
+                          for e in programme_events_from_msg(msg)
+                          if e.state is ProgrammeState.STARTED)
+
+        probe.node.create_subscription(PROGRAMME_STATUS.msg_type, PROGRAMME_STATUS.name,
+                                       on_programme_status, PROGRAMME_STATUS.qos.to_profile())
 
         def finished():
             status = _simulator_status(diagnostics)
@@ -168,7 +184,8 @@ def run_twin_bench(plant='continuous', duration_s=DEFAULT_DURATION_S, seed=0,
                              'controller holding the reference')
             process = group.start(simulator.executable, simulator.args)
             probe.process = process
-            probe.spin_until(finished, START_TIMEOUT_S + WALL_PER_SIMULATED_LIMIT * duration_s,
+            wall_per_simulated = max(WALL_PER_SIMULATED_LIMIT, 3.0 / (real_time_factor or 1.0))
+            probe.spin_until(finished, START_TIMEOUT_S + wall_per_simulated * duration_s,
                              f'{duration_s:g} s of simulated time')
         except TwinTimeoutError as error:
             raise BenchError(str(error).splitlines()[0]) from None
@@ -180,16 +197,15 @@ def run_twin_bench(plant='continuous', duration_s=DEFAULT_DURATION_S, seed=0,
                      if m.status[0].message.startswith('kick')]
     farewell = next((line for line in process.stdout_text().splitlines()
                      if line.startswith('simulator:')), '')
-    cycle = LoopCycle.measure([s for _, s in programmes], [w for w, _ in programmes],
-                              decisions, float(status['programme_delay_median_ms']) / 1e3)
-    return TwinBenchResult.from_status(plant, status, cycle), farewell
+    cycle = LoopCycle.measure(*zip(*starts, strict=True), decisions) if starts else None
+    return TwinBenchResult.from_status(plant, status, cycle, real_time_factor), farewell
 
 
 def summary_lines(result):
     """What ``sphere-twin bench twin`` prints; the last line is the headline."""
     r = result
     return [
-        f'simulator ({r.plant} plant, unpaced): {r.simulated_s:.2f} s simulated in '
+        f'simulator ({r.plant} plant, {r.pace_name}): {r.simulated_s:.2f} s simulated in '
         f'{r.wall_s:.2f} s wall, {r.programmes} programmes ({r.kicks_per_simulated_s:.1f} per '
         f'simulated second), {r.rejected} rejected, {r.samples} samples',
         f'wall time: integrating {r.integrating_fraction:.1%}, publishing '
@@ -197,12 +213,10 @@ def summary_lines(result):
         f'programme latency, arrival to the first published sample showing it: median '
         f'{r.latency_median_ms:.2f} ms, largest {r.latency_max_ms:.2f} ms (wall)',
         *([] if r.cycle is None else [
-            f'node loop cycle, programme to programme (medians): {r.cycle.simulated_ms:.1f} ms '
-            f'simulated, {r.cycle.wall_ms:.1f} ms wall; in simulated time the start delayed '
-            f'{r.cycle.start_delay_ms:.1f} ms, the kick in effect until the deciding sample '
-            f'{r.cycle.settling_ms:.1f} ms'
-            + (' (negative: the next kick was decided before this one started)'
-               if r.cycle.settling_ms < 0 else '')
-            + f', the lead to the next start {r.cycle.lead_ms:.1f} ms']),
-        f'twin real-time factor: {r.real_time_factor:.2f} unpaced ({r.plant})',
+            f'node loop cycle, actual start to actual start (medians): '
+            f'{r.cycle.simulated_ms:.1f} ms simulated, {r.cycle.wall_ms:.1f} ms wall; in '
+            f'simulated time the start delayed {r.cycle.start_delay_ms:.1f} ms, the kick in '
+            f'effect until the deciding sample {r.cycle.settling_ms:.1f} ms, the lead to the '
+            f'next start {r.cycle.lead_ms:.1f} ms']),
+        f'twin real-time factor: {r.real_time_factor:.2f} {r.pace_name} ({r.plant})',
     ]

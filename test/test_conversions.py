@@ -185,3 +185,25 @@ def test_sphere_state_message_carries_the_body_frame_twist():
     position, quaternion = sphere_state_from_msg(msg)
     np.testing.assert_array_equal(position, [1e-6, 0.0, 2e-6])
     np.testing.assert_allclose(quaternion, q, atol=1e-15)
+
+
+@pytest.mark.parametrize('state', ['started', 'ended', 'cut', 'refused'])
+def test_a_programme_report_round_trips_and_names_its_programme_by_its_stamp(state):
+    from actionlib_msgs.msg import GoalStatus
+
+    from msg_defs.conversions import programme_event_to_msg, programme_events_from_msg
+    from msg_defs.programme_events import ProgrammeEvent, ProgrammeState
+
+    event = ProgrammeEvent(ProgrammeState(state), 12.345678901, 17, 12.36, 'why')
+    msg = programme_event_to_msg(event)
+    assert msg.status_list[0].goal_id.stamp.sec == 12
+    assert msg.status_list[0].goal_id.stamp.nanosec == 345678901
+    assert msg.status_list[0].status == {'started': GoalStatus.ACTIVE,
+                                         'ended': GoalStatus.SUCCEEDED,
+                                         'cut': GoalStatus.PREEMPTED,
+                                         'refused': GoalStatus.REJECTED}[state]
+    (back,) = programme_events_from_msg(msg)
+    assert back == event
+    msg.status_list[0].status = GoalStatus.PENDING
+    with pytest.raises(ValueError, match='none of a programme'):
+        programme_events_from_msg(msg)

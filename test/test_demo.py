@@ -37,6 +37,13 @@ def test_short_demo_runs_the_loop_records_a_bag_and_reports(tmp_path, plant):
     assert 0.5 * pace_asked < simulator < 1.01 * pace_asked
     for factor in (controller, reference):
         assert 0.5 * pace_asked < factor < CATCH_UP_SPEEDUP * pace_asked
+    # The ROS loop tracks as the offline loop does on the same controller, plant, reference and
+    # kick period (both errors where the loop decided, on settled states).
+    rms = re.search(r'demo: trajectory RMS error ([\d.]+) deg \(offline loop: ([\d.]+) deg\)',
+                    text)
+    assert rms, text
+    live, offline = float(rms.group(1)), float(rms.group(2))
+    assert 0.0 < offline and live <= 1.5 * offline, text
     bag = re.search(r'demo: bag (\S+)', text).group(1)
     assert (tmp_path / bag.split('/')[-1] / 'metadata.yaml').is_file()
     assert list(tmp_path.glob('*_error.png'))

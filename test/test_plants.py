@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from msg_defs.conversions import programme_from_msg, programme_to_msg
+from msg_defs.programme_events import ProgrammeState
 from sphere_sim.kicks.design import simulate_kick
 from sphere_sim.kicks.discrete import normal_from_xy
 from sphere_sim.kicks.lookup_table import LookupTable
@@ -169,6 +170,59 @@ def test_a_voltage_command_cuts_a_running_programme_and_says_so(table):
     runner.command_programme(*table.programme(1, 1.0).segments(), start_s=runner.time_s + 0.01)
     assert '1 queued programme(s)' in runner.command_voltages([0.0] * 4)
     assert runner.counters.cut == 2 and runner.counters.programmes == 1
+
+
+def test_the_runner_reports_each_programmes_actual_start_and_end(table):
+    """A programme that arrives after the start it asked for starts at the next sample, and
+    the report says so; its end is reported with the sample that shows it, at the true end."""
+    plant = DiscretePlant(table, window_s=0.05)
+    runner = TwinRunner(plant, period_s=0.01)
+    for _ in range(4):
+        runner.tick()  # t = 0.03 s
+    programme = table.programme(0, 1.0)
+    runner.command_programme(*programme.segments(), start_s=0.015)  # late
+    runner.tick()  # starts it at t = 0.03 s, then advances to 0.04 s, past its end
+    started, ended = runner.take_events()
+    assert (started.state, started.asked_s, started.number) == (ProgrammeState.STARTED,
+                                                                0.015, 1)
+    assert started.time_s == pytest.approx(0.03) and 'after the start it asked' in started.text
+    assert runner.counters.late == 1
+    assert (ended.state, ended.number) == (ProgrammeState.ENDED, 1)
+    assert ended.time_s == pytest.approx(0.03 + programme.duration_s)
+    runner.tick()
+    assert runner.take_events() == []
+
+
+def test_refusals_and_cuts_are_reported_to_the_sender(table):
+    plant = DiscretePlant(table, window_s=0.05)
+    runner = TwinRunner(plant, period_s=0.01)
+    runner.tick()
+    with pytest.raises(CommandError):
+        runner.command_programme([0.0, 1e-3], [[90.0, 0, 0, 0], [0] * 4], start_s=0.02)
+    runner.command_programme(*table.programme(0, 1.0).segments(), start_s=0.02)
+    runner.command_programme(*table.programme(1, 1.0).segments(), start_s=0.03)
+    runner.tick()
+    runner.tick()  # the first starts at 0.02 s; the second overlaps its kick at 0.03 s
+    runner.tick()
+    runner.refuse_programme(0.5, 'not a programme')
+    events = [(e.state, e.number) for e in runner.take_events()]
+    assert events == [(ProgrammeState.REFUSED, 1), (ProgrammeState.STARTED, 2),
+                      (ProgrammeState.REFUSED, 3), (ProgrammeState.ENDED, 2),
+                      (ProgrammeState.REFUSED, 4)]
+    assert runner.counters.rejected == 1  # the plant's refusal; the others count at the node
+    continuous = ContinuousPlant(build_plant('continuous').model)
+    runner = TwinRunner(continuous, period_s=1e-3)
+    runner.tick()
+    runner.command_programme(*table.programme(0, 1.0).segments())
+    runner.tick()
+    runner.command_programme(*table.programme(1, 1.0).segments())  # replaces the first
+    runner.tick()
+    runner.command_programme(*table.programme(2, 1.0).segments(), start_s=0.01)
+    runner.command_voltages([0.0] * 4)  # cuts the second and drops the third
+    events = [(e.state, e.number) for e in runner.take_events()]
+    assert events == [(ProgrammeState.STARTED, 1), (ProgrammeState.CUT, 1),
+                      (ProgrammeState.STARTED, 2), (ProgrammeState.CUT, 2),
+                      (ProgrammeState.CUT, 3)]
 
 
 def test_measurement_noise_is_seeded_and_has_the_stated_spread():

@@ -60,7 +60,7 @@ def test_a_jump_restarts_the_estimate_instead_of_extrapolating_it():
 def cycle(preview):
     controller = make_controller('basic', math.radians(0.05), math.radians(0.54),
                                  DIAGONAL_DIRECTIONS_RAD)
-    return KickCycle(controller, window_s=0.05, preview=preview)
+    return KickCycle(controller, kick_period_s=0.05, preview=preview)
 
 
 def test_the_cycle_aims_ahead_only_with_preview():

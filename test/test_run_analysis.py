@@ -156,3 +156,49 @@ def test_recorded_commands_that_break_the_rules_are_dropped_as_the_twin_dropped_
     run = load_run(bag_dir)
     assert len(run.kicks) == 1 and run.kicks[0][2][0][0] == 80.0
     assert len(run.holds) == 1 and run.holds[0][1].tolist() == [1.0] * 4
+
+
+def test_programmes_start_where_the_device_reported_and_refused_ones_never_run(tmp_path):
+    """A bag with /beams/programme_status: each programme starts where its report says (a
+    late one later than its stamp), matched by stamp, in order for programmes that share one;
+    a refused one is not replayed."""
+    from rclpy.serialization import serialize_message
+
+    from msg_defs.conversions import (
+        programme_event_to_msg,
+        programme_to_msg,
+        surface_normal_to_msg,
+        time_from_ns,
+    )
+    from msg_defs.programme_events import ProgrammeEvent, ProgrammeState
+    from msg_defs.topics import PROGRAMME_STATUS, PULSE_PROGRAM, SURFACE_NORMAL
+    from sphere_twin.bag import format as bag_format
+    from sphere_twin.bag.writer import BagWriter
+    from sphere_twin.run_analysis import load_run
+
+    def programme(volts, stamp_s):
+        return programme_to_msg([0.0, 1e-3], [[volts, 0.0, 0.0, 0.0], [0.0] * 4],
+                                stamp=time_from_ns(round(stamp_s * 1e9)))
+
+    sent = [programme(10.0, 0.5), programme(20.0, 0.0), programme(30.0, 0.0),
+            programme(40.0, 0.8)]
+    reports = [ProgrammeEvent(ProgrammeState.STARTED, 0.5, 1, 0.53),
+               ProgrammeEvent(ProgrammeState.STARTED, 0.0, 2, 0.61),
+               ProgrammeEvent(ProgrammeState.REFUSED, 0.0, 3, 0.62, 'overlaps'),
+               ProgrammeEvent(ProgrammeState.ENDED, 0.0, 2, 0.611),
+               ProgrammeEvent(ProgrammeState.STARTED, 0.8, 4, 0.8)]
+    bag_dir = tmp_path / 'reported'
+    with BagWriter(bag_dir) as bag:
+        for topic in (SURFACE_NORMAL, PULSE_PROGRAM, PROGRAMME_STATUS):
+            bag.add_topic(topic.name, bag_format.type_name_of(topic.msg_type),
+                          [bag_format.qos_to_dict(topic.qos.to_profile())])
+        bag.write(SURFACE_NORMAL.name,
+                  serialize_message(surface_normal_to_msg(normal_from_xy(0.0, 0.0))), 1)
+        for k, msg in enumerate(sent):
+            bag.write(PULSE_PROGRAM.name, serialize_message(msg), 10 + k)
+        for k, event in enumerate(reports):
+            bag.write(PROGRAMME_STATUS.name, serialize_message(programme_event_to_msg(event)),
+                      20 + k)
+    run = load_run(bag_dir)
+    assert [(start, volts[0][0]) for start, _, volts in run.kicks] == [
+        (0.53, 10.0), (0.61, 20.0), (0.8, 40.0)]

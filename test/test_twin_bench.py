@@ -25,8 +25,8 @@ def test_the_status_accounts_for_the_run(runs, plant):
     assert result.simulated_s >= DURATION_S
     assert result.real_time_factor == pytest.approx(result.simulated_s / result.wall_s, rel=1e-3)
     assert result.programmes > 0
-    # One sample per 20 ms of simulated time, and the initial one.
-    assert result.samples == pytest.approx(result.simulated_s / 0.02 + 1, abs=1)
+    # One sample per 10 ms of simulated time (the default 100 Hz), and the initial one.
+    assert result.samples == pytest.approx(result.simulated_s / 0.01 + 1, abs=1)
     assert 0.0 < result.integrating_fraction < 1.0 and 0.0 < result.publishing_fraction < 1.0
     assert 0.0 <= result.other_fraction < 1.0
     assert 0.0 < result.latency_median_ms <= result.latency_max_ms
@@ -62,22 +62,29 @@ def test_cli_writes_the_results_and_prints_the_headline_last(tmp_path, capsys):
 
 
 def test_the_loop_cycle_is_split_into_delay_settling_and_lead():
-    # Kicks decided on samples 40 ms before the starts they ask, started 5 ms late, one every
-    # 120 ms simulated and 80 ms wall.
-    starts = [0.1 + 0.12 * k for k in range(6)]
-    cycle = LoopCycle.measure(starts, [2.0 + 0.08 * k for k in range(6)],
-                              [s - 0.04 for s in starts], 0.005)
-    assert cycle.simulated_ms == pytest.approx(120.0) and cycle.wall_ms == pytest.approx(80.0)
-    assert (cycle.start_delay_ms, cycle.lead_ms) == (pytest.approx(5.0), pytest.approx(40.0))
-    assert cycle.start_delay_ms + cycle.settling_ms + cycle.lead_ms == pytest.approx(120.0)
-    assert LoopCycle.measure(starts[:2], [0.0, 1.0], starts[:2], 0.0) is None
+    # Kicks asked 10 ms after the samples they were decided on, started 5 ms late, decided
+    # again 55 ms after each actual start: one every 70 ms simulated, 80 ms wall.
+    asked = [0.1 + 0.07 * k for k in range(6)]
+    started = [a + 0.005 for a in asked]
+    decisions = [a - 0.01 for a in asked]
+    cycle = LoopCycle.measure(asked, started, [2.0 + 0.08 * k for k in range(6)], decisions)
+    assert cycle.simulated_ms == pytest.approx(70.0) and cycle.wall_ms == pytest.approx(80.0)
+    assert (cycle.start_delay_ms, cycle.lead_ms) == (pytest.approx(5.0), pytest.approx(10.0))
+    assert cycle.settling_ms == pytest.approx(55.0)
+    assert cycle.start_delay_ms + cycle.settling_ms + cycle.lead_ms == pytest.approx(70.0)
+    assert LoopCycle.measure(asked[:2], started[:2], [0.0, 1.0], decisions[:1]) is None
 
 
 @pytest.mark.parametrize('plant', ['discrete', 'continuous'])
-def test_no_cycle_is_shorter_than_the_kick_window_and_the_lead(runs, plant):
-    cycle = runs[plant][0].cycle
-    # The controller decides only on a sample at or after the kick's window (60 ms) and asks
-    # the next start two sample periods (40 ms) after that sample.
-    assert cycle.lead_ms == pytest.approx(40.0)
-    assert cycle.simulated_ms >= 100.0 - 1e-6
-    assert cycle.settling_ms + cycle.start_delay_ms >= 60.0 - 1e-6
+def test_the_cycle_is_the_kick_period_and_one_sample_from_the_reported_start(runs, plant):
+    result = runs[plant][0]
+    cycle = result.cycle
+    # The controller decides on the first sample a kick period (50 ms) after the reported
+    # start and asks the next start one sample period (10 ms) after that sample. Unpaced, the
+    # simulator may run past the asked start before the programme arrives; the cycle then
+    # starts from the actual start and waits the full kick period again, never less.
+    assert cycle.lead_ms == pytest.approx(10.0)
+    assert cycle.settling_ms >= 50.0 - 1e-6
+    assert cycle.simulated_ms >= 60.0 - 1e-6
+    # Nothing is refused as overlapping a kick that is still running.
+    assert result.rejected == 0

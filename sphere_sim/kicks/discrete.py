@@ -12,6 +12,8 @@ from typing import Protocol
 
 import numpy as np
 
+from msg_defs.device import KICK_WINDOW_S
+
 # The four diagonal kicks of the paper: hind-left kick -> normal moves towards -45 deg, and its
 # rotations by 90 deg (Fig. 7). Angles are polar angles of the normal's x-y displacement.
 DIAGONAL_DIRECTIONS_RAD = tuple(math.radians(a) for a in (-45.0, 45.0, 135.0, -135.0))
@@ -21,6 +23,10 @@ EIGHT_DIRECTIONS_RAD = tuple(math.radians(a) for a in (-45.0, 0.0, 45.0, 90.0, 1
 CONE_HALF_ANGLE_RAD = math.radians(40.0)  # the state space investigated in the paper
 # The paper's optimised hind-left kick, sqrt(alpha^2 + beta^2) (§4.1, Fig. 5 and Fig. 6a).
 PAPER_FULL_KICK_RAD = math.radians(0.54)
+# A kick period is a kick's settle time rounded up to this: the offline loop's decision grid,
+# and a whole number of samples of a 100 Hz sensor.
+KICK_PERIOD_STEP_S = 0.01
+LEVEL_NORMAL = np.array([0.0, 0.0, 1.0])  # "we initialize the sphere to start with zero angles"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -77,3 +83,19 @@ def normal_from_cardan(alpha_deg, beta_deg=0.0):
     return np.array([math.sin(b), -math.sin(a) * math.cos(b), math.cos(a) * math.cos(b)])
 
 
+
+
+def settled_kick_period_s(settle_time_s):
+    """The shortest decision period after which a kick that settles in ``settle_time_s`` is
+    over: rounded up to KICK_PERIOD_STEP_S; the kick window when no settle time is known."""
+    if not (math.isfinite(settle_time_s) and settle_time_s > 0.0):
+        return KICK_WINDOW_S
+    return round(math.ceil(settle_time_s / KICK_PERIOD_STEP_S - 1e-9) * KICK_PERIOD_STEP_S, 9)
+
+
+def kick_period_s(kick_plant):
+    """The kick period of a kick plant: the settle time of its full first kick from the level
+    state, rounded up (:func:`settled_kick_period_s`). The offline loop decides at this
+    period, the controller node waits this long after a kick's reported start, and the discrete
+    twin lands its kicks after it, so all three describe the same cycle."""
+    return settled_kick_period_s(float(kick_plant.kick(LEVEL_NORMAL, 0, 1.0).settle_time_s))

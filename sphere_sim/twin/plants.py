@@ -93,17 +93,18 @@ class ContinuousPlant:
     x0 : ndarray, shape (n_states,), optional
         Initial state; the scene's initial state by default.
     rtol : float
-    settle_window_s : float
-        Time after a programme's last edge until its effect counts as over.
+    kick_period_s : float
+        Time after a programme's start until its effect counts as over (its settle time; at
+        least the programme itself).
     """
 
-    def __init__(self, model, x0=None, rtol=LIVE_RTOL, settle_window_s=KICK_WINDOW_S):
+    def __init__(self, model, x0=None, rtol=LIVE_RTOL, kick_period_s=KICK_WINDOW_S):
         if not model.has_sphere:
             raise PlantError('the continuous plant needs a scene with the sphere')
         self.model = model
         self.x = np.array(initial_state(model) if x0 is None else x0, dtype=float)
         self.rtol = rtol
-        self.settle_window_s = settle_window_s
+        self.kick_period_s = kick_period_s
         self.time_s = 0.0
         self.busy_until_s = 0.0
         self.schedule = VoltageSchedule()
@@ -115,7 +116,7 @@ class ContinuousPlant:
     def run_programme(self, programme):
         times, volts = programme.segments()
         self.schedule.replace_from(self.time_s, times, volts)
-        self.busy_until_s = self.time_s + programme.duration_s + self.settle_window_s
+        self.busy_until_s = self.time_s + max(programme.duration_s, self.kick_period_s)
 
     def advance(self, t_end_s):
         if t_end_s > self.time_s:

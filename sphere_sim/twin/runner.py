@@ -3,7 +3,9 @@
 :class:`TwinRunner` owns a plant, the simulated time grid, the queue of commands, the
 measurement noise and the lockstep rule; the simulator node only converts messages and calls
 it. Every command is checked here against the device's rules (:mod:`msg_defs.voltage_rules`),
-where it enters the twin, and a rejected one leaves the plant untouched.
+where it enters the twin, and a rejected one leaves the plant untouched. What happens to each
+programme (started, ended, cut, refused) is kept as a :class:`ProgrammeEvent` for the node to
+echo, so that a controller times its kicks by what the twin did.
 """
 
 import collections
@@ -14,6 +16,7 @@ import typing
 import numpy as np
 
 from msg_defs.device import VOLTAGE_LIMIT_V
+from msg_defs.programme_events import ProgrammeEvent, ProgrammeState
 from msg_defs.voltage_rules import VoltageRuleError, check_voltages
 from sphere_sim.model.programme import ProgrammeError, PulseProgramme
 from sphere_sim.twin.plants import TIME_TOL_S, PlantError
@@ -38,6 +41,15 @@ class _Queued(typing.NamedTuple):
     payload: object
     asked_s: float
     arrival_wall_s: float
+    number: int = 0  # programmes: the runner's count of those received
+
+
+class _Running(typing.NamedTuple):
+    """The programme on the beams: who it is and when its segments end."""
+
+    asked_s: float
+    number: int
+    end_s: float
 
 
 class CommandError(ValueError):
@@ -125,7 +137,9 @@ class TwinRunner:
         self.timings = TwinTimings()
         self._queued = []  # _Queued, in start order, applied at the sample boundary they are due
         self._acted = []  # (arrival_wall_s) of programmes applied in this tick
-        self._programme_end_s = -1.0  # when the last programme applied switches off
+        self._running = None  # _Running, until its end is reported or it is cut
+        self._received = 0  # programmes received, refused ones included
+        self._events = []  # ProgrammeEvent not yet taken by take_events()
         self._step = 0
         self._idle_published = False
 
@@ -162,21 +176,37 @@ class TwinRunner:
         return cut
 
     def _cut_by_hold(self):
-        """What a hold now overrides: the running programme and the queued ones (counted and
-        said, or None)."""
+        """What a hold now overrides: the running programme and the queued ones (counted,
+        reported as cut, and said, or None)."""
         queued = [item for item in self._queued if item.kind == 'programme']
-        running = self.time_s < self._programme_end_s - TIME_TOL_S
+        running = self._running is not None and self.time_s < self._running.end_s - TIME_TOL_S
         if not (queued or running):
             return None
         self.counters.cut += len(queued) + running
         what = []
         if running:
-            what.append(f'the programme running until t = {self._programme_end_s:.4f} s')
-            self._programme_end_s = self.time_s
+            what.append(f'the programme running until t = {self._running.end_s:.4f} s')
+            self._cut(self._running.asked_s, self._running.number, 'a voltage command')
+        for item in queued:
+            self._cut(item.asked_s, item.number, 'a voltage command before its start')
         if queued:
             what.append(f'{len(queued)} queued programme(s)')
         return (f'a voltage command at t = {self.time_s:.4f} s cut {" and ".join(what)}: the '
                 'latest command holds the beams')
+
+    def _cut(self, asked_s, number, by):
+        if self._running is not None and self._running.number == number:
+            self._running = None
+        self._event(ProgrammeState.CUT, asked_s, number, f'cut by {by} at t = '
+                    f'{self.time_s:.4f} s')
+
+    def _event(self, state, asked_s, number, text):
+        self._events.append(ProgrammeEvent(state, asked_s, number, self.time_s, text))
+
+    def take_events(self):
+        """The programme events since the last call, oldest first (for the node to echo)."""
+        events, self._events = self._events, []
+        return events
 
     def command_programme(self, times_s, voltages_v, start_s=0.0):
         """Queue a programme (segments relative to its start) starting at ``start_s``
@@ -187,24 +217,34 @@ class TwinRunner:
         CommandError
             For a programme that PulseProgramme refuses (see ``from_segments``).
         """
+        self._received += 1
         try:
             programme = PulseProgramme.from_segments(times_s, voltages_v, self.voltage_limit_v)
-        except ProgrammeError as error:
+            if start_s > self.time_s + MAX_START_AHEAD_S:
+                raise CommandError(
+                    f'starts at t = {start_s:.6g} s, {start_s - self.time_s:.6g} s after the '
+                    f'simulated now (t = {self.time_s:.4f} s): stamps are simulated time '
+                    '(/clock); stamp 0 starts a programme at once')
+            if 0.0 < start_s < self.time_s - 1e-9:
+                self.counters.late += 1  # started now instead
+            self._queue(max(start_s, self.time_s), 'programme', programme, start_s,
+                        self._received)
+        except (ProgrammeError, CommandError) as error:
+            self._event(ProgrammeState.REFUSED, start_s, self._received, str(error))
             raise CommandError(str(error)) from None
-        if start_s > self.time_s + MAX_START_AHEAD_S:
-            raise CommandError(
-                f'starts at t = {start_s:.6g} s, {start_s - self.time_s:.6g} s after the '
-                f'simulated now (t = {self.time_s:.4f} s): stamps are simulated time (/clock); '
-                'stamp 0 starts a programme at once')
-        if 0.0 < start_s < self.time_s - 1e-9:
-            self.counters.late += 1  # started now instead
-        self._queue(max(start_s, self.time_s), 'programme', programme, start_s)
 
-    def _queue(self, start_s, kind, payload, asked_s):
+    def refuse_programme(self, asked_s, reason):
+        """Book a programme refused before it reached the runner (a message that breaks the
+        contract): counted, and reported to its sender like any other refusal."""
+        self._received += 1
+        self._event(ProgrammeState.REFUSED, asked_s, self._received, reason)
+
+    def _queue(self, start_s, kind, payload, asked_s, number=0):
         if len(self._queued) >= MAX_QUEUED_COMMANDS:
             raise CommandError(f'{MAX_QUEUED_COMMANDS} commands are already waiting for their '
                                'start; this one is refused')
-        self._queued.append(_Queued(start_s, kind, payload, asked_s, time.perf_counter()))
+        self._queued.append(_Queued(start_s, kind, payload, asked_s, time.perf_counter(),
+                                    number))
         self._queued.sort(key=lambda item: item.start_s)
         self._idle_published = False
 
@@ -212,21 +252,46 @@ class TwinRunner:
         """Apply queued commands due now; returns the reasons of those the plant refused."""
         refused = []
         while self._queued and self._queued[0].start_s <= self.time_s + TIME_TOL_S:
-            _, kind, payload, asked_s, arrival_wall_s = self._queued.pop(0)
+            item = self._queued.pop(0)
             try:
-                if kind == 'hold':
-                    self.plant.hold(payload)
+                if item.kind == 'hold':
+                    self.plant.hold(item.payload)
                 else:
-                    self.plant.run_programme(payload)
-                    self._programme_end_s = self.time_s + payload.duration_s
-                    self.counters.programmes += 1
-                    self._acted.append(arrival_wall_s)
-                    self.timings.delays_sim_s.append(self.time_s - max(asked_s, 0.0))
+                    self.plant.run_programme(item.payload)
+                    self._started(item)
                 self.counters.accepted += 1
             except (PlantError, ProgrammeError) as error:
                 self.counters.rejected += 1
                 refused.append(str(error))
+                if item.kind == 'programme':
+                    self._event(ProgrammeState.REFUSED, item.asked_s, item.number, str(error))
         return refused
+
+    def _started(self, item):
+        """Book a programme the plant took: the one it replaced is cut; its start is reported
+        and its end watched for."""
+        if self._running is not None:
+            self._cut(self._running.asked_s, self._running.number, 'a later programme')
+        end_s = self.time_s + item.payload.duration_s
+        self._running = _Running(item.asked_s, item.number, end_s)
+        self.counters.programmes += 1
+        self._acted.append(item.arrival_wall_s)
+        self.timings.delays_sim_s.append(self.time_s - max(item.asked_s, 0.0))
+        delay = (f', {self.time_s - item.asked_s:.4f} s after the start it asked for'
+                 if item.asked_s > 0.0 and self.time_s > item.asked_s + TIME_TOL_S else '')
+        self._event(ProgrammeState.STARTED, item.asked_s, item.number,
+                    f'started at t = {self.time_s:.4f} s{delay}; its segments end at '
+                    f't = {end_s:.4f} s')
+
+    def _report_end(self):
+        """Report the running programme's end once simulated time has reached it; the event
+        carries the end itself, not the sample that shows it."""
+        running = self._running
+        if running is not None and self.time_s >= running.end_s - TIME_TOL_S:
+            self._running = None
+            self._events.append(ProgrammeEvent(ProgrammeState.ENDED, running.asked_s,
+                                               running.number, running.end_s,
+                                               f'ended at t = {running.end_s:.4f} s'))
 
     # --- time ----------------------------------------------------------------------------
     def idle(self):
@@ -248,6 +313,7 @@ class TwinRunner:
             self.plant.advance(self.time_s)
             self.timings.integrating_s += time.perf_counter() - started
             refused += self._apply_due()
+        self._report_end()
         snapshot = self.plant.snapshot()
         self.counters.samples += 1
         if (self.lockstep and self.plant.time_s >= self.plant.busy_until_s - TIME_TOL_S

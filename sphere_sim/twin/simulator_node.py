@@ -3,7 +3,8 @@
 Takes ``/beams/voltage_command`` and ``/beams/pulse_program``, runs the continuous or the
 discrete plant, and publishes ``/sphere/surface_normal`` (what the device's sensor measures,
 with optional seeded noise), ``/sphere/state``, ``/beams/state`` and ``/beams/voltage`` (the
-truth), markers, ``/clock`` and ``/diagnostics``. A command that breaks the contract is
+truth), markers, ``/clock``, ``/diagnostics`` and ``/beams/programme_status`` (each
+programme's actual start and end, or its cut or refusal). A command that breaks the contract is
 rejected with a logged error and a diagnostics entry; it never reaches the plant.
 """
 
@@ -18,6 +19,7 @@ from rosgraph_msgs.msg import Clock
 from msg_defs.conversions import (
     beam_state_to_msg,
     ns_from_time,
+    programme_event_to_msg,
     programme_from_msg,
     sphere_state_to_msg,
     surface_normal_to_msg,
@@ -33,6 +35,7 @@ from msg_defs.topics import (
     CLOCK,
     DIAGNOSTICS,
     MARKERS,
+    PROGRAMME_STATUS,
     PULSE_PROGRAM,
     SPHERE_STATE,
     SURFACE_NORMAL,
@@ -52,7 +55,13 @@ from sphere_sim.twin.report_limit import ReportLimit
 # module, so that main() installs its signal handlers first: a SIGINT during the seconds of
 # start-up is then a clean shutdown like any other.
 
-DEFAULT_PUBLISH_RATE_HZ = 50.0
+# The sensor's rate: a kick cycle is its settle period (50 ms for the shipped kicks) plus the
+# one sample between a decision and the kick's start, so the sample period must divide the
+# settle period for the deciding sample to fall where the kick is over: 100 Hz gives a 60 ms
+# cycle (50 Hz gave 80 ms). A magnetic angle sensor of §6 (3D Hall sensors) reads at hundreds
+# of Hz to kHz, so the rate is the device's, not a twin's luxury; publishing costs about 1 ms
+# of wall time per sample.
+DEFAULT_PUBLISH_RATE_HZ = 100.0
 MAX_PUBLISH_RATE_HZ = 1000.0
 MARKER_EVERY_N_SAMPLES = 5
 # As-fast-as-possible and lockstep runs still yield to the executor between samples, so
@@ -64,8 +73,8 @@ IDLE_REPEAT_PERIOD_S = 0.2
 # A paced run is anchored to the wall clock: its timer fires this many times per sample and
 # ticks whenever simulated time is behind, so a sample that cost more than its period (the
 # first milliseconds of a kick) is caught up at this multiple of the pace. Not faster: a
-# controller schedules a kick a couple of sample periods ahead of the sample it decided on,
-# and a burst of samples would pass that start before the command arrives.
+# controller schedules a kick a sample period ahead of the sample it decided on, and a burst
+# of samples would pass that start before the command arrives.
 CATCH_UP_SPEEDUP = 2
 # The status on /diagnostics is published at this wall-clock period, so that a healthy twin
 # is visible to `ros2 topic echo /diagnostics` and to a supervisor.
@@ -103,7 +112,7 @@ class SimulatorNode(Node):
         self._topic_publishers = {topic.name: self.create_publisher(
             topic.msg_type, topic.name, topic.qos.to_profile())
             for topic in (SURFACE_NORMAL, SPHERE_STATE, BEAM_STATE, BEAM_VOLTAGE, MARKERS,
-                          CLOCK, DIAGNOSTICS)}
+                          CLOCK, DIAGNOSTICS, PROGRAMME_STATUS)}
         self.create_subscription(VOLTAGE_COMMAND.msg_type, VOLTAGE_COMMAND.name,
                                  self.on_voltage_command, VOLTAGE_COMMAND.qos.to_profile())
         self.create_subscription(PULSE_PROGRAM.msg_type, PULSE_PROGRAM.name,
@@ -168,11 +177,19 @@ class SimulatorNode(Node):
         except ValueError as error:
             self.runner.counters.rejected += 1
             self._report_rejection(VOLTAGE_COMMAND.name, str(error))
+        self._publish_events()
 
     def on_pulse_program(self, msg):
+        start_s = ns_from_time(msg.header.stamp) / NS_PER_S
         try:
             times, volts = programme_from_msg(msg)
-            start_s = ns_from_time(msg.header.stamp) / NS_PER_S
+        except ValueError as error:
+            self.runner.refuse_programme(start_s, str(error))
+            self.runner.counters.rejected += 1
+            self._report_rejection(PULSE_PROGRAM.name, str(error))
+            self._publish_events()
+            return
+        try:
             late = self.runner.counters.late
             self.runner.command_programme(times, volts, start_s)
             if self.runner.counters.late > late:
@@ -182,6 +199,13 @@ class SimulatorNode(Node):
         except ValueError as error:
             self.runner.counters.rejected += 1
             self._report_rejection(PULSE_PROGRAM.name, str(error))
+        self._publish_events()
+
+    def _publish_events(self):
+        """Echo what happened to programmes since the last echo, oldest first."""
+        publisher = self._topic_publishers[PROGRAMME_STATUS.name]
+        for event in self.runner.take_events():
+            publisher.publish(programme_event_to_msg(event))
 
     def _report_rejection(self, topic, reason):
         """Report a rejection (already counted)."""
@@ -249,6 +273,7 @@ class SimulatorNode(Node):
         sample, refused = self.runner.tick()
         for reason in refused:
             self._report_rejection('plant', reason)
+        self._publish_events()  # before the sample: a controller has them when it decides
         if sample is None:
             now = time.perf_counter()
             if self._last_sample is not None and \

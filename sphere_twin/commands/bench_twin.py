@@ -1,4 +1,5 @@
-"""``sphere-twin bench twin``: the live twin's real-time factor over DDS, and where it goes."""
+"""``sphere-twin bench twin``: the live twin's real-time factor over DDS, where it goes, and
+the node loop's kick cycle."""
 
 import json
 import sys
@@ -7,7 +8,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from sphere_sim.twin.plant_setup import PLANT_KINDS
-from sphere_twin.commands.options import CommandError, positive_float
+from sphere_twin.commands.options import CommandError, non_negative_float, positive_float
 from sphere_twin.twin_bench import DEFAULT_DURATION_S, BenchError, run_twin_bench, summary_lines
 
 RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
@@ -16,16 +17,20 @@ RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
 def register(sub):
     """Add ``twin`` to the ``bench`` subcommands."""
     parser = sub.add_parser(
-        'twin', help='the live twin\'s real-time factor, unpaced, over DDS',
-        description='Run simulator (unpaced), reference and controller as processes over DDS '
-                    'on the demo\'s scenario for a fixed simulated time; report the '
-                    'simulator\'s real-time factor, the share of its wall time spent '
-                    'integrating, publishing and in rclpy, and the latency from a pulse '
-                    'programme\'s arrival to its first effect. Writes '
-                    'bench/results/twin_<plant>.{json,md}.')
+        'twin', help='the live twin\'s real-time factor and kick cycle over DDS',
+        description='Run simulator (unpaced unless --real-time-factor), reference and '
+                    'controller as processes over DDS on the demo\'s scenario for a fixed '
+                    'simulated time; report the simulator\'s real-time factor, the share of '
+                    'its wall time spent integrating, publishing and in rclpy, the latency '
+                    'from a pulse programme\'s arrival to its first effect, and the node '
+                    'loop\'s kick cycle and its parts. Writes '
+                    'bench/results/twin_<plant>[_paced].{json,md}.')
     parser.add_argument('--plant', choices=PLANT_KINDS, default='continuous')
     parser.add_argument('--duration-s', type=positive_float, default=DEFAULT_DURATION_S,
                         help='simulated seconds to run')
+    parser.add_argument('--real-time-factor', type=non_negative_float, default=0.0,
+                        help='pace the simulator at this many simulated seconds per wall '
+                             'second (default 0: unpaced)')
     parser.add_argument('--out', type=Path, default=RESULTS_DIR, help='output directory')
     parser.set_defaults(func=run)
 
@@ -37,16 +42,20 @@ def run(args):
             bar.update(min(simulated_s, args.duration_s) - bar.n)
 
         try:
-            result, farewell = run_twin_bench(args.plant, args.duration_s, progress=progress)
+            result, farewell = run_twin_bench(args.plant, args.duration_s, progress=progress,
+                                              real_time_factor=args.real_time_factor)
         except BenchError as error:
             raise CommandError(str(error)) from None
     lines = summary_lines(result)
     args.out.mkdir(parents=True, exist_ok=True)
-    stem = args.out / f'twin_{args.plant}'
+    paced = args.real_time_factor > 0.0
+    stem = args.out / f'twin_{args.plant}{"_paced" if paced else ""}'
     stem.with_suffix('.json').write_text(json.dumps(result.to_dict(), indent=2) + '\n')
+    command = (f'--plant {args.plant} --duration-s {args.duration_s:g}'
+               + (f' --real-time-factor {args.real_time_factor:g}' if paced else ''))
     stem.with_suffix('.md').write_text(
-        f'# Live twin, {args.plant} plant, unpaced\n\nWritten by `sphere-twin bench twin '
-        f'--plant {args.plant} --duration-s {args.duration_s:g}`.\n\n'
-        + '\n'.join(f'- {line}' for line in lines) + f'\n- farewell: `{farewell}`\n')
+        f'# Live twin, {args.plant} plant, {result.pace_name}\n\nWritten by `sphere-twin bench '
+        f'twin {command}`.\n\n' + '\n'.join(f'- {line}' for line in lines)
+        + f'\n- farewell: `{farewell}`\n')
     print('\n'.join(lines))
     return 0

@@ -28,6 +28,9 @@ def _checked_number(convert, kind, accept, requirement):
 
 positive_float = _checked_number(float, 'a number', lambda v: math.isfinite(v) and v > 0.0,
                                  'must be a positive number')
+non_negative_float = _checked_number(float, 'a number',
+                                     lambda v: math.isfinite(v) and v >= 0.0,
+                                     'must be a number >= 0')
 positive_int = _checked_number(int, 'an integer', lambda v: v >= 1, 'must be at least 1')
 unit_interval = _checked_number(float, 'a number', lambda v: 0.0 <= v <= 1.0,
                                 'must lie in [0, 1]')  # an intensity u_K

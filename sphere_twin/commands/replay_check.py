@@ -29,20 +29,20 @@ def register(subparsers):
 def build_replay_plant(kind, normal0, time0_s, params, tables=()):
     """A plant of parameter set ``params`` resting at ``normal0`` at ``time0_s``."""
     from sphere_sim.kicks.design import cardan_of_normal
+    from sphere_sim.kicks.discrete import kick_period_s
     from sphere_sim.model.scene import load_scene
-    from sphere_sim.twin.plants import ContinuousPlant, DiscretePlant
+    from sphere_sim.twin.plant_setup import discrete_plant, load_kick_model
+    from sphere_sim.twin.plants import ContinuousPlant
 
     if kind == 'discrete':
-        from sphere_sim.twin.plant_setup import load_kick_model
-
-        kicks = load_kick_model(tables, params)
-        plant = DiscretePlant(kicks, normal0, kicks.spec.window_s)
+        plant = discrete_plant(load_kick_model(tables, params), normal0)
     else:
         from sphere_sim.model.assembly import assemble
         from sphere_sim.model.initial_state import rest_state
 
         model = assemble(load_scene('rest'), params)
-        plant = ContinuousPlant(model, rest_state(model, cardan_of_normal(normal0)))
+        plant = ContinuousPlant(model, rest_state(model, cardan_of_normal(normal0)),
+                                kick_period_s=kick_period_s(load_kick_model(tables)))
     plant.time_s = time0_s
     return plant
 
