@@ -47,16 +47,48 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGKILL)
 
 _PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
 _domain_counter = itertools.count()
+# Domain ids this process handed out and still reserves (id -> open lock file), oldest first.
+_held_domains = {}
+DOMAINS_HELD = 32
+DOMAIN_LOCK_DIR = 'sphere_twin_domains'
 
 
 def fresh_domain_id():
-    """A ROS domain id in [MIN_DOMAIN_ID, MAX_DOMAIN_ID] not handed out recently by this process.
+    """A ROS domain id in [MIN_DOMAIN_ID, MAX_DOMAIN_ID] that no other process on this machine
+    holds, and that this one has not handed out recently.
 
-    Consecutive calls cycle through the whole range starting from an offset derived from the
-    PID, so that concurrent test runs are unlikely to share a domain.
+    Consecutive calls cycle through the range from an offset derived from the PID. Each id
+    handed out is reserved by an exclusive lock on a file of its own in the temporary
+    directory, held until this process has handed out DOMAINS_HELD more (or exits), so that
+    concurrent runs (two test suites, a demo beside a test) never share a domain; an id
+    another process holds is skipped. Without a free one it falls back to the next in turn.
     """
     span = MAX_DOMAIN_ID - MIN_DOMAIN_ID + 1
-    return MIN_DOMAIN_ID + (os.getpid() + next(_domain_counter)) % span
+    for _ in range(span):
+        domain_id = MIN_DOMAIN_ID + (os.getpid() + next(_domain_counter)) % span
+        if _reserve(domain_id):
+            return domain_id
+    return domain_id
+
+
+def _reserve(domain_id):
+    """Lock ``domain_id``'s file for this process; False if another process holds it."""
+    import fcntl
+
+    if domain_id in _held_domains:
+        _held_domains.pop(domain_id).close()  # ours, handed out long ago: hand it out again
+    directory = Path(tempfile.gettempdir()) / DOMAIN_LOCK_DIR
+    directory.mkdir(exist_ok=True)
+    handle = open(directory / f'{domain_id}.lock', 'w')  # noqa: SIM115 (held open: the lock)
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        handle.close()
+        return False
+    _held_domains[domain_id] = handle
+    while len(_held_domains) > DOMAINS_HELD:
+        _held_domains.pop(next(iter(_held_domains))).close()
+    return True
 
 
 def child_environment(domain_id, env_overrides=None, base_env=None):

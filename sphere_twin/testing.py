@@ -123,7 +123,8 @@ class TwinClient(TopicProbe):
     kicks : sphere_sim.kicks.lookup_table.LookupTable or CombinedKickPlant
         The kicks :meth:`kick` sends (their programmes).
     window_s : float
-        Kick window: the settled sample comes this long after the kick's start.
+        Kick period: the plant's kick is over this long after its start (the settled sample
+        is the first at or after it).
 
     Attributes
     ----------
@@ -212,7 +213,7 @@ class TwinClient(TopicProbe):
 
 @contextlib.contextmanager
 def lockstep_twin(plant='discrete', scene='rest', seed=0, noise_std_rad=0.0,
-                  publish_rate_hz=50.0, tables=(), domain_id=None, extra_parameters=None):
+                  publish_rate_hz=None, tables=(), domain_id=None, extra_parameters=None):
     """Start a lockstep simulator on a private domain; yield a :class:`TwinClient`.
 
     Parameters
@@ -222,7 +223,8 @@ def lockstep_twin(plant='discrete', scene='rest', seed=0, noise_std_rad=0.0,
     scene : str
     seed : int
     noise_std_rad : float
-    publish_rate_hz : float
+    publish_rate_hz : float, optional
+        The simulator's default (the sensor's rate) unless given.
     tables : sequence of str
         Kick tables of the discrete plant (and of :meth:`TwinClient.kick`); the shipped
         default if empty.
@@ -231,17 +233,19 @@ def lockstep_twin(plant='discrete', scene='rest', seed=0, noise_std_rad=0.0,
     extra_parameters : dict, optional
         More simulator parameters.
     """
+    from sphere_sim.kicks.discrete import kick_period_s
     from sphere_sim.twin.plant_setup import load_kick_model
 
     ensure_localhost_discovery()
     domain_id = fresh_domain_id() if domain_id is None else domain_id
     params = dict(plant=plant, scene=scene, seed=seed, noise_std_rad=float(noise_std_rad),
-                  publish_rate_hz=float(publish_rate_hz), lockstep=True,
-                  tables=list(tables) or [''], **(extra_parameters or {}))
+                  lockstep=True, tables=list(tables) or [''], **(extra_parameters or {}))
+    if publish_rate_hz is not None:
+        params['publish_rate_hz'] = float(publish_rate_hz)
     kicks = load_kick_model(tables)
     with running_nodes(domain_id=domain_id) as group:
         process = group.start('simulator', parameter_args(**params))
-        client = TwinClient(process, domain_id, kicks, kicks.spec.window_s)
+        client = TwinClient(process, domain_id, kicks, kick_period_s(kicks))
         try:
             yield client
         finally:

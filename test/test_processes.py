@@ -4,6 +4,7 @@ import itertools
 import os
 import signal
 import sys
+import time
 
 import pytest
 
@@ -62,7 +63,36 @@ def test_fresh_domain_ids_stay_in_range_and_differ_between_calls():
     assert min(ids) >= MIN_DOMAIN_ID >= 1
     assert max(ids) <= MAX_DOMAIN_ID
     assert all(a != b for a, b in itertools.pairwise(ids))
-    assert len(set(ids)) == MAX_DOMAIN_ID - MIN_DOMAIN_ID + 1
+    # Ids another run on this machine holds are skipped; the rest of the range is used.
+    assert len(set(ids)) > (MAX_DOMAIN_ID - MIN_DOMAIN_ID + 1) // 2
+
+
+def test_a_domain_another_process_holds_is_never_handed_out(tmp_path):
+    """Two runs at once (two test suites, a demo beside a test) must not share a domain."""
+    import subprocess
+
+    from sphere_twin import processes
+
+    taken = fresh_domain_id()
+    processes._held_domains.pop(taken).close()  # let the other process have it
+    ready = tmp_path / 'ready'
+    holder = subprocess.Popen([sys.executable, '-c', (
+        'import sys, time\n'
+        'from pathlib import Path\n'
+        'from sphere_twin import processes\n'
+        f'assert processes._reserve({taken})\n'
+        f'Path({str(ready)!r}).touch()\n'
+        'time.sleep(30)\n')])
+    try:
+        deadline = time.monotonic() + 20.0
+        while not ready.exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert ready.exists()
+        ids = [fresh_domain_id() for _ in range(2 * (MAX_DOMAIN_ID - MIN_DOMAIN_ID + 1))]
+    finally:
+        holder.kill()
+        holder.wait()
+    assert taken not in ids
 
 
 def test_parameter_args_are_ros_arguments():

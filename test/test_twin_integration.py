@@ -55,7 +55,8 @@ def test_lockstep_runs_with_the_same_seed_are_identical():
     # Idle repeats of the last sample depend on wall time: compare the distinct samples.
     distinct = [dict(first), dict(second)]
     assert distinct[0] == distinct[1]
-    assert len(distinct[0]) == 1 + 3 * 3  # the initial sample and three 60 ms windows
+    # The initial sample and three kick periods of 50 ms at the default 100 Hz.
+    assert len(distinct[0]) == 1 + 3 * 5
 
 
 def test_a_healthy_twin_reports_its_status_every_second(twin):
