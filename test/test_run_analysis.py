@@ -15,6 +15,26 @@ from sphere_twin.run_analysis import RecordedRun, setpoint_segments, statistics
 from sphere_twin.testing import TopicProbe
 
 
+def _write_bag(bag_dir, messages):
+    """A bag of the contract's ``(topic, msg)`` messages, logged 1 ns apart in order, after a
+    level surface normal (a bag needs one to be analysed)."""
+    from rclpy.serialization import serialize_message
+
+    from msg_defs.conversions import surface_normal_to_msg
+    from msg_defs.topics import SURFACE_NORMAL
+    from sphere_twin.bag import format as bag_format
+    from sphere_twin.bag.writer import BagWriter
+
+    messages = [(SURFACE_NORMAL, surface_normal_to_msg(normal_from_xy(0.0, 0.0))), *messages]
+    with BagWriter(bag_dir) as bag:
+        for topic in {topic.name: topic for topic, _ in messages}.values():
+            bag.add_topic(topic.name, bag_format.type_name_of(topic.msg_type),
+                          [bag_format.qos_to_dict(topic.qos.to_profile())])
+        for k, (topic, msg) in enumerate(messages):
+            bag.write(topic.name, serialize_message(msg), 1 + k)
+    return bag_dir
+
+
 def _run(errors_deg, period_s=0.02):
     """A synthetic run: the normal approaches a setpoint along x with the given errors."""
     target = normal_from_xy(0.02, 0.0)
@@ -129,12 +149,8 @@ def test_continuous_plant_replays_a_recording_to_the_integrator_tolerance(ros_no
 def test_recorded_commands_that_break_the_rules_are_dropped_as_the_twin_dropped_them(tmp_path):
     """A recording is a boundary where data enters: a programme or a hold beyond the device's
     rules (msg_defs.voltage_rules) is skipped on reading, as the twin refused it when live."""
-    from rclpy.serialization import serialize_message
-
-    from msg_defs.conversions import programme_to_msg, surface_normal_to_msg, voltages_to_msg
-    from msg_defs.topics import PULSE_PROGRAM, SURFACE_NORMAL, VOLTAGE_COMMAND
-    from sphere_twin.bag import format as bag_format
-    from sphere_twin.bag.writer import BagWriter
+    from msg_defs.conversions import programme_to_msg, voltages_to_msg
+    from msg_defs.topics import PULSE_PROGRAM, VOLTAGE_COMMAND
     from sphere_twin.run_analysis import load_run
 
     good = programme_to_msg([0.0, 1e-3], [[80.0, 0.0, 0.0, 0.0], [0.0] * 4])
@@ -142,17 +158,9 @@ def test_recorded_commands_that_break_the_rules_are_dropped_as_the_twin_dropped_
     over.points[0].effort[0] = 90.0  # as a sender that skipped the rules would write it
     hold_over = voltages_to_msg([0.0] * 4)
     hold_over.effort = [0.0, 0.0, 85.0, 0.0]
-    bag_dir = tmp_path / 'rules'
-    with BagWriter(bag_dir) as bag:
-        for topic in (SURFACE_NORMAL, PULSE_PROGRAM, VOLTAGE_COMMAND):
-            bag.add_topic(topic.name, bag_format.type_name_of(topic.msg_type),
-                          [bag_format.qos_to_dict(topic.qos.to_profile())])
-        bag.write(SURFACE_NORMAL.name,
-                  serialize_message(surface_normal_to_msg(normal_from_xy(0.0, 0.0))), 1)
-        for k, msg in enumerate((good, over)):
-            bag.write(PULSE_PROGRAM.name, serialize_message(msg), 10 + k)
-        bag.write(VOLTAGE_COMMAND.name, serialize_message(hold_over), 20)
-        bag.write(VOLTAGE_COMMAND.name, serialize_message(voltages_to_msg([1.0] * 4)), 21)
+    bag_dir = _write_bag(tmp_path / 'rules', [
+        (PULSE_PROGRAM, good), (PULSE_PROGRAM, over), (VOLTAGE_COMMAND, hold_over),
+        (VOLTAGE_COMMAND, voltages_to_msg([1.0] * 4))])
     run = load_run(bag_dir)
     assert len(run.kicks) == 1 and run.kicks[0][2][0][0] == 80.0
     assert len(run.holds) == 1 and run.holds[0][1].tolist() == [1.0] * 4
@@ -162,18 +170,9 @@ def test_programmes_start_where_the_device_reported_and_refused_ones_never_run(t
     """A bag with /beams/programme_status: each programme starts where its report says (a
     late one later than its stamp), matched by stamp, in order for programmes that share one;
     a refused one is not replayed."""
-    from rclpy.serialization import serialize_message
-
-    from msg_defs.conversions import (
-        programme_event_to_msg,
-        programme_to_msg,
-        surface_normal_to_msg,
-        time_from_ns,
-    )
+    from msg_defs.conversions import programme_event_to_msg, programme_to_msg, time_from_ns
     from msg_defs.programme_events import ProgrammeEvent, ProgrammeState
-    from msg_defs.topics import PROGRAMME_STATUS, PULSE_PROGRAM, SURFACE_NORMAL
-    from sphere_twin.bag import format as bag_format
-    from sphere_twin.bag.writer import BagWriter
+    from msg_defs.topics import PROGRAMME_STATUS, PULSE_PROGRAM
     from sphere_twin.run_analysis import load_run
 
     def programme(volts, stamp_s):
@@ -187,18 +186,9 @@ def test_programmes_start_where_the_device_reported_and_refused_ones_never_run(t
                ProgrammeEvent(ProgrammeState.REFUSED, 0.0, 3, 0.62, 'overlaps'),
                ProgrammeEvent(ProgrammeState.ENDED, 0.0, 2, 0.611),
                ProgrammeEvent(ProgrammeState.STARTED, 0.8, 4, 0.8)]
-    bag_dir = tmp_path / 'reported'
-    with BagWriter(bag_dir) as bag:
-        for topic in (SURFACE_NORMAL, PULSE_PROGRAM, PROGRAMME_STATUS):
-            bag.add_topic(topic.name, bag_format.type_name_of(topic.msg_type),
-                          [bag_format.qos_to_dict(topic.qos.to_profile())])
-        bag.write(SURFACE_NORMAL.name,
-                  serialize_message(surface_normal_to_msg(normal_from_xy(0.0, 0.0))), 1)
-        for k, msg in enumerate(sent):
-            bag.write(PULSE_PROGRAM.name, serialize_message(msg), 10 + k)
-        for k, event in enumerate(reports):
-            bag.write(PROGRAMME_STATUS.name, serialize_message(programme_event_to_msg(event)),
-                      20 + k)
+    bag_dir = _write_bag(tmp_path / 'reported', [
+        *((PULSE_PROGRAM, msg) for msg in sent),
+        *((PROGRAMME_STATUS, programme_event_to_msg(event)) for event in reports)])
     run = load_run(bag_dir)
     assert [(start, volts[0][0]) for start, _, volts in run.kicks] == [
         (0.53, 10.0), (0.61, 20.0), (0.8, 40.0)]
