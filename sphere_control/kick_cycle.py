@@ -154,9 +154,8 @@ class KickCycle:
     def on_programme_event(self, event):
         """A plant's report on a programme (:class:`ProgrammeEvent`).
 
-        Returns the :class:`Decision` it leads to when it completes the pending kick on a
-        sample already seen (or frees the cycle), else None. Reports on other programmes
-        (another sender's) are ignored.
+        Returns the :class:`Decision` it leads to when it ends the pending kick on a sample
+        already seen, else None. Reports on other programmes (another sender's) are ignored.
         """
         if not self.concerns(event):
             return None
@@ -173,8 +172,11 @@ class KickCycle:
             p.end_s, p.learn = event.time_s, False
             self.counts.cut += 1
         elif event.state is ProgrammeState.REFUSED:
+            # Nothing ran. The next kick waits for the next sample: deciding at once would
+            # answer a plant that refuses every kick with a flood of them.
             self.pending = None
             self.counts.refused += 1
+            return None
         return self.decide() if self.over() and self.latest is not None else None
 
     def concerns(self, event):

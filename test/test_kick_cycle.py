@@ -95,11 +95,12 @@ def test_reports_on_other_programmes_are_ignored(cycle):
     assert cycle.on_sample(0.2, MOVED, wall_s=0.0).phase is Phase.WAITING
 
 
-def test_a_refused_kick_is_not_learned_from_and_the_next_is_decided_at_once(cycle):
+def test_a_refused_kick_is_not_learned_from_and_the_next_waits_for_a_sample(cycle):
     asked = cycle.on_sample(0.0, LEVEL, wall_s=0.0).start_s
     cycle.on_sample(0.01, LEVEL, wall_s=0.0)
-    decision = cycle.on_programme_event(report(ProgrammeState.REFUSED, asked, 0.01))
-    assert decision.phase is Phase.KICKING
+    # Not at once: a plant that refuses every kick would be flooded with them.
+    assert cycle.on_programme_event(report(ProgrammeState.REFUSED, asked, 0.01)) is None
+    assert cycle.on_sample(0.02, LEVEL, wall_s=0.0).phase is Phase.KICKING
     assert cycle.controller.observed == [] and cycle.counts.refused == 1
 
 
