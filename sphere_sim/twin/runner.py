@@ -235,7 +235,7 @@ class TwinRunner:
 
     def refuse_programme(self, asked_s, reason):
         """Book a programme refused before it reached the runner (a message that breaks the
-        contract): counted, and reported to its sender like any other refusal."""
+        contract): numbered, and reported to its sender like any other refusal."""
         self._received += 1
         self._event(ProgrammeState.REFUSED, asked_s, self._received, reason)
 
