@@ -178,13 +178,19 @@ class RunStatistics:
     max_error_rad: float
     settle_times_s: list  # per setpoint: time until the error stays within the band (or None)
     band_rad: float
+    # RMS error at the samples the controller decided on (settled states, as the offline loop
+    # records them); NaN for a bag without the controller's status.
+    rms_decided_error_rad: float = math.nan
 
     def to_dict(self):
         return {'kicks': self.kicks, 'duration_s': self.duration_s,
                 'final_error_deg': math.degrees(self.final_error_rad),
                 'rms_error_deg': math.degrees(self.rms_error_rad),
                 'max_error_deg': math.degrees(self.max_error_rad),
-                'settle_times_s': self.settle_times_s, 'band_deg': math.degrees(self.band_rad)}
+                'settle_times_s': self.settle_times_s, 'band_deg': math.degrees(self.band_rad),
+                'rms_decided_error_deg': (math.degrees(self.rms_decided_error_rad)
+                                          if math.isfinite(self.rms_decided_error_rad)
+                                          else None)}
 
 
 def errors_rad(run):
@@ -237,9 +243,11 @@ def statistics(run, band_rad=DEFAULT_BAND_RAD):
             settle.append(float(seg_t[outside[-1] + 1] - start_s))
         else:
             settle.append(None)  # never settled within the segment
+    _, decided = errors_at_decisions_rad(run)
     return RunStatistics(len(run.kicks), float(run.normal_t_s[-1] - run.normal_t_s[0]),
                          float(errors[-1]), float(np.sqrt(np.mean(errors ** 2))),
-                         float(errors.max()), settle, band_rad)
+                         float(errors.max()), settle, band_rad,
+                         float(np.sqrt(np.mean(decided ** 2))) if decided.size else math.nan)
 
 
 def plot_report(run, path, title=''):

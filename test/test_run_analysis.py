@@ -11,7 +11,12 @@ from sphere_sim.kicks.discrete import normal_from_xy
 from sphere_sim.twin.plants import LIVE_ERROR_BOUND_RAD
 from sphere_twin.cli import build_parser
 from sphere_twin.processes import parameter_args
-from sphere_twin.run_analysis import RecordedRun, setpoint_segments, statistics
+from sphere_twin.run_analysis import (
+    RecordedRun,
+    errors_at_decisions_rad,
+    setpoint_segments,
+    statistics,
+)
 from sphere_twin.testing import TopicProbe
 
 
@@ -52,6 +57,20 @@ def test_statistics_of_a_synthetic_approach():
     assert stats.settle_times_s == [pytest.approx(0.7)]
     assert math.degrees(stats.max_error_rad) == pytest.approx(1.0, rel=1e-3)  # x_sn is a sine
     assert math.degrees(stats.final_error_rad) == pytest.approx(0.01, rel=1e-3)
+
+
+def test_the_error_where_the_controller_decided_is_read_at_those_samples_only():
+    import dataclasses
+
+    run = _run([1.0, 0.5, 0.2, 0.08, 0.04, 0.03, 0.06, 0.02, 0.01, 0.01], period_s=0.1)
+    assert math.isnan(statistics(run).rms_decided_error_rad)  # no controller status recorded
+    # Decided on the samples at 0.0, 0.3 and 0.7 s; 0.75 s is no sample and is ignored.
+    run = dataclasses.replace(run, decision_t_s=np.array([0.0, 0.3, 0.7, 0.75]))
+    times, errors = errors_at_decisions_rad(run)
+    np.testing.assert_allclose(times, [0.0, 0.3, 0.7])
+    np.testing.assert_allclose(np.degrees(errors), [1.0, 0.08, 0.02], rtol=1e-3)
+    rms_deg = math.degrees(statistics(run).rms_decided_error_rad)
+    assert rms_deg == pytest.approx(math.sqrt((1.0 + 0.08 ** 2 + 0.02 ** 2) / 3), rel=1e-3)
 
 
 def test_a_run_that_never_settles_says_so():

@@ -44,6 +44,9 @@ def run(args):
              f'error: final {math.degrees(stats.final_error_rad):.4f} deg, RMS '
              f'{math.degrees(stats.rms_error_rad):.4f} deg, max '
              f'{math.degrees(stats.max_error_rad):.4f} deg',
+             *([f'error where the controller decided (settled states): RMS '
+                f'{math.degrees(stats.rms_decided_error_rad):.4f} deg']
+               if math.isfinite(stats.rms_decided_error_rad) else []),
              f'wrote {png} and {stem.with_suffix(".json")}']
     stem.with_suffix('.txt').write_text('\n'.join(lines[:-1]) + '\n')
     print('\n'.join(lines))
