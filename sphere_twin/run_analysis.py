@@ -126,12 +126,11 @@ def load_run(bag_dir):
     # A reference is in force from when it arrives (its node may stamp with another clock).
     references = sorted(((on_stamps(log), n) for log, n in read.references),
                         key=lambda r: r[0])
-    if read.reports:
-        kicks = _reported_starts(read.programmes, read.reports)
-    else:
-        kicks = [(stamp_ns / NS_PER_S if stamp_ns else on_stamps(log_ns_), times, volts)
-                 for log_ns_, stamp_ns, times, volts in read.programmes]
-    kicks.sort(key=lambda k: k[0])
+    def at_stamp(log_ns, stamp_ns):
+        return stamp_ns / NS_PER_S if stamp_ns else on_stamps(log_ns)
+
+    kicks = sorted(_reported_starts(read.programmes, read.reports, at_stamp),
+                   key=lambda k: k[0])
     return RecordedRun(
         np.array([t for t, _ in normals]), np.array([n for _, n in normals]),
         np.array([t for t, _ in references]), np.array([n for _, n in references]).reshape(-1, 3),
@@ -140,19 +139,21 @@ def load_run(bag_dir):
         np.unique(read.decisions))
 
 
-def _reported_starts(programmes, reports):
-    """(start_s, times, volts) of the programmes that started, at the start the device
-    reported. A report names its programme by the stamp it was sent with; programmes that
-    share a stamp (0: at once) are matched in the order they were received."""
+def _reported_starts(programmes, reports, unreported_start_s):
+    """(start_s, times, volts) of the programmes that ran: at the start the device reported,
+    a refused one not at all, and one whose report was not recorded (a recorder that joined
+    the topic late) at ``unreported_start_s(log_time_ns, stamp_ns)``. A report names its
+    programme by the stamp it was sent with; programmes that share a stamp (0: at once) are
+    matched in the order they were received."""
     outcomes = {}  # stamp in ns -> [start_s or None (refused)], in report order
     for event in reports:
         if event.state in (ProgrammeState.STARTED, ProgrammeState.REFUSED):
             outcomes.setdefault(round(event.asked_s * NS_PER_S), []).append(
                 event.time_s if event.state is ProgrammeState.STARTED else None)
     kicks = []
-    for _, stamp_ns, times, volts in sorted(programmes, key=lambda p: p[0]):
+    for log_ns, stamp_ns, times, volts in sorted(programmes, key=lambda p: p[0]):
         queue = outcomes.get(stamp_ns)
-        start_s = queue.pop(0) if queue else None
+        start_s = queue.pop(0) if queue else unreported_start_s(log_ns, stamp_ns)
         if start_s is not None:
             kicks.append((start_s, times, volts))
     return kicks

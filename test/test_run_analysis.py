@@ -188,7 +188,7 @@ def test_recorded_commands_that_break_the_rules_are_dropped_as_the_twin_dropped_
 def test_programmes_start_where_the_device_reported_and_refused_ones_never_run(tmp_path):
     """A bag with /beams/programme_status: each programme starts where its report says (a
     late one later than its stamp), matched by stamp, in order for programmes that share one;
-    a refused one is not replayed."""
+    a refused one is not replayed; one whose report was not recorded starts at its stamp."""
     from msg_defs.conversions import programme_event_to_msg, programme_to_msg, time_from_ns
     from msg_defs.programme_events import ProgrammeEvent, ProgrammeState
     from msg_defs.topics import PROGRAMME_STATUS, PULSE_PROGRAM
@@ -199,7 +199,7 @@ def test_programmes_start_where_the_device_reported_and_refused_ones_never_run(t
                                 stamp=time_from_ns(round(stamp_s * 1e9)))
 
     sent = [programme(10.0, 0.5), programme(20.0, 0.0), programme(30.0, 0.0),
-            programme(40.0, 0.8)]
+            programme(40.0, 0.8), programme(50.0, 0.9)]  # the last one's report was lost
     reports = [ProgrammeEvent(ProgrammeState.STARTED, 0.5, 1, 0.53),
                ProgrammeEvent(ProgrammeState.STARTED, 0.0, 2, 0.61),
                ProgrammeEvent(ProgrammeState.REFUSED, 0.0, 3, 0.62, 'overlaps'),
@@ -210,4 +210,4 @@ def test_programmes_start_where_the_device_reported_and_refused_ones_never_run(t
         *((PROGRAMME_STATUS, programme_event_to_msg(event)) for event in reports)])
     run = load_run(bag_dir)
     assert [(start, volts[0][0]) for start, _, volts in run.kicks] == [
-        (0.53, 10.0), (0.61, 20.0), (0.8, 40.0)]
+        (0.53, 10.0), (0.61, 20.0), (0.8, 40.0), (0.9, 50.0)]
