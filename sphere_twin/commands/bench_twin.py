@@ -2,6 +2,7 @@
 the node loop's kick cycle."""
 
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -36,6 +37,8 @@ def register(sub):
 
 
 def run(args):
+    # The machine's load beside the figures: an unpaced real-time factor moves with it.
+    load_before = os.getloadavg()[0]
     with tqdm(total=args.duration_s, desc=f'bench twin ({args.plant})', unit='sim s',
               file=sys.stderr, bar_format='{l_bar}{bar}| {n:.1f}/{total:g} sim s') as bar:
         def progress(simulated_s):
@@ -47,15 +50,19 @@ def run(args):
         except BenchError as error:
             raise CommandError(str(error)) from None
     lines = summary_lines(result)
+    load = (f'load average (1 min) {load_before:.2f} at the start, {os.getloadavg()[0]:.2f} '
+            'at the end')
     args.out.mkdir(parents=True, exist_ok=True)
     paced = args.real_time_factor > 0.0
     stem = args.out / f'twin_{args.plant}{"_paced" if paced else ""}'
-    stem.with_suffix('.json').write_text(json.dumps(result.to_dict(), indent=2) + '\n')
+    stem.with_suffix('.json').write_text(json.dumps({**result.to_dict(), 'machine': load},
+                                                   indent=2) + '\n')
     command = (f'--plant {args.plant} --duration-s {args.duration_s:g}'
                + (f' --real-time-factor {args.real_time_factor:g}' if paced else ''))
     stem.with_suffix('.md').write_text(
         f'# Live twin, {args.plant} plant, {result.pace_name}\n\nWritten by `sphere-twin bench '
         f'twin {command}`.\n\n' + '\n'.join(f'- {line}' for line in lines)
-        + f'\n- farewell: `{farewell}`\n')
+        + f'\n- farewell: `{farewell}`\n- machine: {load}\n')
+    print(load)
     print('\n'.join(lines))
     return 0
