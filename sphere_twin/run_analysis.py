@@ -105,10 +105,20 @@ class _Messages:
             self.holds.append((log_time_ns, check_voltages(voltages_from_msg(msg))))
 
 
-def load_run(bag_dir):
-    """Read the contract's signals from a bag; BagError if it has no surface normal."""
+# What a device itself records: its commands and its sensor (and the reference it was given).
+# Identification reads only these; the twin's reports and the controller's status are extras.
+DEVICE_TOPICS = (SURFACE_NORMAL.name, SPHERE_REFERENCE.name, PULSE_PROGRAM.name,
+                 VOLTAGE_COMMAND.name)
+
+
+def load_run(bag_dir, topics=_Messages.TOPICS):
+    """Read the contract's signals from a bag; BagError if it has no surface normal.
+
+    ``topics`` limits what is read (:data:`DEVICE_TOPICS`: only what the device records);
+    without the programme reports, programmes start at their stamps.
+    """
     read = _Messages()
-    for raw in read_messages(bag_dir, list(_Messages.TOPICS)):
+    for raw in read_messages(bag_dir, list(topics)):
         try:
             read.add(raw.topic, raw.log_time_ns, deserialize(raw))
         except ValueError:
