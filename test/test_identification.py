@@ -244,3 +244,46 @@ def test_a_bad_request_is_one_line(device_bag, tmp_path, capsys, argv, message):
     assert status == 2 and len(err) == 1
     assert err[0].startswith('sphere-twin identify: error: ') and message in err[0]
     assert not (tmp_path / 'x.yaml').exists()
+
+
+def test_replay_check_shows_the_error_before_and_after(device_bag, tmp_path, capsys):
+    """The device's own parameters replay its recording better than the shipped set."""
+    import json
+
+    from sphere_twin import cli
+
+    status = cli.main(['replay-check', str(device_bag), '--params',
+                       str(device_bag / 'truth.yaml'), '--out', str(tmp_path)])
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert status == 0
+    data = json.loads((tmp_path / f'{device_bag.name}_replay.json').read_text())
+    assert data['plant'] == 'continuous' and data['before']['params'] == 'calibrated'
+    assert data['rms_error_rad'] < data['before']['rms_error_rad']
+    assert lines[-3].startswith('replay error before (calibrated)')
+    assert lines[-2].startswith('replay error after (device_a_truth)')
+    assert lines[-1].startswith('improvement: RMS')
+
+
+def test_a_start_set_given_as_a_file_is_kept_beside_the_fitted_one(tmp_path):
+    from sphere_twin.commands.identify import write_fitted
+
+    start_file = tmp_path / 'stiffer.yaml'
+    start_file.write_text('base: calibrated\nname: stiffer\n'
+                          'overrides:\n  beam.stiffness_z_n_per_m: 40.0\n')
+    start = load_parameter_set(str(start_file))
+    fits = idf.fit_parameters(start, ['friction.coulomb'])
+    fitted_p = idf.FittedParameter('friction.coulomb', 0.3, 0.35, 0.05, 0.1, 0.8, True,
+                                   'fitted', '', ('friction.stribeck',))
+    result = idf.IdentificationResult([fitted_p], np.zeros((3, 2)), np.zeros((3, 2)), 1e-3,
+                                      np.ones((1, 1)), 4, 12, 0, 'done', 1.0)
+    obs = idf.Observations(tuple(idf.KickObservation(float(i), np.zeros(1), np.zeros((1, 4)),
+                                                     np.array([0, 0, 1.0]),
+                                                     np.array([0, 0, 1.0]), 5, 5)
+                                 for i in range(3)), 1e-3)
+    assert fits[0].tied == fitted_p.tied
+    out = write_fitted(tmp_path / 'fit.yaml',
+                       start, result, obs, [str(tmp_path / 'bag')], 1.0)
+    loaded = load_parameter_set(str(out))
+    assert loaded.beam.stiffness_z_n_per_m == 40.0  # the start set, through its copy
+    assert (loaded.friction.coulomb, loaded.friction.stribeck) == (0.35, 0.35)
+    assert (tmp_path / 'fit_start.yaml').exists()

@@ -57,13 +57,16 @@ FD_STEP = 0.01
 # a search bound of the identification, not a physical range (docs/identification.md).
 UNDECLARED_FACTOR = 2.0
 # What the recordings cannot tell: a parameter whose 2-sigma interval, with the ones fitted
-# before it held, would cover more than this share of its scaled range.
+# before it held, would cover more than this share of its scaled range; or one of a pair whose
+# estimates would correlate beyond PAIR_CORRELATION_LIMIT.
 UNRESOLVED_SHARE = 0.5
+PAIR_CORRELATION_LIMIT = 0.95
 # The optimiser stops when a step moves the scaled parameters by less than XTOL (a fraction of
 # the standard errors that recordings of tens of kicks give, 0.03 and more) or the cost by less
-# than FTOL of itself.
-XTOL = 2e-3
-FTOL = 1e-3
+# than FTOL of itself (a cost of 2 x 40 kicks noise-weighted residuals: 0.4, where one standard
+# error of a parameter is worth 1).
+XTOL = 1e-2
+FTOL = 5e-3
 # The reported uncertainty: this many standard errors (about 95 % for a Gaussian estimate).
 UNCERTAINTY_SIGMAS = 2.0
 CHECKPOINT_VERSION = 1
@@ -453,9 +456,11 @@ def select_identifiable(jac, noise_std):
     Orthogonal selection on the noise-weighted Jacobian: take the parameter the residuals are
     most sensitive to, remove its direction from the others, and go on while the next one's
     remaining sensitivity still pins it to ``UNRESOLVED_SHARE`` of its range at
-    ``UNCERTAINTY_SIGMAS``. A parameter left out is *unresolved* when even alone it could not
-    be pinned so, and otherwise *entangled*: its effect on the kicks is (nearly) a combination
-    of those selected, and its partner is the selected one whose effect it resembles most.
+    ``UNCERTAINTY_SIGMAS``; then, while two selected ones would have estimates correlated
+    beyond ``PAIR_CORRELATION_LIMIT``, hold the less sensitive of them. A parameter left out is
+    *unresolved* when even alone it could not be pinned so, and otherwise *entangled*: its
+    effect on the kicks is (nearly) a combination of those selected, and its partner is the
+    selected one whose effect it resembles most.
 
     Returns
     -------
@@ -478,6 +483,18 @@ def select_identifiable(jac, noise_std):
         selected.append(best)
         remaining.remove(best)
     alone = np.linalg.norm(jw, axis=0)
+    # A pair whose estimates would correlate beyond the limit: each alone may be pinned, but
+    # the kicks trade one for the other; the less sensitive one is held.
+    while len(selected) > 1:
+        cov = np.linalg.pinv(jw[:, selected].T @ jw[:, selected])
+        sd = np.sqrt(np.diag(cov))
+        corr = np.abs(cov / np.outer(sd, sd)) - np.eye(len(selected))
+        a, b = np.unravel_index(np.argmax(corr), corr.shape)
+        if corr[a, b] <= PAIR_CORRELATION_LIMIT:
+            break
+        weak = selected[a] if alone[selected[a]] < alone[selected[b]] else selected[b]
+        selected.remove(weak)
+        remaining.append(weak)
     held = {}
     for j in remaining:
         if alone[j] < limit or not selected:

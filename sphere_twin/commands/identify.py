@@ -46,8 +46,8 @@ def register(subparsers):
     parser.add_argument('--scheduler', default=None,
                         help='Dask scheduler address, e.g. tcp://host:8786')
     parser.add_argument('--max-evaluations', type=positive_int, default=30,
-                        help="most residual evaluations of the optimiser (each one simulates "
-                             "every kick)")
+                        help="most evaluations of the residuals by the optimiser (each one "
+                             "simulates every kick; a Jacobian's columns come on top)")
     parser.set_defaults(func=run)
 
 
@@ -196,29 +196,33 @@ def write_fitted(path, params, result, obs, bags, wall_s):
 
 
 def plot_fit(path, obs, result, title):
-    """Recorded resting normals against the model's, at the start and fitted, per kick."""
+    """Each kick's displacement of the resting normal, recorded against the model's at the
+    start values and fitted, and the residual per kick."""
     from sphere_twin.plots import plt
 
     t = np.array([k.time_s for k in obs.kicks])
-    after = np.array([k.normal_after[:2] for k in obs.kicks])
-    start = after + result.vectors_before
-    fitted = after + result.vectors_after
+    before = np.array([k.normal_before[:2] for k in obs.kicks])
+    recorded = np.array([k.normal_after[:2] for k in obs.kicks]) - before
+    start = recorded + result.vectors_before
+    fitted = recorded + result.vectors_after
     fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
     for i, name in enumerate(('$x_{sn}$', '$y_{sn}$')):
         ax = axes[i]
-        ax.plot(t, np.degrees(after[:, i]), 'ko', ms=4, label='recorded (resting mean)')
+        ax.plot(t, np.degrees(recorded[:, i]), 'ko', ms=4, label='recorded (resting means)')
         ax.plot(t, np.degrees(start[:, i]), 'x', color='tab:blue', label='model, start')
         ax.plot(t, np.degrees(fitted[:, i]), '+', color='tab:red', ms=9, label='model, fitted')
-        ax.set_ylabel(f'{name} after kick (deg)')
+        ax.set_ylabel(f'kick: change of {name} (deg)')
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
     axes[2].semilogy(t, np.degrees(result.residuals_before), 'x', color='tab:blue',
                      label='start')
     axes[2].semilogy(t, np.degrees(result.residuals_after), '+', color='tab:red', ms=9,
                      label='fitted')
-    axes[2].axhline(math.degrees(obs.noise_std_rad * math.sqrt(2.0 / max(
-        1, np.median([k.samples_after for k in obs.kicks])) * 2)), color='grey', lw=1,
-        ls='--', label='sensor noise of the means')
+    # RMS of a kick's residual from the sensor noise alone (both means, both axes).
+    expected = obs.noise_std_rad * math.sqrt(2.0 * np.mean(
+        [1.0 / k.samples_before + 1.0 / k.samples_after for k in obs.kicks]))
+    axes[2].axhline(math.degrees(expected), color='grey', lw=1, ls='--',
+                    label='expected from the sensor noise')
     axes[2].set_ylabel('model - recorded (deg)')
     axes[2].set_xlabel('kick start (s)')
     axes[2].grid(alpha=0.3, which='both')

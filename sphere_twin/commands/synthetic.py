@@ -28,7 +28,7 @@ def register(subparsers):
                                         'the study (or of --truth) into OUT, with truth.yaml.')
     record.add_argument('out', type=Path, help='bag directory to create')
     record.add_argument('--device', default='device_a',
-                        help='a device of the study (device_a, device_b, device_c)')
+                        help='a device of the study (device_a to device_e)')
     record.add_argument('--kicks', type=positive_int, default=DEFAULT_KICKS)
     record.add_argument('--seed', type=int, default=None,
                         help="seed of the kicks and the noise (default: the device's)")
