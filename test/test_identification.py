@@ -287,3 +287,37 @@ def test_a_start_set_given_as_a_file_is_kept_beside_the_fitted_one(tmp_path):
     assert loaded.beam.stiffness_z_n_per_m == 40.0  # the start set, through its copy
     assert (loaded.friction.coulomb, loaded.friction.stribeck) == (0.35, 0.35)
     assert (tmp_path / 'fit_start.yaml').exists()
+
+
+class _Analytic:
+    """An evaluator of residuals given as a function of the scaled parameters."""
+
+    def __init__(self, fun):
+        self.fun = fun
+
+    def __call__(self, u):
+        return self.fun(np.asarray(u, dtype=float))
+
+    def many(self, points):
+        return [self(p) for p in points]
+
+
+def test_the_curvature_is_checked_over_the_interval_it_reports():
+    rng = np.random.default_rng(0)
+    a = rng.normal(0.0, 1.0, 30)
+    noise = np.full(30, 0.1)
+    u0 = np.array([0.5])
+    for shape, widened in ((lambda x: x, False), (lambda x: 0.02 * np.tanh(x / 0.02), True)):
+        ev = _Analytic(lambda u, shape=shape: a * shape(u[0] - u0[0]))
+        jac = (ev(u0 + 1e-4) - ev(u0))[:, None] / 1e-4
+        cov = idf.covariance(jac, noise)
+        checked = idf._secant_checked(ev, u0, [0], cov, noise)
+        if not widened:  # a linear residual: the quadratic model is exact
+            assert checked == pytest.approx(cov, rel=1e-6)
+            continue
+        # tanh saturates: two standard errors out, the sum of squares rises less than the
+        # quadratic model says, and the variance grows by that ratio.
+        step = 2.0 * math.sqrt(cov[0, 0])
+        rise = np.sum((ev(u0 + step) / noise) ** 2)
+        assert rise < 4.0
+        assert checked[0, 0] == pytest.approx(cov[0, 0] * 4.0 / rise, rel=1e-6)

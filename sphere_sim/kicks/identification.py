@@ -67,6 +67,8 @@ PAIR_CORRELATION_LIMIT = 0.95
 # error of a parameter is worth 1).
 XTOL = 1e-2
 FTOL = 5e-3
+# The curvature check may widen a direction's variance at most this many times.
+MAX_WIDENING = 25.0
 # The reported uncertainty: this many standard errors (about 95 % for a Gaussian estimate).
 UNCERTAINTY_SIGMAS = 2.0
 CHECKPOINT_VERSION = 1
@@ -599,7 +601,8 @@ def identify(params, observations, fits, workers=1, scheduler=None, rtol=FIT_RTO
         u, converged, cov_free = start.copy(), 'nothing fitted', np.zeros((0, 0))
         if free:
             u, converged = _least_squares(ev, start, free, noise, max_nfev)
-            cov_free = covariance(ev.jacobian(u)[:, free], noise)
+            cov_free = _secant_checked(ev, u, free, covariance(ev.jacobian(u)[:, free], noise),
+                                       noise)
         r1 = ev(u)
     chi2 = float(np.sum((r1 / noise) ** 2)) / max(1, r1.size - len(free))
     # The sensor noise sets the scale; a fit worse than it explains widens the errors too.
@@ -622,6 +625,40 @@ def identify(params, observations, fits, workers=1, scheduler=None, rtol=FIT_RTO
     return IdentificationResult(results, r0.reshape(-1, 2), r1.reshape(-1, 2),
                                 observations.noise_std_rad, corr, len(ev.cache), ev.simulated,
                                 ev.resumed, converged, chi2)
+
+
+def _secant_checked(ev, u, free, cov, noise):
+    """The covariance with the curvature along each of its principal directions measured over
+    the interval it reports (two standard errors either way) instead of the Jacobian's 1 %
+    step: where the sum of squares rises less there than the quadratic model says (a valley
+    that bends, a kink), the variance along that direction grows by the ratio, at most
+    ``MAX_WIDENING`` times."""
+    values, vectors = np.linalg.eigh(cov)
+    chi_opt = float(np.sum((ev(u) / noise) ** 2))
+    points, steps = [], []
+    for k in range(values.size):
+        for sign in (1.0, -1.0):
+            step = np.zeros(u.size)
+            step[free] = sign * UNCERTAINTY_SIGMAS * math.sqrt(max(values[k], 0.0)) * \
+                vectors[:, k]
+            point = np.clip(u + step, 0.0, 1.0)
+            points.append(point)
+            steps.append((point - u)[free])
+    chis = [float(np.sum((r / noise) ** 2)) for r in ev.many(points)]
+    inverse = np.linalg.pinv(cov)
+    widened = cov.copy()
+    for k in range(values.size):
+        ratios = []
+        for i in (2 * k, 2 * k + 1):
+            predicted = float(steps[i] @ inverse @ steps[i])
+            rise = chis[i] - chi_opt
+            if predicted > 0.0:
+                ratios.append(MAX_WIDENING if rise <= predicted / MAX_WIDENING
+                              else predicted / rise)
+        ratio = max(ratios, default=1.0)
+        if ratio > 1.0:
+            widened += (ratio - 1.0) * values[k] * np.outer(vectors[:, k], vectors[:, k])
+    return widened
 
 
 def _held(fits, why):
