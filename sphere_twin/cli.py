@@ -31,6 +31,8 @@ COMMAND_MODULES = (
     'primitives',
     'report',
     'replay_check',
+    'identify',
+    'synthetic',
     'evaluate',
     'bag',
 )

@@ -26,6 +26,8 @@ RCLPY_ALLOWED = {
     'msg_defs.topics': 'turns its QoS specs into rclpy profiles, inside that one method',
     'sphere_twin.testing': "the tests' probe node that watches a running twin",
     'sphere_twin.bag.reader': "rclpy's CDR deserialiser reads recorded messages; no graph",
+    'sphere_twin.synthetic_device': "rclpy's CDR serialiser writes a synthetic device's "
+                                    'recording; no graph',
 }
 
 

@@ -43,10 +43,12 @@ def test_calibrated_moves_only_declared_uncertain_parameters():
         assert u.reason.strip()
         assert all(cal.get(tied) == cal.get(u.path) for tied in u.tied), u.path
     # Fig. 4 pins one parameter; the friction is held at physical estimates, since Fig. 5's
-    # kick is met across their whole ranges (docs/parameters.md).
+    # kick is met across their whole ranges (docs/parameters.md); so is the beams' damping,
+    # which only a device's recordings pin (docs/identification.md).
     targets = {u.path: u.target for u in cal.uncertain}
     assert targets == {'beam.stiffness_phi_nm_per_rad': 'fig4_threshold',
-                       'friction.coulomb': 'estimate', 'friction.presliding_m': 'estimate'}
+                       'friction.coulomb': 'estimate', 'friction.presliding_m': 'estimate',
+                       'beam.damping_phi_nms_per_rad': 'estimate'}
 
 
 def test_an_uncertain_entry_must_name_its_target(tmp_path):

@@ -4,23 +4,34 @@ import json
 import math
 from pathlib import Path
 
-from msg_defs.device import KICK_WINDOW_S
+from msg_defs.device import DEFAULT_PARAMETER_SET, KICK_WINDOW_S
 from sphere_twin.commands.bag import BAG_HELP
-from sphere_twin.commands.options import CommandError, add_params_option
+from sphere_twin.commands.options import CommandError, add_params_option, parameter_set
+
+# Resting samples that differ by more than this are a noisy sensor's, not rounding.
+SCATTER_RAD = 1e-12
 
 
 def register(subparsers):
     parser = subparsers.add_parser(
         'replay-check', help='replay a bag\'s commands open loop and compare the normals',
         description='Feed the recorded voltage commands and pulse programmes into the '
-                    'simulator open loop, from the first recorded normal, and report the '
+                    'simulator open loop, from the first recorded resting normal (the mean of '
+                    'the samples before the first command), and report the '
                     'simulated surface normal\'s error against the recorded one over time: the '
                     'way to hold the twin against recordings of the real device.')
     parser.add_argument('bag', help=BAG_HELP)
-    parser.add_argument('--plant', choices=('discrete', 'continuous'), default='discrete')
+    parser.add_argument('--plant', choices=('discrete', 'continuous'), default=None,
+                        help='the plant replayed (default: discrete with the shipped set, '
+                             'continuous with any other: the kick table holds only the '
+                             'shipped set\'s kicks)')
     parser.add_argument('--tables', nargs='*', default=[],
                         help='kick tables of the discrete plant (default: the shipped one)')
     add_params_option(parser)
+    parser.add_argument('--before', type=parameter_set, default=None, metavar='NAME|FILE',
+                        help='with a --params other than the shipped set (a file that '
+                             '`sphere-twin identify` fitted, say): the set to compare it with, '
+                             f'replayed too (default {DEFAULT_PARAMETER_SET})')
     parser.add_argument('--out', type=Path, default=None,
                         help='output directory (default: beside the bag)')
     parser.set_defaults(func=run)
@@ -48,9 +59,10 @@ def build_replay_plant(kind, normal0, time0_s, params, tables=()):
 
 
 def run(args):
+    from sphere_sim.model.parameters import load_parameter_set
     from sphere_twin.bag.locate import locate_bag
     from sphere_twin.plots import plot_lines
-    from sphere_twin.run_analysis import load_run, replay, replay_start_index
+    from sphere_twin.run_analysis import load_run, replay_start_index
 
     bag = locate_bag(args.bag)
     if bag.note:
@@ -60,23 +72,72 @@ def run(args):
     if start >= recorded.normal_t_s.size:
         raise CommandError(f'{args.bag}: the recording ends before a kick that began before '
                            'it settles')
-    plant = build_replay_plant(args.plant, recorded.normals[start],
-                               float(recorded.normal_t_s[start]), args.params, args.tables)
-    result = replay(recorded, plant, start)
+    shipped = load_parameter_set(DEFAULT_PARAMETER_SET)
+    plant = args.plant or ('discrete' if args.params.digest() == shipped.digest()
+                           else 'continuous')
+    before = args.before
+    if before is None and args.params.digest() != shipped.digest():
+        before = shipped
+    runs = ([('before', before)] if before is not None else []) + [('after', args.params)]
+    results = {label: _replay(recorded, start, plant, params, args.tables)
+               for label, params in runs}
     out = args.out or bag.output_dir
     out.mkdir(parents=True, exist_ok=True)
     stem = out / f'{bag.name}_replay'
-    plot_lines(result.times_s, [[max(math.degrees(e), 1e-12) for e in result.error_rad]],
-               [f'{args.plant} plant'], 'time (s)', 'simulated vs recorded normal (deg)',
+    result = results['after']
+    labels = {'before': f'{plant} plant, {before.name if before else ""} (before)',
+              'after': f'{plant} plant, {args.params.name}' + (' (after)' if before else '')}
+    plot_lines(result.times_s, [[max(math.degrees(e), 1e-12) for e in results[k].error_rad]
+                                for k in results],
+               [labels[k] for k in results], 'time (s)', 'simulated vs recorded normal (deg)',
                stem.with_suffix('.png'), title=f'open-loop replay of {bag.name}',
                logy=True)
-    data = {'bag': str(args.bag), 'plant': args.plant, 'samples': int(result.times_s.size),
-            'kicks': len(recorded.kicks), 'max_error_rad': result.max_error_rad,
-            'rms_error_rad': result.rms_error_rad}
+    data = {'bag': str(args.bag), 'plant': plant, 'samples': int(result.times_s.size),
+            'kicks': len(recorded.kicks), 'params': args.params.name,
+            'max_error_rad': result.max_error_rad, 'rms_error_rad': result.rms_error_rad}
+    if before is not None:
+        data['before'] = {'params': before.name,
+                          'max_error_rad': results['before'].max_error_rad,
+                          'rms_error_rad': results['before'].rms_error_rad}
     stem.with_suffix('.json').write_text(json.dumps(data, indent=2) + '\n')
     print(f'replayed {len(recorded.kicks)} programmes and {len(recorded.holds)} voltage '
-          f'commands through the {args.plant} plant against {result.times_s.size} samples')
+          f'commands through the {plant} plant against {result.times_s.size} samples')
     print(f'wrote {stem.with_suffix(".png")} and {stem.with_suffix(".json")}')
-    print(f'replay error: max {result.max_error_rad:.3g} rad, RMS {result.rms_error_rad:.3g} '
-          'rad')
+    if before is not None:
+        b = results['before']
+        print(f'replay error before ({before.name}): max {b.max_error_rad:.3g} rad, RMS '
+              f'{b.rms_error_rad:.3g} rad')
+        print(f'replay error after ({args.params.name}): max {result.max_error_rad:.3g} rad, '
+              f'RMS {result.rms_error_rad:.3g} rad')
+        print(f'improvement: RMS {b.rms_error_rad:.3g} -> {result.rms_error_rad:.3g} rad '
+              f'({b.rms_error_rad / max(result.rms_error_rad, 1e-300):.2f}x)')
+    else:
+        print(f'replay error: max {result.max_error_rad:.3g} rad, RMS '
+              f'{result.rms_error_rad:.3g} rad')
     return 0
+
+
+def _replay(recorded, start, plant, params, tables):
+    from sphere_twin.run_analysis import replay
+
+    replay_plant = build_replay_plant(plant, resting_start(recorded, start),
+                                      float(recorded.normal_t_s[start]), params, tables)
+    return replay(recorded, replay_plant, start)
+
+
+def resting_start(recorded, start):
+    """The normal the replay starts from: the sample at ``start``, or, where the samples until
+    the first command scatter by more than rounding (a noisy sensor), their mean: the sphere
+    rests there, and the mean beats the noise. (A noiseless recording keeps its first sample:
+    a replay through contacts amplifies even a 1e-17 change to the live tolerance's 1e-5 rad.)
+    """
+    import numpy as np
+
+    t = recorded.normal_t_s
+    first = min((k[0] for k in recorded.kicks if k[0] >= t[start] - 1e-9), default=np.inf)
+    first = min([first] + [h[0] for h in recorded.holds if h[0] >= t[start]])
+    resting = recorded.normals[start:][t[start:] < first - 1e-9]
+    if len(resting) < 2 or np.ptp(resting, axis=0).max() < SCATTER_RAD:
+        return recorded.normals[start]
+    mean = resting.mean(axis=0)
+    return mean / np.linalg.norm(mean)

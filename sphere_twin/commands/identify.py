@@ -1,0 +1,257 @@
+"""``sphere-twin identify BAG [BAG ...]``: fit the twin's parameters to a device's recordings.
+
+Reads only what the device records (``/beams/pulse_program``, ``/beams/voltage_command``,
+``/sphere/surface_normal``), hands the kicks to :mod:`sphere_sim.kicks.identification`, and
+writes a parameter file (``base:`` + ``overrides:``, with an ``identification:`` section of
+values, uncertainties and per-kick residuals) and a plot of recorded against fitted normals.
+"""
+
+import dataclasses
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+from tqdm import tqdm
+
+from msg_defs.device import DEFAULT_PARAMETER_SET, KICK_WINDOW_S
+from sphere_twin.commands.bag import BAG_HELP
+from sphere_twin.commands.options import CommandError, add_params_option, positive_int
+
+# The only topics identification reads: what a device records (never the twin's truth).
+DEVICE_TOPICS = ('/beams/pulse_program', '/beams/voltage_command', '/sphere/surface_normal')
+TRUTH_FILE = 'truth.yaml'
+
+
+def register(subparsers):
+    parser = subparsers.add_parser(
+        'identify', help='fit the twin to recordings of one device',
+        description='Fit the parameters the set declares uncertain (or those named with --fit) '
+                    'so that the continuous model, started at rest at each kick\'s recorded '
+                    'normal and driven by its recorded programme, reproduces the recorded '
+                    'normal after it. Reads only the device\'s topics; writes a parameter file '
+                    'usable with every --params and a plot of recorded against fitted normals. '
+                    'Resumable: an interrupted fit goes on from its checkpoint file.')
+    parser.add_argument('bags', nargs='+', metavar='BAG', help=BAG_HELP)
+    add_params_option(parser, help='the start, and every parameter not fitted: a set\'s name '
+                                   f'or a YAML file (default {DEFAULT_PARAMETER_SET})')
+    parser.add_argument('--fit', nargs='+', metavar='NAME', default=None,
+                        help='parameter paths to fit (default: those the set declares '
+                             'uncertain), e.g. beam.damping_phi_nms_per_rad')
+    parser.add_argument('--out', type=Path, default=None,
+                        help='fitted parameter file (default: <bag>_identified.yaml beside the '
+                             'first bag)')
+    parser.add_argument('--workers', type=positive_int, default=2, help='local processes')
+    parser.add_argument('--scheduler', default=None,
+                        help='Dask scheduler address, e.g. tcp://host:8786')
+    parser.add_argument('--max-evaluations', type=positive_int, default=30,
+                        help="most evaluations of the residuals by the optimiser (each one "
+                             "simulates every kick; a Jacobian's columns come on top)")
+    parser.set_defaults(func=run)
+
+
+def read_observations(bag_dir, window_s=KICK_WINDOW_S):
+    """The kicks of one bag, from the device's topics only."""
+    from sphere_sim.kicks.identification import observations_from_samples
+    from sphere_twin.run_analysis import load_run
+
+    run = load_run(bag_dir)
+    return observations_from_samples(run.normal_t_s, run.normals, run.kicks, run.holds,
+                                     window_s)
+
+
+def run(args):
+    from sphere_sim.kicks.identification import (
+        IdentificationError,
+        fit_parameters,
+        identify,
+        merge_observations,
+    )
+    from sphere_sim.model.parameters import ParameterError, load_parameter_set
+    from sphere_twin.bag.locate import locate_bag
+
+    bags = [locate_bag(b) for b in args.bags]
+    base = args.params
+    try:
+        obs = merge_observations([read_observations(b.directory) for b in bags])
+        fits = fit_parameters(base, args.fit)
+    except IdentificationError as exc:
+        raise CommandError(str(exc)) from None
+    out = args.out or bags[0].output_dir / f'{bags[0].name}_identified.yaml'
+    out.parent.mkdir(parents=True, exist_ok=True)
+    checkpoint = out.with_suffix('.partial.jsonl')
+    print(f'{len(obs.kicks)} kicks from {len(bags)} bag(s) ({obs.dropped} programmes without '
+          f'settled samples around them left out); sensor noise {obs.noise_std_rad:.3g} rad '
+          'per axis, from the resting stretches')
+    for fit in fits:
+        where = 'declared range' if fit.declared else 'search bound, no declared range'
+        print(f'fit {fit.path}{" (with " + ", ".join(fit.tied) + ")" if fit.tied else ""}: '
+              f'start {base.get(fit.path):.4g}, {where} [{fit.low:.4g}, {fit.high:.4g}]')
+    started = time.perf_counter()
+    with tqdm(desc='identify', unit='kick') as bar:
+        def progress(evaluator):
+            bar.n = evaluator.simulated
+            bar.set_postfix_str(f'{len(evaluator.cache)} evaluations')
+            bar.refresh()
+
+        try:
+            result = identify(base, obs, fits, args.workers, args.scheduler,
+                              checkpoint=checkpoint, progress=progress,
+                              max_nfev=args.max_evaluations)
+        except IdentificationError as exc:
+            raise CommandError(str(exc)) from None
+    wall_s = time.perf_counter() - started
+    print_result(result, wall_s)
+    write_fitted(out, args.params, result, obs, [str(b.directory) for b in bags], wall_s)
+    load_parameter_set.cache_clear()
+    try:
+        fitted = load_parameter_set(str(out))
+    except ParameterError as exc:  # pragma: no cover - a bug, said plainly
+        raise CommandError(f'the fitted file does not load: {exc}') from None
+    png = plot_fit(out.with_suffix('.png'), obs, result, bags[0].name)
+    checkpoint.unlink(missing_ok=True)
+    print(f'wrote {out} and {png}')
+    truth_path = bags[0].directory / TRUTH_FILE
+    if truth_path.exists():
+        report_truth(result, load_parameter_set(str(truth_path.resolve())), fitted)
+    return 0
+
+
+def print_result(result, wall_s):
+    print(f'{result.evaluations} evaluations, {result.simulated_kicks} kicks simulated '
+          f'({result.resumed_evaluations} evaluations read back from the checkpoint) in '
+          f'{wall_s:.1f} s; optimiser: {result.converged}')
+    print(f'per-kick residual RMS: {_rms(result.residuals_before):.3g} rad at the start, '
+          f'{_rms(result.residuals_after):.3g} rad fitted; sum of squares '
+          f'{result.cost_ratio:.2f} x what the sensor noise explains')
+    for p in result.parameters:
+        if p.status == 'fitted':
+            print(f'{p.path} = {p.value:.5g} +- {p.uncertainty:.2g} (2 standard errors; start '
+                  f'{p.start:.5g})')
+        else:
+            print(f'{p.path}: {p.status}, {p.note}')
+
+
+def _rms(values):
+    return float(np.sqrt(np.mean(np.square(values)))) if len(values) else 0.0
+
+
+def base_reference(params, path):
+    """What a fitted file's ``base:`` names: the shipped set ``params`` is, or else a file
+    beside ``path`` holding ``params`` whole (a start given as a file of its own)."""
+    from sphere_sim.model.parameters import available_parameter_sets, load_parameter_set
+
+    if params.name in available_parameter_sets() and \
+            load_parameter_set(params.name).digest() == params.digest():
+        return params.name
+    start = path.with_name(f'{path.stem}_start.yaml')
+    start.write_text(yaml.safe_dump(json_safe(params.to_dict()), sort_keys=False, width=96))
+    return str(start.resolve())
+
+
+def json_safe(data):
+    """Tuples as lists, for yaml.safe_dump."""
+    if isinstance(data, dict):
+        return {k: json_safe(v) for k, v in data.items()}
+    if isinstance(data, (list, tuple)):
+        return [json_safe(v) for v in data]
+    return data
+
+
+def write_fitted(path, params, result, obs, bags, wall_s):
+    """The fitted parameter file: ``base:`` + ``overrides:``, and what the fit found."""
+    overrides = {}
+    for p in result.parameters:
+        if p.status == 'fitted':
+            for q in (p.path, *p.tied):
+                overrides[q] = float(p.value)
+    data = {
+        'name': f'{Path(bags[0]).name}_identified',
+        'description': f'{params.name} with the parameters identified from '
+                       f'{len(obs.kicks)} recorded kicks ({", ".join(Path(b).name for b in bags)})',
+        'base': base_reference(params, path),
+        'overrides': overrides,
+        'identification': {
+            'bags': bags,
+            'kicks': len(obs.kicks),
+            'sensor_noise_rad': float(obs.noise_std_rad),
+            'uncertainty': '2 standard errors from the fit\'s curvature, (J^T W J)^-1 with '
+                           'the sensor noise measured in the resting stretches, widened by the '
+                           'fit\'s own misfit where it exceeds that noise',
+            'wall_s': round(wall_s, 1),
+            'optimiser': result.converged,
+            'parameters': [p.to_dict() for p in result.parameters],
+            'correlation_of_fitted': np.round(result.correlation, 4).tolist(),
+            'residual_rms_rad': {'start': _rms(result.residuals_before),
+                                 'fitted': _rms(result.residuals_after)},
+            'per_kick': [{'time_s': round(float(k.time_s), 6),
+                          'residual_start_rad': float(b), 'residual_fitted_rad': float(a)}
+                         for k, b, a in zip(obs.kicks, result.residuals_before,
+                                            result.residuals_after, strict=True)],
+        },
+    }
+    path.write_text(yaml.safe_dump(data, sort_keys=False, width=96))
+    return path
+
+
+def plot_fit(path, obs, result, title):
+    """Each kick's displacement of the resting normal, recorded against the model's at the
+    start values and fitted, and the residual per kick."""
+    from sphere_twin.plots import plt
+
+    t = np.array([k.time_s for k in obs.kicks])
+    before = np.array([k.normal_before[:2] for k in obs.kicks])
+    recorded = np.array([k.normal_after[:2] for k in obs.kicks]) - before
+    start = recorded + result.vectors_before
+    fitted = recorded + result.vectors_after
+    fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
+    for i, name in enumerate(('$x_{sn}$', '$y_{sn}$')):
+        ax = axes[i]
+        ax.plot(t, np.degrees(recorded[:, i]), 'ko', ms=4, label='recorded (resting means)')
+        ax.plot(t, np.degrees(start[:, i]), 'x', color='tab:blue', label='model, start')
+        ax.plot(t, np.degrees(fitted[:, i]), '+', color='tab:red', ms=9, label='model, fitted')
+        ax.set_ylabel(f'kick: change of {name} (deg)')
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    axes[2].semilogy(t, np.degrees(result.residuals_before), 'x', color='tab:blue',
+                     label='start')
+    axes[2].semilogy(t, np.degrees(result.residuals_after), '+', color='tab:red', ms=9,
+                     label='fitted')
+    # RMS of a kick's residual from the sensor noise alone (both means, both axes).
+    expected = obs.noise_std_rad * math.sqrt(2.0 * np.mean(
+        [1.0 / k.samples_before + 1.0 / k.samples_after for k in obs.kicks]))
+    axes[2].axhline(math.degrees(expected), color='grey', lw=1, ls='--',
+                    label='expected from the sensor noise')
+    axes[2].set_ylabel('model - recorded (deg)')
+    axes[2].set_xlabel('kick start (s)')
+    axes[2].grid(alpha=0.3, which='both')
+    axes[2].legend(fontsize=8)
+    fig.suptitle(f'identification: {title}')
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def report_truth(result, truth, fitted):
+    """Each parameter against the bag's ``truth.yaml``, and the count that the issue asks."""
+    from sphere_sim.kicks.identification import within_truth
+
+    rows = within_truth(result, truth)
+    print(f'against {TRUTH_FILE}:')
+    for path, value, unc, true, inside, status in rows:
+        unc_text = f'+- {unc:.2g}' if status == 'fitted' else f'({status}, held)'
+        print(f'  {path}: {value:.5g} {unc_text}, true {true:.5g} '
+              f'({(value / true - 1) * 100:+.1f} %): {"within" if inside else "OUTSIDE"}')
+    others = [f.name for f in dataclasses.fields(truth) if f.name in (
+        'beam', 'sphere', 'contact', 'friction', 'electrostatics')]
+    changed = [f'{section}.{key}' for section in others
+               for key, value in truth.to_dict()[section].items()
+               if fitted.to_dict()[section][key] != value]
+    unfitted = [c for c in changed if c not in {r[0] for r in rows}
+                and not any(c in p.tied for p in result.parameters)]
+    if unfitted:
+        print(f'  the truth also differs in {", ".join(unfitted)}, which was not fitted')
+    k = sum(r[4] for r in rows)
+    print(f'identified: {k} of {len(rows)} parameters within their uncertainty of the truth')
