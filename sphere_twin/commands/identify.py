@@ -54,9 +54,9 @@ def register(subparsers):
 def read_observations(bag_dir, window_s=KICK_WINDOW_S):
     """The kicks of one bag, from the device's topics only."""
     from sphere_sim.kicks.identification import observations_from_samples
-    from sphere_twin.run_analysis import load_run
+    from sphere_twin.run_analysis import DEVICE_TOPICS, load_run
 
-    run = load_run(bag_dir)
+    run = load_run(bag_dir, DEVICE_TOPICS)
     return observations_from_samples(run.normal_t_s, run.normals, run.kicks, run.holds,
                                      window_s)
 
