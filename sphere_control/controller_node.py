@@ -4,10 +4,10 @@ Subscribes to the measured ``/sphere/surface_normal``, ``/sphere/reference`` and
 ``/beams/programme_status``; when the plant has reported the last kick's start and end and a
 kick period has passed since that start, it runs the basic or the extended controller (§4.2) on
 that sample and publishes the chosen kick as a ``/beams/pulse_program`` — the same voltages a
-real device's drivers take. While
-resting it sends 0 V on ``/beams/voltage_command`` (which also lets a lockstep simulator's time
-run on). ``/controller/status`` says what it did and why: chosen action, Phi, Theta, learned
-directions and widths; when the state is stale it holds, sends nothing, and says so.
+real device's drivers take. While resting it sends 0 V on ``/beams/voltage_command`` (which
+also lets a lockstep simulator's time run on). ``/controller/status`` says what it did and
+why: chosen action, Phi, Theta, learned directions and widths, and the kicks sent, landed,
+cut, refused and unanswered; when the state is stale it holds, sends nothing, and says so.
 """
 
 import math
