@@ -48,6 +48,16 @@ def _raise_keyboard_interrupt(signum, frame):
     raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
+def _unraisable_after_shutdown(unraisable):
+    """``sys.unraisablehook``: an error in a finaliser (``__del__``) after a shutdown signal is
+    an object the KeyboardInterrupt cut mid-construction being collected (rclpy's
+    ``Task.__init__`` interrupted before it set ``_exception``, whose ``__del__`` then fails),
+    not a bug: dropped. Before a shutdown signal, Python's own hook reports it."""
+    if _shutdown_signal:
+        return
+    sys.__unraisablehook__(unraisable)
+
+
 def shutdown_requested():
     """True once SIGINT or SIGTERM reached a process that installed the handlers below."""
     return bool(_shutdown_signal)
@@ -65,6 +75,7 @@ def install_shutdown_signal_handlers():
     """
     signal.signal(signal.SIGINT, _raise_keyboard_interrupt)
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+    sys.unraisablehook = _unraisable_after_shutdown
 
 
 # What a missing Python module is called where a ROS user installs it (rosdep keys of

@@ -1,6 +1,8 @@
 """The nodes' shared main(): a shutdown signal ends a node cleanly, whatever it interrupted."""
 
+import gc
 import signal
+import sys
 
 import pytest
 
@@ -19,6 +21,7 @@ def fresh_signals(monkeypatch):
     """run_node installs process-wide signal handlers: put this process's back afterwards."""
     saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     monkeypatch.setattr(ros_env, '_shutdown_signal', [])
+    monkeypatch.setattr(sys, 'unraisablehook', sys.unraisablehook)
     yield
     for s, handler in saved.items():
         signal.signal(s, handler)
@@ -48,3 +51,24 @@ def test_without_a_shutdown_signal_an_error_is_a_bug(fresh_signals):
     with pytest.raises(RuntimeError, match='a bug'):
         ros_env.run_node(lambda: node, spin=spin)
     assert not ros_env.shutdown_requested() and node.destroyed
+
+
+class CutMidConstruction:
+    """As rclpy's Task when a KeyboardInterrupt lands in its ``__init__``: ``__del__`` reads an
+    attribute that was never set."""
+
+    def __del__(self):
+        return self._exception
+
+
+def test_a_finaliser_error_after_a_shutdown_signal_is_dropped_and_reported_before(
+        fresh_signals, capfd):
+    ros_env.install_shutdown_signal_handlers()
+    CutMidConstruction()
+    gc.collect()
+    assert "no attribute '_exception'" in capfd.readouterr().err  # a bug: reported
+    with pytest.raises(KeyboardInterrupt):
+        ros_env._raise_keyboard_interrupt(signal.SIGINT, None)
+    CutMidConstruction()
+    gc.collect()
+    assert capfd.readouterr().err == ''  # the shutdown's debris: dropped
