@@ -47,8 +47,6 @@ def kick_sequence(kicks, n_kicks, seed, intensity_range=INTENSITY_RANGE):
 
 def kick_programme(kicks, action, intensity, width_high_s):
     """Kick ``action`` of the table's design with the high pair's width ``width_high_s``."""
-    import dataclasses
-
     from sphere_sim.model.symmetry import Symmetry
 
     design = dataclasses.replace(kicks.design(action), width_high_s=width_high_s)
@@ -80,7 +78,6 @@ def record_device(bag_dir, params, n_kicks=20, seed=0, noise_std_rad=NOISE_STUDY
     from sphere_sim.twin.plant_setup import load_kick_model
     from sphere_sim.twin.plants import ContinuousPlant
     from sphere_sim.twin.runner import TwinRunner
-    from sphere_twin.bag import format as bag_format
     from sphere_twin.bag.writer import BagWriter
 
     kicks = load_kick_model()
@@ -94,8 +91,7 @@ def record_device(bag_dir, params, n_kicks=20, seed=0, noise_std_rad=NOISE_STUDY
     samples = 0
     with BagWriter(bag_dir) as bag:
         for topic in (PULSE_PROGRAM, SURFACE_NORMAL, SPHERE_STATE):
-            bag.add_topic(topic.name, bag_format.type_name_of(topic.msg_type),
-                          [bag_format.qos_to_dict(topic.qos.to_profile())])
+            bag.add_contract_topic(topic)
 
         def sample():
             snap_sample, _ = runner.tick()

@@ -58,8 +58,7 @@ def _voltage(i):
 
 def _add_topics(bag):
     for topic in (SURFACE_NORMAL, BEAM_VOLTAGE):
-        bag.add_topic(topic.name, bag_format.type_name_of(topic.msg_type),
-                      [bag_format.qos_to_dict(topic.qos.to_profile())])
+        bag.add_contract_topic(topic)
 
 
 def _write_flushed_bag(path):

@@ -27,14 +27,12 @@ def _write_bag(bag_dir, messages):
 
     from msg_defs.conversions import surface_normal_to_msg
     from msg_defs.topics import SURFACE_NORMAL
-    from sphere_twin.bag import format as bag_format
     from sphere_twin.bag.writer import BagWriter
 
     messages = [(SURFACE_NORMAL, surface_normal_to_msg(normal_from_xy(0.0, 0.0))), *messages]
     with BagWriter(bag_dir) as bag:
         for topic in {topic.name: topic for topic, _ in messages}.values():
-            bag.add_topic(topic.name, bag_format.type_name_of(topic.msg_type),
-                          [bag_format.qos_to_dict(topic.qos.to_profile())])
+            bag.add_contract_topic(topic)
         for k, (topic, msg) in enumerate(messages):
             bag.write(topic.name, serialize_message(msg), 1 + k)
     return bag_dir

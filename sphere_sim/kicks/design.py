@@ -154,13 +154,14 @@ def deviations_rad(normals, final):
 
 
 def final_normal(model, normal, programme, window_s=KICK_WINDOW_S, rtol=1e-6, x_rest=None,
-                 method='fast'):
+                 method='fast', sample_period_s=KICK_SAMPLE_PERIOD_S):
     """The resting normal after a kick: :func:`simulate_kick`'s ``normal``, the same number,
-    without the transient's peak and settling time (which take a Python loop over samples)."""
+    without the transient's peak and settling time (which take a Python loop over samples).
+    ``sample_period_s`` at least ``window_s`` keeps only the end state."""
     if x_rest is None:
         x_rest = rest_state(model, cardan_of_normal(normal))
     traj = simulate(model, x_rest, window_s, programme, rtol=rtol,
-                    sample_period_s=KICK_SAMPLE_PERIOD_S, method=method)
+                    sample_period_s=sample_period_s, method=method)
     return model.surface_normal(traj.x[:, -1])
 
 

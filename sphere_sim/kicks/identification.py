@@ -37,7 +37,12 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from msg_defs.device import KICK_WINDOW_S
-from sphere_sim.kicks.design import KICK_RELAXATION, KICK_SAMPLE_PERIOD_S, cardan_of_normal
+from sphere_sim.kicks.design import (
+    KICK_RELAXATION,
+    KICK_SAMPLE_PERIOD_S,
+    cardan_of_normal,
+    final_normal,
+)
 from sphere_sim.kicks.engine import engine_for
 from sphere_sim.kicks.table_build import BLAS_THREADS_PER_KICK
 from sphere_sim.model.assembly import assemble
@@ -319,16 +324,15 @@ def _model(params):
 
 def kick_end_normal(params, kick, rtol=FIT_RTOL):
     """The model's resting normal after ``kick``'s programme, from rest at its recorded start."""
-    from sphere_sim.integrate.solve import simulate
-
     with threadpool_limits(limits=BLAS_THREADS_PER_KICK):
         model = _model(params)
         x_rest = rest_state(model, cardan_of_normal(kick.normal_before),
                             relaxation=KICK_RELAXATION)
         window = max(KICK_WINDOW_S, float(kick.times_s[-1]))
-        traj = simulate(model, x_rest, window, kick.programme(), rtol=rtol,
-                        sample_period_s=max(window, KICK_SAMPLE_PERIOD_S))
-        return np.asarray(model.surface_normal(traj.x[:, -1]), dtype=float)
+        return np.asarray(final_normal(model, kick.normal_before, kick.programme(), window,
+                                       rtol, x_rest,
+                                       sample_period_s=max(window, KICK_SAMPLE_PERIOD_S)),
+                          dtype=float)
 
 
 def _kick_task(task):
@@ -354,6 +358,7 @@ class Evaluator:
         self.engine, self.rtol, self.progress = engine, rtol, progress
         self.cache = {}
         self.simulated = 0
+        self._written = False  # this run has started its own checkpoint file
         self.checkpoint = Path(checkpoint) if checkpoint is not None else None
         self.digest = self._digest()
         self.resumed = self._read_checkpoint()
@@ -397,8 +402,6 @@ class Evaluator:
             for key, r in entries:
                 stream.write(json.dumps({'u': list(key), 'r': r.tolist()}) + '\n')
         self._written = True
-
-    _written = False
 
     def values(self, u):
         return [fit.from_unit(v) for fit, v in zip(self.fits, u, strict=True)]
@@ -519,7 +522,7 @@ class FittedParameter:
     low: float
     high: float
     declared: bool
-    status: str  # 'fitted', 'unresolved' (held), 'pair' (held: unidentifiable with another)
+    status: str  # 'fitted', 'unresolved' (held), 'entangled' (held: unidentifiable with another)
     note: str = ''
     tied: tuple = ()
 

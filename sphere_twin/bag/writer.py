@@ -141,6 +141,12 @@ class BagWriter:
 
     # --- writing ----------------------------------------------------------------------
 
+    def add_contract_topic(self, topic):
+        """Add a topic of the contract (:class:`msg_defs.topics.Topic`) with the QoS the
+        contract gives it: what a bag written without live publishers offers."""
+        self.add_topic(topic.name, bag_format.type_name_of(topic.msg_type),
+                       [bag_format.qos_to_dict(topic.qos.to_profile())])
+
     def add_topic(self, name, type_name, qos_dicts, type_description_hash='',
                   message_definition=None):
         """Add a topic: its schema (once per type), its channel and its metadata.yaml entry.

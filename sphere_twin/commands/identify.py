@@ -19,8 +19,6 @@ from msg_defs.device import DEFAULT_PARAMETER_SET, KICK_WINDOW_S
 from sphere_twin.commands.bag import BAG_HELP
 from sphere_twin.commands.options import CommandError, add_params_option, positive_int
 
-# The only topics identification reads: what a device records (never the twin's truth).
-DEVICE_TOPICS = ('/beams/pulse_program', '/beams/voltage_command', '/sphere/surface_normal')
 TRUTH_FILE = 'truth.yaml'
 
 
