@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from msg_defs.device import SENSOR_RATE_HZ
 from sphere_sim.kicks.discrete import PAPER_FULL_KICK_RAD
 
 # The noise study's sensor noise: a tenth of the paper's full kick, per axis.
@@ -28,10 +29,11 @@ INTENSITY_RANGE = (0.5, 1.0)
 # The high pair's pulse width, drawn per kick: the threshold of a long pulse is the static
 # pull-in (stiffness), that of a short one is dynamic (the beams' inertia and damping).
 WIDTH_RANGE_S = (1.5e-3, 6e-3)
-# A second per kick: the 60 ms kick window, then some 47 samples of the resting sphere whose
-# mean beats the sensor noise by a factor of 7 (the fit's cost does not grow with the pause).
+# A second per kick: the 60 ms kick window, then some 94 samples (at the sensor's rate) of the
+# resting sphere whose mean beats the sensor noise by a factor of 10 (the fit's cost does not
+# grow with the pause).
 KICK_PERIOD_S = 1.0
-PUBLISH_RATE_HZ = 50.0
+PUBLISH_RATE_HZ = SENSOR_RATE_HZ
 # Past this tilt the next kick is the one that points back towards the centre.
 MAX_TILT_RAD = math.radians(8.0)
 

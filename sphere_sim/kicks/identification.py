@@ -10,8 +10,8 @@ observation: the programme, the resting normal before it and the resting normal 
 The residual of a kick is the model's resting normal after the programme, started at rest at
 the recorded normal before it, minus the recorded normal after it (its x and y components, in
 rad). Each kick restarts from its own recorded start (multiple shooting): the errors do not
-accumulate over a run, every kick is an independent simulation (one task on a process pool or
-Dask), and the per-kick residuals allow a bootstrap over kicks.
+accumulate over a run, and every kick is an independent simulation (one task on a process pool
+or Dask).
 
 The fit is :func:`scipy.optimize.least_squares` (trust-region reflective, bounded by the
 parameters' ranges) in scaled coordinates (the logarithm of each value, mapped onto [0, 1] over
@@ -20,10 +20,15 @@ engine. Every evaluated parameter vector and its residuals are appended to a che
 the optimiser is deterministic, so a rerun retraces its path from the file and goes on where the
 interrupted one stopped.
 
-Before fitting, the Jacobian at the start and the measured sensor noise say what the recordings
-can tell: a parameter whose expected uncertainty spans its whole range, or one almost perfectly
-correlated with another (an unidentifiable pair), is held at its start value and reported as
-such, never fitted blindly.
+The residuals are weighed by the sensor noise they carry, correlations included: the stretch
+after one kick is the stretch before the next, so one noise draw enters both. Each declared
+parameter's range enters as a weak prior (``PRIOR_SD_UNIT``).
+
+Before fitting, the Jacobian at the start says what the recordings can tell: a parameter whose
+expected uncertainty spans its whole range is held at its start value and reported as
+unresolved; one almost perfectly correlated with another (an unidentifiable pair) is reported
+as entangled, and fitted with an interval that spans what the kicks leave open. That interval
+is measured on the misfit itself (``_scan_checked``), never taken from the Jacobian alone.
 """
 
 import dataclasses
@@ -36,7 +41,7 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from msg_defs.device import KICK_WINDOW_S
+from sphere_sim.kicks import misfit_scan as scan
 from sphere_sim.kicks.design import (
     KICK_RELAXATION,
     KICK_SAMPLE_PERIOD_S,
@@ -51,30 +56,67 @@ from sphere_sim.model.programme import PulseProgramme
 from sphere_sim.model.scene import load_scene
 
 # The fit's tolerance, the live twin's (sphere_sim.twin.plants.LIVE_RTOL): a kick then ends
-# within a few 1e-6 rad of the exact one, and that error jumps with the step-size sequence as a
-# parameter moves; a finite-difference step (FD_STEP) of a parameter the kicks can tell moves
-# the residuals by 1e-4 rad or more, so the jumps stay below 1 % of what the Jacobian reads
-# (docs/identification.md).
+# within a few 1e-6 rad of the exact one (at times 3e-5), and that error jumps with the
+# step-size sequence as a parameter moves.
 FIT_RTOL = 3e-4
-# Finite-difference step in the scaled coordinate ([0, 1] over the range, logarithmic).
-FD_STEP = 0.01
+# Finite-difference step in the scaled coordinate ([0, 1] over the range, logarithmic). The
+# integrator's error jumps as a parameter moves (a few 1e-6 rad); divided by the step, the jumps
+# must stay well below what a residual's noise can tell, or the Jacobian reads them as
+# information about a combination the kicks do not tell (an entangled pair's valley): at 0.01
+# they did. The step must also stay below the width of the valleys the whitened misfit has
+# (one standard error, 0.01 to 0.05 with 40 kicks), or the Gauss-Newton steps miss their floor.
+# The misfit's curvature is then measured over the reported interval itself (misfit_scan).
+FD_STEP = 0.02
+# A kick counts as over, and the model is compared with the recording, this long after its
+# programme's start (or at the programme's end, if later). The kick window of the controllers
+# (KICK_WINDOW_S, 60 ms) is where a kick is within a small angle of its end; at 60 ms the sphere
+# still moves by a few 1e-6 rad, which the whitened fit reads (measured over 16 noiseless kicks
+# of device_a at its true parameters: model against recording 4.5e-6 rad median at 60 ms,
+# 1.7e-6 at 100, 200 and 500 ms). Four samples of a second's pause are the price.
+SETTLE_S = 0.1
+# Noiseless recordings: the integrator's own error sets the residuals' scale.
+NOISELESS_STD_RAD = 1e-9
+# The restart's own error, per axis: a kick simulated from the relaxed rest state at the
+# recorded normal ends up to this far from the same kick in the continuous run that recorded it
+# (measured over 16 noiseless kicks of device_a at its true parameters, compared at SETTLE_S:
+# 3e-6 rad RMS per axis, the largest 1.1e-5; carrying the friction bristles' strain over from
+# the kick before changes it little). It is independent from kick to kick and enters every
+# residual beside the sensor's noise, at the largest seen: without it the whitened fit reads
+# it as a parameter change.
+RESTART_STD_RAD = 1e-5
 # An undeclared parameter named for the fit is searched within this factor of its start value:
 # a search bound of the identification, not a physical range (docs/identification.md).
 UNDECLARED_FACTOR = 2.0
+# A declared range is where the parameter physically lies: the fit takes it as a Gaussian
+# prior about the start value whose two standard deviations span half the scaled range. It
+# decides only what the kicks leave open (an entangled pair's valley); a parameter they pin
+# moves as the kicks say. An undeclared parameter has no prior.
+PRIOR_SD_UNIT = 0.25
 # What the recordings cannot tell: a parameter whose 2-sigma interval, with the ones fitted
 # before it held, would cover more than this share of its scaled range; or one of a pair whose
 # estimates would correlate beyond PAIR_CORRELATION_LIMIT.
 UNRESOLVED_SHARE = 0.5
 PAIR_CORRELATION_LIMIT = 0.95
-# The optimiser stops when a step moves the scaled parameters by less than XTOL (a fraction of
-# the standard errors that recordings of tens of kicks give, 0.03 and more) or the cost by less
-# than FTOL of itself (a cost of 2 x 40 kicks noise-weighted residuals: 0.4, where one standard
-# error of a parameter is worth 1).
-XTOL = 1e-2
-FTOL = 5e-3
-# The curvature check may widen a direction's variance at most this many times.
+# The optimiser stops when a step moves the scaled parameters by less than XTOL (a tenth of the
+# smallest standard errors that recordings of tens of kicks give) or the cost by less than FTOL
+# of itself; the scan of the misfit then checks the optimum (RESTART_DROP).
+XTOL = 1e-3
+FTOL = 1e-4
+# The scan of the misfit: at most SCAN_ROUNDS, until each direction's rise two standard errors
+# out is 4 within SCAN_AGREEMENT in the standard error; one round may widen or narrow a
+# direction's variance at most MAX_WIDENING times. A point lower than the optimum by
+# RESTART_DROP (a sum of squares of 1: one standard error) restarts the optimiser there.
+SCAN_ROUNDS = 3
+SCAN_AGREEMENT = 1.5
 MAX_WIDENING = 25.0
-# The reported uncertainty: this many standard errors (about 95 % for a Gaussian estimate).
+RESTART_DROP = 1.0
+# The optimiser starts from the lowest OPTIMISER_STARTS of the start values and a design of
+# STARTS_PER_PARAMETER points per parameter over the region the priors allow.
+STARTS_PER_PARAMETER = 6
+OPTIMISER_STARTS = 2
+MAX_RESTARTS = 2
+# The reported interval: this many standard errors either side (about 95 % for a Gaussian
+# estimate), in the scaled coordinate, so that it is a factor either way in the value.
 UNCERTAINTY_SIGMAS = 2.0
 CHECKPOINT_VERSION = 1
 
@@ -128,17 +170,38 @@ class Observations:
     kicks: tuple
     noise_std_rad: float  # per tangential axis, from the scatter within settled stretches
     dropped: int = 0  # programmes that could not be used (no settled samples around them)
+    # Indices i whose settled stretch after kick i is the one before kick i + 1: one noise
+    # draw enters both kicks' residuals, with opposite signs.
+    shared: tuple = ()
 
     def digest(self):
         text = json.dumps([k.to_dict() for k in self.kicks], sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
-    def residual_std_rad(self):
-        """Expected standard deviation of each residual component from the sensor noise alone,
-        per kick (the means before and after each carry it)."""
-        return np.repeat([self.noise_std_rad * math.sqrt(1.0 / k.samples_before
-                                                         + 1.0 / k.samples_after)
-                          for k in self.kicks], 2)
+    def residual_covariance(self):
+        """Covariance (rad^2) of the residual vector (x and y of each kick) from the sensor
+        noise alone. A residual is the model's end, started from the mean before the kick,
+        minus the mean after it: it carries the noise of both means, and consecutive kicks
+        that share a stretch are anticorrelated through it."""
+        var = (self.noise_std_rad or NOISELESS_STD_RAD) ** 2
+        n = len(self.kicks)
+        cov = np.zeros((2 * n, 2 * n))
+        for i, k in enumerate(self.kicks):
+            cov[2 * i, 2 * i] = cov[2 * i + 1, 2 * i + 1] = var * (
+                1.0 / k.samples_before + 1.0 / k.samples_after) + RESTART_STD_RAD ** 2
+        for i in self.shared:
+            for axis in (0, 1):
+                a, b = 2 * i + axis, 2 * i + 2 + axis
+                cov[a, b] = cov[b, a] = -var / self.kicks[i].samples_after
+        return cov
+
+    def whitener(self):
+        """``W`` with ``W C W^T = I`` for the residuals' covariance ``C``: ``W r`` are residuals
+        in units of their noise, uncorrelated, whose sum of squares is the misfit."""
+        from scipy.linalg import solve_triangular
+
+        chol = np.linalg.cholesky(self.residual_covariance())
+        return solve_triangular(chol, np.eye(chol.shape[0]), lower=True)
 
 
 def _unit_mean(normals):
@@ -155,7 +218,7 @@ def _tangential_scatter(normals, mean):
 
 
 def observations_from_samples(normal_t_s, normals, programmes, holds=(),
-                              window_s=KICK_WINDOW_S, min_samples=2):
+                              window_s=None, min_samples=2):
     """Cut a recording into kick observations.
 
     Parameters
@@ -169,9 +232,10 @@ def observations_from_samples(normal_t_s, normals, programmes, holds=(),
         Recorded voltage commands. 0 V on every beam is the rest the kicks start from; a kick
         whose stretch before or after contains another hold is dropped (the model starts each
         kick at rest with the beams unpowered).
-    window_s : float
+    window_s : float, optional
         A programme's effect counts as over this long after its start (or at its end, if
-        later); samples from then until the next programme are settled.
+        later); samples from then until the next programme are settled. ``SETTLE_S`` unless
+        given.
     min_samples : int
         Fewest settled samples before and after a kick for it to count.
 
@@ -180,12 +244,13 @@ def observations_from_samples(normal_t_s, normals, programmes, holds=(),
     IdentificationError
         When no kick has settled samples on both sides.
     """
+    window_s = SETTLE_S if window_s is None else window_s
     t = np.asarray(normal_t_s, dtype=float)
     n = np.asarray(normals, dtype=float)
     progs = sorted(((float(s), np.asarray(ts, dtype=float), np.asarray(vs, dtype=float))
                     for s, ts, vs in programmes), key=lambda p: p[0])
     powered = [float(ht) for ht, volts in holds if np.any(np.asarray(volts) != 0.0)]
-    kicks, dropped, ss, dof = [], 0, 0.0, 0
+    kicks, dropped, ss, dof, shared, last_after = [], 0, 0.0, 0, [], None
     for i, (start, times, volts) in enumerate(progs):
         settled_from = start + max(window_s, float(times[-1]))
         prev_end = (progs[i - 1][0] + max(window_s, float(progs[i - 1][1][-1]))
@@ -198,6 +263,9 @@ def observations_from_samples(normal_t_s, normals, programmes, holds=(),
             dropped += 1
             continue
         n_before, n_after = _unit_mean(n[before]), _unit_mean(n[after])
+        if kicks and last_after is not None and np.array_equal(before, last_after):
+            shared.append(len(kicks) - 1)
+        last_after = after
         kicks.append(KickObservation(start, times, volts, n_before, n_after,
                                      int(before.sum()), int(after.sum())))
         # Each settled stretch counted once for the noise (the one after each kick, and the
@@ -209,7 +277,7 @@ def observations_from_samples(normal_t_s, normals, programmes, holds=(),
         raise IdentificationError('no kick with settled samples before and after it: the '
                                   'recording needs pauses between programmes')
     noise = math.sqrt(ss / dof) if dof else 0.0  # per axis
-    return Observations(tuple(kicks), noise, dropped)
+    return Observations(tuple(kicks), noise, dropped, tuple(shared))
 
 
 def merge_observations(parts):
@@ -217,7 +285,10 @@ def merge_observations(parts):
     kicks = tuple(k for part in parts for k in part.kicks)
     weights = [len(part.kicks) for part in parts]
     noise = math.sqrt(np.average([p.noise_std_rad ** 2 for p in parts], weights=weights))
-    return Observations(kicks, noise, sum(p.dropped for p in parts))
+    offsets = np.cumsum([0, *weights[:-1]])
+    shared = tuple(int(o + i) for o, part in zip(offsets, parts, strict=True)
+                   for i in part.shared)
+    return Observations(kicks, noise, sum(p.dropped for p in parts), shared)
 
 
 # --- the parameters fitted ------------------------------------------------------------------------
@@ -256,12 +327,10 @@ class FitParameter:
 
     def from_unit(self, u):
         lo, hi = self._log_bounds
+        if not 0.0 < u < 1.0:  # a range's end exactly, not an ulp off
+            near_zero, far = (self.low, self.high) if self.sign > 0 else (self.high, self.low)
+            return near_zero if u <= 0.0 else far
         return self.sign * math.exp(lo + float(u) * (hi - lo))
-
-    def value_sigma(self, value, sigma_unit):
-        """A standard error in the scaled coordinate as one of the value (at ``value``)."""
-        lo, hi = self._log_bounds
-        return abs(value) * (hi - lo) * sigma_unit
 
     def assign(self, value):
         return {path: value for path in (self.path, *self.tied)}
@@ -328,7 +397,7 @@ def kick_end_normal(params, kick, rtol=FIT_RTOL):
         model = _model(params)
         x_rest = rest_state(model, cardan_of_normal(kick.normal_before),
                             relaxation=KICK_RELAXATION)
-        window = max(KICK_WINDOW_S, float(kick.times_s[-1]))
+        window = max(SETTLE_S, float(kick.times_s[-1]))
         return np.asarray(final_normal(model, kick.normal_before, kick.programme(), window,
                                        rtol, x_rest,
                                        sample_period_s=max(window, KICK_SAMPLE_PERIOD_S)),
@@ -449,30 +518,29 @@ class Evaluator:
 
 # --- what the recordings can tell -----------------------------------------------------------------
 
-def covariance(jac, noise_std):
-    """(JᵀWJ)⁻¹ of residuals with standard deviations ``noise_std`` (pseudo-inverse)."""
-    jw = jac / np.asarray(noise_std)[:, None]
-    return np.linalg.pinv(jw.T @ jw)
+def covariance(jac_w):
+    """``(J^T J)^-1`` of whitened residuals with Jacobian ``jac_w`` (pseudo-inverse)."""
+    return np.linalg.pinv(jac_w.T @ jac_w)
 
 
-def select_identifiable(jac, noise_std):
-    """Which parameters the recordings can tell, and why each other one is held.
+def select_identifiable(jac_w):
+    """Which parameters the recordings can tell, and what the others are.
 
-    Orthogonal selection on the noise-weighted Jacobian: take the parameter the residuals are
-    most sensitive to, remove its direction from the others, and go on while the next one's
-    remaining sensitivity still pins it to ``UNRESOLVED_SHARE`` of its range at
-    ``UNCERTAINTY_SIGMAS``; then, while two selected ones would have estimates correlated
-    beyond ``PAIR_CORRELATION_LIMIT``, hold the less sensitive of them. A parameter left out is
-    *unresolved* when even alone it could not be pinned so, and otherwise *entangled*: its
-    effect on the kicks is (nearly) a combination of those selected, and its partner is the
-    selected one whose effect it resembles most.
+    Orthogonal selection on the whitened Jacobian ``jac_w`` (residuals in units of their
+    noise): take the parameter the residuals are most sensitive to, remove its direction from
+    the others, and go on while the next one's remaining sensitivity still pins it to
+    ``UNRESOLVED_SHARE`` of its range at ``UNCERTAINTY_SIGMAS``; then, while two selected ones
+    would have estimates correlated beyond ``PAIR_CORRELATION_LIMIT``, set aside the less
+    sensitive of them. A parameter set aside is *unresolved* when even alone it could not be
+    pinned so, and otherwise *entangled*: its effect on the kicks is (nearly) a combination of
+    those selected, and its partner is the selected one whose effect it resembles most.
 
     Returns
     -------
     selected : list of int
-    held : dict of int -> (status, partner index or None, cosine of their effects)
+    why : dict of int -> (status, partner index or None, cosine of their effects)
     """
-    jw = jac / np.asarray(noise_std)[:, None]
+    jw = np.asarray(jac_w, dtype=float)
     p = jw.shape[1]
     limit = UNCERTAINTY_SIGMAS / UNRESOLVED_SHARE
     selected, remaining = [], list(range(p))
@@ -489,9 +557,9 @@ def select_identifiable(jac, noise_std):
         remaining.remove(best)
     alone = np.linalg.norm(jw, axis=0)
     # A pair whose estimates would correlate beyond the limit: each alone may be pinned, but
-    # the kicks trade one for the other; the less sensitive one is held.
+    # the kicks trade one for the other.
     while len(selected) > 1:
-        cov = np.linalg.pinv(jw[:, selected].T @ jw[:, selected])
+        cov = covariance(jw[:, selected])
         sd = np.sqrt(np.diag(cov))
         corr = np.abs(cov / np.outer(sd, sd)) - np.eye(len(selected))
         a, b = np.unravel_index(np.argmax(corr), corr.shape)
@@ -500,15 +568,50 @@ def select_identifiable(jac, noise_std):
         weak = selected[a] if alone[selected[a]] < alone[selected[b]] else selected[b]
         selected.remove(weak)
         remaining.append(weak)
-    held = {}
+    why = {}
     for j in remaining:
         if alone[j] < limit or not selected:
-            held[j] = ('unresolved', None, 0.0)
+            why[j] = ('unresolved', None, 0.0)
             continue
         cos = [float(jw[:, j] @ jw[:, k] / (alone[j] * alone[k])) for k in selected]
         k = int(np.argmax(np.abs(cos)))
-        held[j] = ('entangled', selected[k], cos[k])
-    return selected, held
+        why[j] = ('entangled', selected[k], cos[k])
+    return selected, why
+
+
+# --- the misfit -----------------------------------------------------------------------------------
+
+class Misfit:
+    """The sum of squares the fit minimises: the kicks' residuals whitened by the sensor
+    noise, and for each declared parameter its prior, a Gaussian about the start value with
+    ``PRIOR_SD_UNIT`` (its range is where it physically lies). The prior decides only what the
+    kicks leave open: along an entangled pair's valley, not across it."""
+
+    def __init__(self, evaluator, whitener, fits, start):
+        self.ev, self.whitener = evaluator, np.asarray(whitener, dtype=float)
+        self.start = np.asarray(start, dtype=float)
+        self.prior = np.array([f.declared for f in fits], dtype=bool)
+
+    def data(self, r):
+        return self.whitener @ r
+
+    def residuals(self, u):
+        u = np.asarray(u, dtype=float)
+        return np.concatenate([self.data(self.ev(u)),
+                               ((u - self.start) / PRIOR_SD_UNIT)[self.prior]])
+
+    def chi2_many(self, points):
+        prior = [np.sum((((np.asarray(u) - self.start) / PRIOR_SD_UNIT)[self.prior]) ** 2)
+                 for u in points]
+        return np.array([float(np.sum(self.data(r) ** 2)) + pr
+                         for r, pr in zip(self.ev.many(points), prior, strict=True)])
+
+    def chi2(self, u):
+        return float(self.chi2_many([u])[0])
+
+    def jacobian(self, u):
+        rows = np.eye(self.start.size)[self.prior] / PRIOR_SD_UNIT
+        return np.vstack([self.whitener @ self.ev.jacobian(u), rows])
 
 
 # --- the fit --------------------------------------------------------------------------------------
@@ -518,18 +621,29 @@ class FittedParameter:
     path: str
     start: float
     value: float
-    uncertainty: float  # UNCERTAINTY_SIGMAS standard errors (nan where held)
+    interval: tuple  # (low, high): UNCERTAINTY_SIGMAS standard errors either side; () if held
     low: float
     high: float
     declared: bool
-    status: str  # 'fitted', 'unresolved' (held), 'entangled' (held: unidentifiable with another)
+    status: str  # 'fitted'; 'entangled' (fitted: the kicks tell a combination with another);
+    # 'unresolved' (held at its start value)
     note: str = ''
     tied: tuple = ()
+
+    @property
+    def fitted(self):
+        return self.status != 'unresolved'
+
+    def contains(self, value):
+        """Whether ``value`` lies in the reported interval (a held parameter: at its value)."""
+        if not self.fitted:
+            return math.isclose(value, self.value, rel_tol=1e-12)
+        return min(self.interval) <= value <= max(self.interval)
 
     def to_dict(self):
         return {'path': self.path, 'tied': list(self.tied), 'start': self.start,
                 'value': self.value,
-                'uncertainty': None if math.isnan(self.uncertainty) else self.uncertainty,
+                'interval': [float(v) for v in self.interval] if self.fitted else None,
                 'range': [self.low, self.high], 'declared_range': self.declared,
                 'status': self.status, 'note': self.note}
 
@@ -545,7 +659,8 @@ class IdentificationResult:
     simulated_kicks: int
     resumed_evaluations: int
     converged: str
-    cost_ratio: float  # sum of squares after over what the sensor noise alone explains
+    cost_ratio: float  # the kicks' whitened sum of squares after over its degrees of freedom
+    restarts: int = 0  # optimiser runs restarted from a lower point the scan found
 
     @property
     def residuals_before(self):
@@ -557,7 +672,7 @@ class IdentificationResult:
         return np.hypot(*self.vectors_after.T)
 
     def fitted(self):
-        return [p for p in self.parameters if p.status == 'fitted']
+        return [p for p in self.parameters if p.fitted]
 
     def values(self):
         return {p.path: p.value for p in self.parameters}
@@ -582,7 +697,7 @@ def identify(params, observations, fits, workers=1, scheduler=None, rtol=FIT_RTO
     progress : callable, optional
         Called with the :class:`Evaluator` after each batch.
     max_nfev : int
-        Most residual evaluations of the optimiser (each one a batch of kicks).
+        Most residual evaluations of each optimiser run (each one a batch of kicks).
     """
     fits = list(fits)
     if not fits:
@@ -591,122 +706,172 @@ def identify(params, observations, fits, workers=1, scheduler=None, rtol=FIT_RTO
     if len(observations.kicks) * 2 <= len(fits):
         raise IdentificationError(f'{len(observations.kicks)} kicks cannot fit {len(fits)} '
                                   'parameters: record more')
-    noise = observations.residual_std_rad()
-    if observations.noise_std_rad == 0.0:
-        noise = np.full_like(noise, 1e-9)  # noiseless recordings: the integrator's own error
+    whitener = observations.whitener()
+    start = np.array([min(max(f.to_unit(params.get(f.path)), 0.0), 1.0) for f in fits])
     with engine_for(workers, scheduler) as engine:
         ev = Evaluator(params, observations, fits, engine, rtol, checkpoint, progress)
-        start = np.array([min(max(f.to_unit(params.get(f.path)), 0.0), 1.0) for f in fits])
-        j0 = ev.jacobian(start)
+        misfit = Misfit(ev, whitener, fits, start)
+        why = select_identifiable(whitener @ ev.jacobian(start))[1]
         r0 = ev(start)
-        held = _held(fits, select_identifiable(j0, noise)[1])
-        free = [j for j in range(len(fits)) if j not in held]
-        u, converged, cov_free = start.copy(), 'nothing fitted', np.zeros((0, 0))
+        free = [j for j in range(len(fits)) if why.get(j, ('',))[0] != 'unresolved']
+        u, converged, cov_free, restarts = start.copy(), 'nothing fitted', np.zeros((0, 0)), 0
         if free:
-            u, converged = _least_squares(ev, start, free, noise, max_nfev)
-            cov_free = _secant_checked(ev, u, free, covariance(ev.jacobian(u)[:, free], noise),
-                                       noise)
+            u, converged = _best_of_starts(misfit, start, fits, free, max_nfev)
+            u, converged, cov_free, restarts = _scan_checked(misfit, u, converged, free,
+                                                                max_nfev)
         r1 = ev(u)
-    chi2 = float(np.sum((r1 / noise) ** 2)) / max(1, r1.size - len(free))
+    chi2 = float(np.sum(misfit.data(r1) ** 2)) / max(1, r1.size - len(free))
     # The sensor noise sets the scale; a fit worse than it explains widens the errors too.
     scale = max(1.0, chi2)
+    notes = _notes(fits, why)
     results = []
     for j, fit in enumerate(fits):
         start_value = params.get(fit.path)
-        if j in held:
-            results.append(FittedParameter(fit.path, start_value, start_value, math.nan,
-                                           fit.low, fit.high, fit.declared, *held[j], fit.tied))
+        status, note = notes.get(j, ('fitted', ''))
+        if j not in free:
+            results.append(FittedParameter(fit.path, start_value, start_value, (), fit.low,
+                                           fit.high, fit.declared, status, note, fit.tied))
             continue
         k = free.index(j)
-        value = fit.from_unit(u[j])
-        sigma_u = math.sqrt(max(cov_free[k, k], 0.0) * scale)
+        half = UNCERTAINTY_SIGMAS * math.sqrt(max(cov_free[k, k], 0.0) * scale)
+        ends = (fit.from_unit(max(u[j] - half, 0.0)), fit.from_unit(min(u[j] + half, 1.0)))
         results.append(FittedParameter(
-            fit.path, start_value, value, UNCERTAINTY_SIGMAS * fit.value_sigma(value, sigma_u),
-            fit.low, fit.high, fit.declared, 'fitted', '', fit.tied))
+            fit.path, start_value, fit.from_unit(u[j]), (min(ends), max(ends)), fit.low,
+            fit.high, fit.declared, status, note, fit.tied))
     sig = np.sqrt(np.clip(np.diag(cov_free), 1e-300, None))
     corr = cov_free / np.outer(sig, sig) if free else cov_free
     return IdentificationResult(results, r0.reshape(-1, 2), r1.reshape(-1, 2),
                                 observations.noise_std_rad, corr, len(ev.cache), ev.simulated,
-                                ev.resumed, converged, chi2)
+                                ev.resumed, converged, chi2, restarts)
 
 
-def _secant_checked(ev, u, free, cov, noise):
-    """The covariance with the curvature along each of its principal directions measured over
-    the interval it reports (two standard errors either way) instead of the Jacobian's 1 %
-    step: where the sum of squares rises less there than the quadratic model says (a valley
-    that bends, a kink), the variance along that direction grows by the ratio, at most
-    ``MAX_WIDENING`` times."""
-    values, vectors = np.linalg.eigh(cov)
-    chi_opt = float(np.sum((ev(u) / noise) ** 2))
-    points, steps = [], []
-    for k in range(values.size):
-        for sign in (1.0, -1.0):
-            step = np.zeros(u.size)
-            step[free] = sign * UNCERTAINTY_SIGMAS * math.sqrt(max(values[k], 0.0)) * \
-                vectors[:, k]
-            point = np.clip(u + step, 0.0, 1.0)
-            points.append(point)
-            steps.append((point - u)[free])
-    chis = [float(np.sum((r / noise) ** 2)) for r in ev.many(points)]
-    inverse = np.linalg.pinv(cov)
-    widened = cov.copy()
-    for k in range(values.size):
-        ratios = []
-        for i in (2 * k, 2 * k + 1):
-            predicted = float(steps[i] @ inverse @ steps[i])
-            rise = chis[i] - chi_opt
-            if predicted > 0.0:
-                ratios.append(MAX_WIDENING if rise <= predicted / MAX_WIDENING
-                              else predicted / rise)
-        ratio = max(ratios, default=1.0)
-        if ratio > 1.0:
-            widened += (ratio - 1.0) * values[k] * np.outer(vectors[:, k], vectors[:, k])
-    return widened
+def _scan_checked(misfit, u, converged, free, max_nfev):
+    """The optimum's covariance (scaled coordinates of ``free``) from the misfit itself.
+
+    Starting from the Gauss-Newton covariance, the misfit is evaluated two standard errors
+    either way along each principal direction (``misfit_scan``), and each direction's variance
+    is rescaled by what the rise there says; a direction whose rise was not about 4 (outside
+    ``SCAN_AGREEMENT``) is scanned again at its new scale, at most ``SCAN_ROUNDS`` times. A
+    point lower than the optimum by more than ``RESTART_DROP`` means the optimiser stopped
+    short in a valley: it restarts from there (at most ``MAX_RESTARTS`` times).
+
+    Returns
+    -------
+    u, converged, cov, restarts
+    """
+    restarts = 0
+    while True:
+        scales, vectors = scan.principal_scales(covariance(misfit.jacobian(u)[:, free]))
+        chi_opt = misfit.chi2(u)
+        todo, better = list(range(scales.size)), None
+        for _ in range(SCAN_ROUNDS):
+            points = [_embed(u, free, sign * scan.SCAN_SIGMAS * scales[k] * vectors[:, k])
+                      for k in todo for sign in (1.0, -1.0)]
+            chis = misfit.chi2_many(points)
+            best = int(np.argmin(chis))
+            if chis[best] < chi_opt - RESTART_DROP and restarts < MAX_RESTARTS:
+                better = points[best]
+                break
+            still = []
+            for i, k in enumerate(todo):
+                # How far each point got along its direction (a bound may clip it), in the
+                # standard errors scanned.
+                t = [abs(float((points[2 * i + side] - u)[free] @ vectors[:, k])) / scales[k]
+                     for side in (0, 1)]
+                a = scan.measured_curvature(t[0], chis[2 * i] - chi_opt,
+                                            t[1], chis[2 * i + 1] - chi_opt)
+                if a is None:
+                    continue
+                a = min(max(a, 1.0 / MAX_WIDENING), MAX_WIDENING)
+                scales[k] /= math.sqrt(a)
+                if not 1.0 / SCAN_AGREEMENT ** 2 <= a <= SCAN_AGREEMENT ** 2:
+                    still.append(k)
+            todo = still
+            if not todo:
+                break
+        if better is None:
+            return u, converged, scan.covariance_of(scales, vectors), restarts
+        restarts += 1
+        u, converged = _least_squares(misfit, better, free, max_nfev)
 
 
-def _held(fits, why):
-    """(status, note) of each parameter the selection holds."""
-    held = {}
+def _start_points(start, fits, free):
+    """Where the optimiser may start: the start values, and a quasi-random (Halton) design of
+    ``STARTS_PER_PARAMETER`` points per fitted parameter over the region its prior allows (two
+    prior standard deviations either side of the start; an undeclared one's whole range)."""
+    from scipy.stats import qmc
+
+    n = STARTS_PER_PARAMETER * len(free)
+    unit = qmc.Halton(d=len(free), scramble=False).random(n + 1)[1:]  # without the corner 0
+    points = [np.asarray(start, dtype=float)]
+    for row in unit:
+        point = np.asarray(start, dtype=float).copy()
+        for value, j in zip(row, free, strict=True):
+            reach = 2.0 * PRIOR_SD_UNIT if fits[j].declared else 1.0
+            low, high = max(start[j] - reach, 0.0), min(start[j] + reach, 1.0)
+            point[j] = low + value * (high - low)
+        points.append(point)
+    return points
+
+
+def _best_of_starts(misfit, start, fits, free, max_nfev):
+    """Bounded least squares from the ``OPTIMISER_STARTS`` lowest points of
+    :func:`_start_points` (all evaluated in one batch): the misfit of kicks has valleys whose
+    floors are not smooth (a contact sequence that changes), and one Gauss-Newton descent can
+    end on the wrong side of a kink. Returns the lowest end, (u, message)."""
+    points = _start_points(start, fits, free)
+    chis = misfit.chi2_many(points)
+    ends = [_least_squares(misfit, points[i], free, max_nfev)
+            for i in np.argsort(chis)[:OPTIMISER_STARTS]]
+    return min(ends, key=lambda end: misfit.chi2(end[0]))
+
+
+def _embed(u, free, step):
+    point = np.asarray(u, dtype=float).copy()
+    point[free] = np.clip(point[free] + step, 0.0, 1.0)
+    return point
+
+
+def _notes(fits, why):
+    """(status, note) of each parameter the selection set aside."""
+    notes = {}
     for j, (status, partner, cos) in why.items():
         if status == 'unresolved':
-            held[j] = (status, 'the recorded kicks barely depend on it: held at its start value')
+            notes[j] = (status, 'the recorded kicks barely depend on it: held at its start value')
         else:
-            held[j] = (status, f'cannot be told apart from {fits[partner].path} by these kicks '
-                               f'(their effects correlate at {cos:+.3f}): held at its start '
-                               f'value, {fits[partner].path} fitted for both')
-    return held
+            notes[j] = (status, f'the kicks tell only a combination of it and '
+                                f'{fits[partner].path} (their effects correlate at {cos:+.3f}): '
+                                'its interval spans what they leave open')
+    return notes
 
 
-def _least_squares(ev, start, free, noise, max_nfev):
-    """Bounded least squares over the ``free`` scaled coordinates; (u, message)."""
+def _least_squares(misfit, start, free, max_nfev):
+    """Bounded least squares over the ``free`` scaled coordinates from ``start``;
+    (u, message)."""
     from scipy.optimize import least_squares
 
     def full(x):
-        v = start.copy()
+        v = np.asarray(start, dtype=float).copy()
         v[free] = x
         return v
 
     def fun(x):
-        return ev(full(x)) / noise
+        return misfit.residuals(full(x))
 
     def jac(x):
-        return ev.jacobian(full(x))[:, free] / noise[:, None]
+        return misfit.jacobian(full(x))[:, free]
 
-    x0 = np.clip(start[free], 1e-3, 1.0 - 1e-3)  # strictly inside the bounds
+    x0 = np.clip(np.asarray(start)[free], 1e-3, 1.0 - 1e-3)  # strictly inside the bounds
     sol = least_squares(fun, x0, jac=jac, bounds=(np.zeros(len(free)), np.ones(len(free))),
                         method='trf', x_scale=1.0, max_nfev=max_nfev, xtol=XTOL, ftol=FTOL)
     return full(sol.x), sol.message
 
 
 def within_truth(result, truth):
-    """Per fitted parameter: (path, value, uncertainty, true value, inside) against ``truth``
-    (a ParameterSet); held ones count as inside when the truth equals where they were held."""
+    """Per parameter: (path, value, interval, true value, inside, status) against ``truth`` (a
+    ParameterSet); a held one counts as inside when the truth equals where it was held."""
     rows = []
     for p in result.parameters:
         true = truth.get(p.path)
-        if p.status == 'fitted':
-            inside = abs(p.value - true) <= p.uncertainty
-        else:
-            inside = math.isclose(true, p.value, rel_tol=1e-12)
-        rows.append((p.path, p.value, p.uncertainty, true, inside, p.status))
+        rows.append((p.path, p.value, p.interval, true, p.contains(true), p.status))
     return rows

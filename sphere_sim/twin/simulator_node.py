@@ -27,7 +27,7 @@ from msg_defs.conversions import (
     voltages_from_msg,
     voltages_to_msg,
 )
-from msg_defs.device import NS_PER_S
+from msg_defs.device import NS_PER_S, SENSOR_RATE_HZ
 from msg_defs.markers import twin_markers
 from msg_defs.topics import (
     BEAM_STATE,
@@ -55,13 +55,6 @@ from sphere_sim.twin.report_limit import ReportLimit
 # module, so that main() installs its signal handlers first: a SIGINT during the seconds of
 # start-up is then a clean shutdown like any other.
 
-# The sensor's rate: a kick cycle is its settle period (50 ms for the shipped kicks) plus the
-# one sample between a decision and the kick's start, so the sample period must divide the
-# settle period for the deciding sample to fall where the kick is over: 100 Hz gives a 60 ms
-# cycle (50 Hz gave 80 ms). A magnetic angle sensor of §6 (3D Hall sensors) reads at hundreds
-# of Hz to kHz, so the rate is the device's, not a twin's luxury; publishing costs about 1 ms
-# of wall time per sample.
-DEFAULT_PUBLISH_RATE_HZ = 100.0
 MAX_PUBLISH_RATE_HZ = 1000.0
 MARKER_EVERY_N_SAMPLES = 5
 # As-fast-as-possible and lockstep runs still yield to the executor between samples, so
@@ -146,7 +139,7 @@ class SimulatorNode(Node):
                 'Kick tables (.npz) of the discrete plant, their actions combined (the '
                 'diagonal and the axis-parallel tables give 8 directions); [""] for the '
                 'shipped default.')),
-            'publish_rate_hz': (DEFAULT_PUBLISH_RATE_HZ, parameter_descriptor(
+            'publish_rate_hz': (SENSOR_RATE_HZ, parameter_descriptor(
                 'Samples per simulated second (Hz).',
                 float_range=(1.0, MAX_PUBLISH_RATE_HZ))),
             'real_time_factor': (1.0, parameter_descriptor(

@@ -15,7 +15,7 @@ import numpy as np
 import yaml
 from tqdm import tqdm
 
-from msg_defs.device import DEFAULT_PARAMETER_SET, KICK_WINDOW_S
+from msg_defs.device import DEFAULT_PARAMETER_SET
 from sphere_twin.commands.bag import BAG_HELP
 from sphere_twin.commands.options import CommandError, add_params_option, positive_int
 
@@ -49,14 +49,14 @@ def register(subparsers):
     parser.set_defaults(func=run)
 
 
-def read_observations(bag_dir, window_s=KICK_WINDOW_S):
+def read_observations(bag_dir):
     """The kicks of one bag, from the device's topics only."""
-    from sphere_sim.kicks.identification import observations_from_samples
+    from sphere_sim.kicks.identification import SETTLE_S, observations_from_samples
     from sphere_twin.run_analysis import DEVICE_TOPICS, load_run
 
     run = load_run(bag_dir, DEVICE_TOPICS)
     return observations_from_samples(run.normal_t_s, run.normals, run.kicks, run.holds,
-                                     window_s)
+                                     SETTLE_S)
 
 
 def run(args):
@@ -123,12 +123,20 @@ def print_result(result, wall_s):
     print(f'per-kick residual RMS: {_rms(result.residuals_before):.3g} rad at the start, '
           f'{_rms(result.residuals_after):.3g} rad fitted; sum of squares '
           f'{result.cost_ratio:.2f} x what the sensor noise explains')
+    if result.restarts:
+        print(f'the scan of the misfit found a lower point than the optimiser\'s: restarted '
+              f'{result.restarts} x')
     for p in result.parameters:
-        if p.status == 'fitted':
-            print(f'{p.path} = {p.value:.5g} +- {p.uncertainty:.2g} (2 standard errors; start '
-                  f'{p.start:.5g})')
-        else:
+        if p.fitted:
+            print(f'{p.path} = {p.value:.5g} in {interval_text(p.interval)} (2 standard errors; '
+                  f'start {p.start:.5g})')
+        if p.status != 'fitted':
             print(f'{p.path}: {p.status}, {p.note}')
+
+
+def interval_text(interval):
+    low, high = interval
+    return f'[{low:.4g}, {high:.4g}]'
 
 
 def _rms(values):
@@ -161,7 +169,7 @@ def write_fitted(path, params, result, obs, bags, wall_s):
     """The fitted parameter file: ``base:`` + ``overrides:``, and what the fit found."""
     overrides = {}
     for p in result.parameters:
-        if p.status == 'fitted':
+        if p.fitted:
             for q in (p.path, *p.tied):
                 overrides[q] = float(p.value)
     data = {
@@ -174,9 +182,12 @@ def write_fitted(path, params, result, obs, bags, wall_s):
             'bags': bags,
             'kicks': len(obs.kicks),
             'sensor_noise_rad': float(obs.noise_std_rad),
-            'uncertainty': '2 standard errors from the fit\'s curvature, (J^T W J)^-1 with '
-                           'the sensor noise measured in the resting stretches, widened by the '
-                           'fit\'s own misfit where it exceeds that noise',
+            'interval': '2 standard errors either side in the scaled (logarithmic) '
+                        'coordinate, from the curvature of the misfit measured over the '
+                        'interval itself; the residuals weighed by the sensor noise measured '
+                        'in the resting stretches, the interval widened by the fit\'s own '
+                        'misfit where it exceeds that noise',
+            'restarts': result.restarts,
             'wall_s': round(wall_s, 1),
             'optimiser': result.converged,
             'parameters': [p.to_dict() for p in result.parameters],
@@ -238,8 +249,8 @@ def report_truth(result, truth, fitted):
 
     rows = within_truth(result, truth)
     print(f'against {TRUTH_FILE}:')
-    for path, value, unc, true, inside, status in rows:
-        unc_text = f'+- {unc:.2g}' if status == 'fitted' else f'({status}, held)'
+    for path, value, interval, true, inside, status in rows:
+        unc_text = f'in {interval_text(interval)}' if interval else f'({status}, held)'
         print(f'  {path}: {value:.5g} {unc_text}, true {true:.5g} '
               f'({(value / true - 1) * 100:+.1f} %): {"within" if inside else "OUTSIDE"}')
     others = [f.name for f in dataclasses.fields(truth) if f.name in (

@@ -10,7 +10,9 @@ from pathlib import Path
 from tqdm import tqdm
 
 from msg_defs.device import DEFAULT_PARAMETER_SET
+from sphere_twin.commands.identify import interval_text
 from sphere_twin.commands.options import CommandError, positive_int
+from sphere_twin.synthetic_device import PUBLISH_RATE_HZ
 
 DEFAULT_STUDY = Path('bench/results/identification.md')
 DEFAULT_KICKS = 40
@@ -138,8 +140,10 @@ def _print_device(row):
 
 
 def _parameter_line(p):
-    if p['status'] == 'fitted':
-        got = f'{p["value"]:.4g} +- {p["uncertainty"]:.2g}'
+    if p['interval']:
+        got = f'{p["value"]:.4g} in {interval_text(p["interval"])}'
+        if p['status'] != 'fitted':
+            got += f' ({p["status"]})'
     else:
         got = f'{p["value"]:.4g} ({p["status"]}, held)'
     return (f'{p["path"]}: {got}, true {p["true"]:.4g}, start {p["start"]:.4g}: '
@@ -151,9 +155,10 @@ def _markdown(rows, args, noise):
              f'Made by `sphere-twin synthetic study --kicks {args.kicks} --workers '
              f'{args.workers}`: each device is the `calibrated` set with two physical '
              f'parameters changed; {args.kicks} kicks recorded open loop by the continuous twin '
-             f'(one a second, 50 Hz samples, sensor noise {noise:.3g} rad per axis: the noise '
+             f'(one a second, {PUBLISH_RATE_HZ:g} Hz samples, sensor noise {noise:.3g} rad per '
+             'axis: the noise '
              'study\'s 0.1 of the paper\'s kick), then identified from the bag alone. '
-             'Uncertainties are 2 standard errors. See docs/identification.md.', '']
+             'Intervals are 2 standard errors either side. See docs/identification.md.', '']
     for r in rows:
         factors = ', '.join(f'`{p}` x {f:g}' for p, f in r['factors'].items())
         lines += [f'## {r["device"]}: {factors}', '',
@@ -162,11 +167,13 @@ def _markdown(rows, args, noise):
                   f'per-kick residual RMS {r["residual_rms_start_rad"]:.3g} rad at the start, '
                   f'{r["residual_rms_fitted_rad"]:.3g} rad fitted (sum of squares '
                   f'{r["cost_ratio"]:.2f} x the noise\'s).', '',
-                  '| parameter | true | start | identified | 2 s.e. | within |',
+                  '| parameter | true | start | identified | 2 s.e. interval | within |',
                   '|---|---|---|---|---|---|']
         for p in r['parameters']:
-            if p['status'] == 'fitted':
-                got, unc = f'{p["value"]:.4g}', f'{p["uncertainty"]:.2g}'
+            if p['interval']:
+                got, unc = f'{p["value"]:.4g}', interval_text(p['interval'])
+                if p['status'] != 'fitted':
+                    got += f' ({p["status"]})'
             else:
                 got, unc = f'{p["value"]:.4g} ({p["status"]}, held)', '-'
             lines.append(f'| `{p["path"]}` | {p["true"]:.4g} | {p["start"]:.4g} | {got} | '
