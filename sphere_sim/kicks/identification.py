@@ -72,16 +72,16 @@ FD_STEP = 0.02
 # (KICK_WINDOW_S, 60 ms) is where a kick is within a small angle of its end; at 60 ms the sphere
 # still moves by a few 1e-6 rad, which the whitened fit reads (measured over 16 noiseless kicks
 # of device_a at its true parameters: model against recording 4.5e-6 rad median at 60 ms,
-# 1.7e-6 at 100, 200 and 500 ms). Four samples of a second's pause are the price.
+# 1.7e-6 at 100, 200 and 500 ms alike). Four samples of a second's pause are the price.
 SETTLE_S = 0.1
 # Noiseless recordings: the integrator's own error sets the residuals' scale.
 NOISELESS_STD_RAD = 1e-9
 # The restart's own error, per axis: a kick simulated from the relaxed rest state at the
-# recorded normal ends up to this far from the same kick in the continuous run that recorded it
-# (measured over 16 noiseless kicks of device_a at its true parameters, compared at SETTLE_S:
-# 3e-6 rad RMS per axis, the largest 1.1e-5; carrying the friction bristles' strain over from
-# the kick before changes it little). It is independent from kick to kick and enters every
-# residual beside the sensor's noise, at the largest seen: without it the whitened fit reads
+# recorded normal ends this far (RMS) from the same kick in the continuous run that recorded it
+# (measured over 40 noiseless kicks of device_a at its true parameters, compared at SETTLE_S:
+# 8e-6 rad per axis, most kicks within 2e-6 and one 6.8e-5 off; carrying the friction
+# bristles' strain over from the kick before changes it little). It enters every residual,
+# independent from kick to kick, beside the sensor's noise: without it the whitened fit reads
 # it as a parameter change.
 RESTART_STD_RAD = 1e-5
 # An undeclared parameter named for the fit is searched within this factor of its start value:
