@@ -75,6 +75,10 @@ def test_observations_average_each_resting_stretch_and_measure_the_sensor_noise(
     assert np.count_nonzero(cov) == 22 + 2 * 20
     w = obs.whitener()
     assert w @ cov @ w.T == pytest.approx(np.eye(22), abs=1e-9)
+    # Two recordings as one: the second's shared stretches keep their place; one is itself.
+    both = idf.merge_observations([obs, obs])
+    assert both.shared == obs.shared + tuple(i + 11 for i in obs.shared)
+    assert idf.merge_observations([obs]) is obs
 
 
 def test_the_residuals_noise_model_is_the_noise_they_carry():
