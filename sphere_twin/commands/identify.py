@@ -3,7 +3,7 @@
 Reads only what the device records (``/beams/pulse_program``, ``/beams/voltage_command``,
 ``/sphere/surface_normal``), hands the kicks to :mod:`sphere_sim.kicks.identification`, and
 writes a parameter file (``base:`` + ``overrides:``, with an ``identification:`` section of
-values, uncertainties and per-kick residuals) and a plot of recorded against fitted normals.
+values, intervals and per-kick residuals) and a plot of recorded against fitted normals.
 """
 
 import dataclasses
