@@ -599,16 +599,15 @@ class Misfit:
     def data(self, r):
         return self.whitener @ r
 
+    def prior_residuals(self, u):
+        return ((np.asarray(u, dtype=float) - self.start) / PRIOR_SD_UNIT)[self.prior]
+
     def residuals(self, u):
-        u = np.asarray(u, dtype=float)
-        return np.concatenate([self.data(self.ev(u)),
-                               ((u - self.start) / PRIOR_SD_UNIT)[self.prior]])
+        return np.concatenate([self.data(self.ev(u)), self.prior_residuals(u)])
 
     def chi2_many(self, points):
-        prior = [np.sum((((np.asarray(u) - self.start) / PRIOR_SD_UNIT)[self.prior]) ** 2)
-                 for u in points]
-        return np.array([float(np.sum(self.data(r) ** 2)) + pr
-                         for r, pr in zip(self.ev.many(points), prior, strict=True)])
+        return np.array([float(np.sum(self.data(r) ** 2) + np.sum(self.prior_residuals(u) ** 2))
+                         for u, r in zip(points, self.ev.many(points), strict=True)])
 
     def chi2(self, u):
         return float(self.chi2_many([u])[0])
