@@ -16,18 +16,19 @@ def scenario_nodes(setpoint_s, plant, real_time_factor, seed, normal_subscribers
     """The closed loop of the scenario, in start order: controller, reference, simulator.
 
     The simulator comes last, once the controller holds the reference, and holds simulated
-    time at 0 until ``normal_subscribers`` listen: the scenario's clock (simulated time, which
-    the reference follows) starts when everyone is there.
+    time at 0 until ``normal_subscribers`` listen to the normal and the reference listens to
+    ``/clock``: the scenario's clock (simulated time, which the reference follows) starts when
+    everyone is there. A reference that had not yet heard the clock would hold its setpoint
+    through a short run.
     """
+    reference_args = dict(setpoint_xy=list(SETPOINT_XY), trajectory_start_s=setpoint_s,
+                          trajectory_offset_s=TRAJECTORY_OFFSET_S, use_sim_time=True)
     return (
         NodeSpec('controller', tuple(parameter_args(controller=CONTROLLER))),
-        NodeSpec('reference', tuple(parameter_args(setpoint_xy=list(SETPOINT_XY),
-                                                   trajectory_start_s=setpoint_s,
-                                                   trajectory_offset_s=TRAJECTORY_OFFSET_S,
-                                                   use_sim_time=True))),
+        NodeSpec('reference', tuple(parameter_args(**reference_args))),
         NodeSpec('simulator', tuple(parameter_args(
             plant=plant, seed=seed, real_time_factor=real_time_factor,
-            wait_for_subscribers=normal_subscribers))),
+            wait_for_subscribers=normal_subscribers, wait_for_clock_subscribers=1))),
     )
 
 

@@ -116,6 +116,7 @@ class SimulatorNode(Node):
         self.create_timer(period, self.on_timer)
         self.create_timer(STATUS_PERIOD_S, self.on_status_timer)
         self.wait_for_subscribers = p['wait_for_subscribers']
+        self.wait_for_clock_subscribers = p['wait_for_clock_subscribers']
         self._last_sample = None
         self._reports = ReportLimit()
         self._last_repeat_wall_s = 0.0
@@ -154,6 +155,10 @@ class SimulatorNode(Node):
                 f'Hold simulated time at 0 until {SURFACE_NORMAL.name} has this many '
                 'subscribers (DDS discovery takes seconds; a scenario should not start before '
                 'its controller listens).', int_range=(0, 100))),
+            'wait_for_clock_subscribers': (0, parameter_descriptor(
+                f'Hold simulated time at 0 until {CLOCK.name} has this many subscribers (the '
+                'nodes on use_sim_time: a reference that has not yet heard the clock when a '
+                'short run ends never moves).', int_range=(0, 100))),
             'lockstep': (False, parameter_descriptor(
                 'Advance simulated time only while a command is in effect: runs are then '
                 'identical whatever the wall-clock timing.')),
@@ -219,7 +224,7 @@ class SimulatorNode(Node):
         self._publish_diagnostics(level, text)
 
     def on_status_timer(self):
-        state = 'running' if self.wait_for_subscribers == 0 else 'waiting for subscribers'
+        state = 'waiting for subscribers' if self._waiting() else 'running'
         left_out = self._reports.take_suppressed()  # a burst that ended: its count is said here
         self._publish_diagnostics(DiagnosticStatus.OK, state + (
             f' ({left_out} more reports left out)' if left_out else ''))
@@ -250,14 +255,22 @@ class SimulatorNode(Node):
         self._topic_publishers[DIAGNOSTICS.name].publish(array)
 
     # --- time --------------------------------------------------------------------------
+    def _waiting(self):
+        return bool(self.wait_for_subscribers or self.wait_for_clock_subscribers)
+
+    def _subscribers_present(self):
+        pub = self._topic_publishers
+        return (pub[SURFACE_NORMAL.name].get_subscription_count() >= self.wait_for_subscribers
+                and pub[CLOCK.name].get_subscription_count() >= self.wait_for_clock_subscribers)
+
     def on_timer(self):
-        normal_pub = self._topic_publishers[SURFACE_NORMAL.name]
-        if self.wait_for_subscribers:
-            if normal_pub.get_subscription_count() < self.wait_for_subscribers:
+        if self._waiting():
+            if not self._subscribers_present():
                 return
-            self.get_logger().info(f'{self.wait_for_subscribers} subscribers on '
-                                   f'{SURFACE_NORMAL.name}: simulated time starts')
-            self.wait_for_subscribers = 0
+            self.get_logger().info(
+                f'{self.wait_for_subscribers} subscribers on {SURFACE_NORMAL.name} and '
+                f'{self.wait_for_clock_subscribers} on {CLOCK.name}: simulated time starts')
+            self.wait_for_subscribers = self.wait_for_clock_subscribers = 0
         if self.runner.counters.samples == 0:
             self._wall_start_s = time.perf_counter()  # simulated time 0 is now
         elif self.paced and self.runner.time_s >= (
