@@ -450,3 +450,61 @@ def test_the_optimiser_starts_where_the_misfit_is_lowest_not_only_at_the_start()
     assert all(0.0 <= p[0] <= start[0] + 2.0 * idf.PRIOR_SD_UNIT for p in points)
     best, _ = idf._best_of_starts(misfit, start, fits, [0], 30)
     assert best[0] == pytest.approx(0.6, abs=1e-3) and misfit.chi2(best) < 1e-6
+
+
+def test_the_start_values_are_always_descended_from(monkeypatch):
+    """The design's lowest points can lie on the far side of a ridge from the prior's centre:
+    besides the design's lowest, the optimiser always starts at the start values too."""
+    # Lowest far from the start, so the start ranks last among the candidates.
+    misfit = _AnalyticMisfit(lambda u: np.array([u[0] - 0.9]))
+    fits = idf.fit_parameters(BASE, ['beam.damping_phi_nms_per_rad'])
+    start = np.array([0.3])
+    descents = []
+    original = idf._least_squares
+
+    def spy(misfit, start_point, free, max_nfev):
+        descents.append(float(start_point[0]))
+        return original(misfit, start_point, free, max_nfev)
+
+    monkeypatch.setattr(idf, '_least_squares', spy)
+    best, _ = idf._best_of_starts(misfit, start, fits, [0], 30)
+    points = idf._start_points(start, fits, [0])
+    lowest = min((p[0] for p in points[1:]), key=lambda x: abs(x - 0.9))
+    assert descents == [0.3, lowest]
+    assert len(descents) == 1 + idf.OPTIMISER_STARTS
+    assert best[0] == pytest.approx(0.9, abs=1e-3)
+
+
+def _parabola_misfit_along(device_bag, rtol, offsets):
+    """The whitened misfit at ``offsets`` along a line through the truth (friction and damping
+    together, in the scaled coordinate), and its largest departure from the fitted parabola."""
+    from sphere_sim.kicks.engine import engine_of
+    from sphere_twin.commands.identify import read_observations
+
+    obs = read_observations(device_bag)
+    truth = load_parameter_set(str(device_bag / 'truth.yaml'))
+    fits = idf.fit_parameters(BASE, ['friction.coulomb', 'beam.damping_phi_nms_per_rad'])
+    centre = np.array([f.to_unit(truth.get(f.path)) for f in fits])
+    direction = np.array([0.6, 0.8])
+    with engine_of(2) as engine:
+        ev = idf.Evaluator(BASE, obs, fits, engine, rtol=rtol)
+        misfit = idf.Misfit(ev, obs.whitener(), fits, centre)
+        chis = misfit.chi2_many([centre + t * direction for t in offsets])
+    fitted = np.polyval(np.polyfit(offsets, chis, 2), offsets)
+    return chis, float(np.max(np.abs(chis - fitted)))
+
+
+def test_the_misfit_is_smooth_where_the_interval_is_measured(device_bag):
+    """Within a standard error or two of the truth the misfit must be the smooth parabola the
+    intervals assume: at the live twin's tolerance the integrator's step-size jumps make dips
+    and bumps as deep as the rise an interval is read from; at the fit's they are gone."""
+    from sphere_sim.twin.plants import LIVE_RTOL
+
+    offsets = np.linspace(-0.02, 0.02, 9)
+    chis, departure = _parabola_misfit_along(device_bag, idf.FIT_RTOL, offsets)
+    _, live_departure = _parabola_misfit_along(device_bag, LIVE_RTOL, offsets)
+    print(f'misfit along the line {np.round(chis - chis.min(), 2)}; departure from a parabola '
+          f'{departure:.3f} at rtol {idf.FIT_RTOL:g}, {live_departure:.3f} at {LIVE_RTOL:g}')
+    assert np.ptp(chis) > 1.0  # the line climbs the valley's wall: there is a rise to read
+    assert departure < 0.1 * np.ptp(chis)
+    assert live_departure > 3.0 * departure

@@ -2,11 +2,12 @@
 
 The curvature a Gauss-Newton fit reports comes from the Jacobian at its optimum: it says how
 the misfit rises where the residuals are linear in the parameters. Where two parameters trade
-against each other the misfit lies in a long valley that flattens or bends, and a Jacobian's
-step reads the integrator's jitter as information across it. The scan measures the misfit
-itself where the interval is reported, two standard errors out along each principal direction
-(where the sum of squares should have risen by 4, and the jitter is worth a hundredth of
-that), and rescales each direction by what it finds. Pure arithmetic: the caller evaluates the
+against each other the misfit lies in a long valley that flattens or bends. The scan measures
+the misfit itself where the interval is reported, two standard errors out along each principal
+direction (where the sum of squares should have risen by 4), and rescales each direction by what
+it finds. That reading needs a misfit smooth on this scale: the kicks are simulated at a
+tolerance where the integrator's own jumps are worth well under one (identification.FIT_RTOL).
+Pure arithmetic: the caller evaluates the
 points.
 """
 

@@ -40,6 +40,8 @@ def register(subparsers):
                                        'compare with the truth; writes a Markdown table and '
                                        'its JSON.')
     study.add_argument('--kicks', type=positive_int, default=DEFAULT_KICKS)
+    study.add_argument('--device', action='append', dest='devices', metavar='NAME',
+                       help='study only this device (repeatable; default: all five)')
     study.add_argument('--workers', type=positive_int, default=2)
     study.add_argument('--scheduler', default=None)
     study.add_argument('--out', type=Path, default=DEFAULT_STUDY)
@@ -88,9 +90,10 @@ def run_study(args):
     from sphere_twin.synthetic_device import DEVICES, NOISE_STUDY_STD_RAD
 
     base = load_parameter_set(DEFAULT_PARAMETER_SET)
+    devices = [_device(name) for name in args.devices] if args.devices else DEVICES
     rows = []
     with tempfile.TemporaryDirectory() as tmp, engine_of(args.workers, args.scheduler) as eng:
-        for device in DEVICES:
+        for device in devices:
             bag = Path(tmp) / device.name
             record(device, bag, args.kicks)
             obs = read_observations(bag)
@@ -151,9 +154,10 @@ def _parameter_line(p):
 
 
 def _markdown(rows, args, noise):
+    only = ''.join(f' --device {name}' for name in args.devices or ())
     lines = ['# Identification of synthetic devices', '',
              f'Made by `sphere-twin synthetic study --kicks {args.kicks} --workers '
-             f'{args.workers}`: each device is the `calibrated` set with two physical '
+             f'{args.workers}{only}`: each device is the `calibrated` set with two physical '
              f'parameters changed; {args.kicks} kicks recorded open loop by the continuous twin '
              f'(one a second, {PUBLISH_RATE_HZ:g} Hz samples, sensor noise {noise:.3g} rad per '
              'axis: the noise '
