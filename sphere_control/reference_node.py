@@ -55,7 +55,10 @@ class ReferenceNode(Node):
         self.pace = PaceMeter()
         self.create_timer(1.0 / p['publish_rate_hz'], self.on_timer)
         # Latched at once: with use_sim_time the timer waits for /clock, and a controller
-        # should hold the reference before the simulator starts.
+        # should hold the reference before the simulator starts. Created at simulated time 0,
+        # before any /clock, the timer still fires once /clock passes its period (rcl checks
+        # a ROS-time timer on every jump of the clock), so the reference follows /clock as
+        # soon as it hears it; one that never hears it holds its setpoint (test_clock_wait).
         self.on_timer()
 
     def reference_at(self, elapsed_s):

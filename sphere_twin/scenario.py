@@ -12,14 +12,19 @@ CONTROLLER = 'extended'
 TRAJECTORY_OFFSET_S = 12.5
 
 
-def scenario_nodes(setpoint_s, plant, real_time_factor, seed, normal_subscribers):
+def scenario_nodes(setpoint_s, plant, real_time_factor, seed, normal_subscribers,
+                   clock_subscribers):
     """The closed loop of the scenario, in start order: controller, reference, simulator.
 
     The simulator comes last, once the controller holds the reference, and holds simulated
-    time at 0 until ``normal_subscribers`` listen to the normal and the reference listens to
+    time at 0 until ``normal_subscribers`` listen to the normal and ``clock_subscribers`` to
     ``/clock``: the scenario's clock (simulated time, which the reference follows) starts when
-    everyone is there. A reference that had not yet heard the clock would hold its setpoint
-    through a short run.
+    everyone is there. ``clock_subscribers`` counts every listener of ``/clock``, the reference
+    and a recorder (which records it) alike: the simulator sees only a count, so with a
+    recorder a count of 1 would let time start before the reference listens. DDS discovery
+    of one pair of processes can lag the others by seconds (up to 3 s seen here), longer than
+    a short run: a reference that had not yet heard the clock would hold its setpoint
+    through it.
     """
     reference_args = dict(setpoint_xy=list(SETPOINT_XY), trajectory_start_s=setpoint_s,
                           trajectory_offset_s=TRAJECTORY_OFFSET_S, use_sim_time=True)
@@ -28,7 +33,8 @@ def scenario_nodes(setpoint_s, plant, real_time_factor, seed, normal_subscribers
         NodeSpec('reference', tuple(parameter_args(**reference_args))),
         NodeSpec('simulator', tuple(parameter_args(
             plant=plant, seed=seed, real_time_factor=real_time_factor,
-            wait_for_subscribers=normal_subscribers, wait_for_clock_subscribers=1))),
+            wait_for_subscribers=normal_subscribers,
+            wait_for_clock_subscribers=clock_subscribers))),
     )
 
 

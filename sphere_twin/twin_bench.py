@@ -26,6 +26,8 @@ DEFAULT_DURATION_S = 20.0
 SETPOINT_S = 4.0
 # Subscribers of /sphere/surface_normal the simulator waits for: the controller and the probe.
 NORMAL_SUBSCRIBERS = 2
+# Subscribers of /clock it waits for: the reference (on simulated time).
+CLOCK_SUBSCRIBERS = 1
 START_TIMEOUT_S = 60.0
 # An unpaced run slower than this many wall seconds per simulated second is cut.
 WALL_PER_SIMULATED_LIMIT = 10.0
@@ -158,7 +160,7 @@ def run_twin_bench(plant='continuous', duration_s=DEFAULT_DURATION_S, seed=0,
 
     domain_id = fresh_domain_id()
     *others, simulator = scenario_nodes(SETPOINT_S, plant, real_time_factor, seed,
-                                        NORMAL_SUBSCRIBERS)
+                                        NORMAL_SUBSCRIBERS, CLOCK_SUBSCRIBERS)
     with running_nodes(*others, domain_id=domain_id) as group:
         probe = TopicProbe(domain_id, (SURFACE_NORMAL, CONTROLLER_STATUS, DIAGNOSTICS))
         diagnostics = probe.messages[DIAGNOSTICS.name]

@@ -35,6 +35,7 @@ SIMULATOR_SIGNAL_DELAYS_S = (0.013, 0.171)
 KICK_EVERY_S = 0.005
 # The simulator starts once the recorder, the controller and the probe listen to the normal.
 NORMAL_SUBSCRIBERS = 3
+CLOCK_SUBSCRIBERS = 2  # and once the recorder and the reference listen to /clock
 BUSY_FRACTION = 0.3  # of wall time integrating, by the simulator's periodic status
 
 
@@ -87,7 +88,8 @@ def test_controller_reference_and_recorder_stop_cleanly_while_the_loop_runs(
 
     recorder = ros_nodes.start('recorder', parameter_args(output_dir=str(tmp_path / 'bag')))
     nodes = {spec.executable: ros_nodes.start(spec.executable, spec.args)
-             for spec in scenario_nodes(1.0, 'discrete', 5.0, 0, NORMAL_SUBSCRIBERS)}
+             for spec in scenario_nodes(1.0, 'discrete', 5.0, 0, NORMAL_SUBSCRIBERS,
+                                       CLOCK_SUBSCRIBERS)}
     probe = TopicProbe(ros_nodes.domain_id, (SURFACE_NORMAL, CONTROLLER_STATUS))
     try:
         log = RunLog(probe)

@@ -5,9 +5,10 @@ import re
 
 import pytest
 
+from msg_defs.topics import ALL_TOPICS, CLOCK
 from sphere_sim.twin.simulator_node import CATCH_UP_SPEEDUP
 from sphere_twin.cli import build_parser
-from sphere_twin.commands.demo import DEFAULT_REAL_TIME_FACTOR, run_demo
+from sphere_twin.commands.demo import DEFAULT_REAL_TIME_FACTOR, demo_nodes, run_demo
 
 pytestmark = pytest.mark.ros
 
@@ -48,6 +49,18 @@ def test_short_demo_runs_the_loop_records_a_bag_and_reports(tmp_path, plant):
     assert (tmp_path / bag.split('/')[-1] / 'metadata.yaml').is_file()
     assert list(tmp_path.glob('*_error.png'))
     assert lines[-1].startswith('demo: OK')
+
+
+def test_the_demo_simulator_waits_for_every_listener_of_the_clock(tmp_path):
+    """The simulator sees only a count of /clock subscribers: it must count the recorder (it
+    records every contract topic, /clock among them) as well as the reference, or the
+    recorder alone starts a run the reference may not yet hear (it then holds its setpoint)."""
+    *others, simulator = demo_nodes(tmp_path, 3.0, 2.0, 0)
+    records_clock = [spec.executable for spec in others if spec.executable == 'recorder'
+                     and CLOCK in ALL_TOPICS and not any('topics:=' in a for a in spec.args)]
+    on_sim_time = [spec.executable for spec in others if 'use_sim_time:=True' in spec.args]
+    assert (records_clock, on_sim_time) == (['recorder'], ['reference'])
+    assert 'wait_for_clock_subscribers:=2' in simulator.args
 
 
 def test_cli_parses_the_scenario_and_rejects_non_positive_durations():

@@ -157,8 +157,9 @@ class SimulatorNode(Node):
                 'its controller listens).', int_range=(0, 100))),
             'wait_for_clock_subscribers': (0, parameter_descriptor(
                 f'Hold simulated time at 0 until {CLOCK.name} has this many subscribers (the '
-                'nodes on use_sim_time: a reference that has not yet heard the clock when a '
-                'short run ends never moves).', int_range=(0, 100))),
+                'nodes on use_sim_time, and a recorder, which counts too: a reference that has '
+                'not yet heard the clock when a short run ends never moves).',
+                int_range=(0, 100))),
             'lockstep': (False, parameter_descriptor(
                 'Advance simulated time only while a command is in effect: runs are then '
                 'identical whatever the wall-clock timing.')),

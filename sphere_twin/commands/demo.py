@@ -44,6 +44,10 @@ WALL_MARGIN = 3.0  # the run may take this many times its paced duration before 
 # Subscribers of /sphere/surface_normal the simulator waits for: recorder, controller, and the
 # demo's own probe.
 DEMO_NORMAL_SUBSCRIBERS = 3
+# Subscribers of /clock it waits for: the recorder (it records /clock) and the reference (on
+# simulated time). Counting the recorder alone once let a run start, and end, before the
+# reference heard the clock: it held its setpoint throughout.
+DEMO_CLOCK_SUBSCRIBERS = 2
 # Each node's farewell line ends with the real-time factor it saw; the simulator's also counts
 # the programmes that arrived after their start.
 REAL_TIME_FACTOR_PATTERN = re.compile(r'real-time factor (\S+?);?(?:\s|$)')
@@ -54,7 +58,7 @@ def demo_nodes(bag_dir, setpoint_s, real_time_factor, seed, plant=DEFAULT_PLANT)
     """What the demo starts, in start order (stopped in reverse: the recorder last)."""
     return (NodeSpec('recorder', tuple(parameter_args(output_dir=str(bag_dir)))),
             *scenario_nodes(setpoint_s, plant, real_time_factor, seed,
-                            DEMO_NORMAL_SUBSCRIBERS))
+                            DEMO_NORMAL_SUBSCRIBERS, DEMO_CLOCK_SUBSCRIBERS))
 
 
 def run_demo(setpoint_s=DEFAULT_SETPOINT_S, trajectory_s=DEFAULT_TRAJECTORY_S,
