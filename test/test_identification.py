@@ -508,3 +508,40 @@ def test_the_misfit_is_smooth_where_the_interval_is_measured(device_bag):
     assert np.ptp(chis) > 1.0  # the line climbs the valley's wall: there is a rise to read
     assert departure < 0.1 * np.ptp(chis)
     assert live_departure > 3.0 * departure
+
+
+def test_the_study_runs_only_the_devices_named_and_says_so(tmp_path, monkeypatch, capsys):
+    """``synthetic study --device`` records and identifies the device named and no other, and
+    its table says how it was made; an unknown device is one line and exit status 2."""
+    from sphere_twin import cli
+
+    fitted = []
+
+    def truth_as_fitted(params, obs, fits, engine, progress=None):
+        """The fit stubbed: each parameter at its start value, its interval a factor 1.5."""
+        fitted.append([f.path for f in fits])
+        parameters = [idf.FittedParameter(f.path, params.get(f.path), params.get(f.path),
+                                          (params.get(f.path) / 1.5, params.get(f.path) * 1.5),
+                                          f.low, f.high, f.declared, 'fitted')
+                      for f in fits]
+        zeros = np.zeros((len(obs.kicks), 2))
+        return idf.IdentificationResult(parameters, zeros, zeros, obs.noise_std_rad,
+                                        np.eye(len(fits)), 1, 0, 0, 'stub', 1.0)
+
+    monkeypatch.setattr(idf, 'identify', truth_as_fitted)
+    out = tmp_path / 'study.md'
+    status = cli.main(['synthetic', 'study', '--device', 'device_b', '--kicks', '3',
+                       '--workers', '1', '--out', str(out)])
+    printed = capsys.readouterr().out
+    assert status == 0
+    assert fitted == [['beam.damping_phi_nms_per_rad', 'beam.stiffness_z_n_per_m',
+                       'friction.coulomb']]
+    table = out.read_text()
+    assert '--device device_b`' in table and '## device_b' in table and 'device_a' not in table
+    # Start values: the changed damping (x 1.25) and k_z (x 0.85) lie inside a factor 1.5,
+    # the unchanged friction coefficient too.
+    assert printed.strip().splitlines()[-1] == (
+        'identified: 3 of 3 parameters within their uncertainty of the truth over 1 device')
+    status = cli.main(['synthetic', 'study', '--device', 'device_z', '--out', str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2 and len(err) == 1 and "unknown device 'device_z'" in err[0]

@@ -126,7 +126,7 @@ def run_study(args):
     inside = sum(p['within'] for r in rows for p in r['parameters'])
     total = sum(len(r['parameters']) for r in rows)
     print(f'identified: {inside} of {total} parameters within their uncertainty of the truth '
-          f'over {len(rows)} devices')
+          f'over {len(rows)} device{"s" if len(rows) != 1 else ""}')
     return 0
 
 
