@@ -7,8 +7,7 @@ the misfit itself where the interval is reported, two standard errors out along 
 direction (where the sum of squares should have risen by 4), and rescales each direction by what
 it finds. That reading needs a misfit smooth on this scale: the kicks are simulated at a
 tolerance where the integrator's own jumps are worth well under one (identification.FIT_RTOL).
-Pure arithmetic: the caller evaluates the
-points.
+Pure arithmetic: the caller evaluates the points.
 """
 
 import numpy as np
