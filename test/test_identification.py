@@ -468,8 +468,8 @@ def test_the_start_values_are_always_descended_from(monkeypatch):
 
     monkeypatch.setattr(idf, '_least_squares', spy)
     best, _ = idf._best_of_starts(misfit, start, fits, [0], 30)
-    points = idf._start_points(start, fits, [0])
-    lowest = min((p[0] for p in points[1:]), key=lambda x: abs(x - 0.9))
+    design = idf._start_points(start, fits, [0])[1:]
+    lowest = design[int(np.argmin(misfit.chi2_many(design)))][0]
     assert descents == [0.3, lowest]
     assert len(descents) == 1 + idf.OPTIMISER_STARTS
     assert best[0] == pytest.approx(0.9, abs=1e-3)
