@@ -1,24 +1,26 @@
-"""Calibration of the declared-uncertain parameters to the paper's observed behaviour.
+"""Calibration of the declared-uncertain parameters to the paper's pull-in (Fig. 4).
 
 Only parameters that a parameter set declares uncertain, each with a range, a reason and a
-target, may move. Two observations are targets:
+target, may move, and only one observation is a target:
 
 ``fig4_threshold``
-    Fig. 4: the kick rises sharply between 40 and 45 V and the beams pull in above 44 V. The
-    model's dynamic pull-in threshold of 5 ms pulses on all beams, with the sphere on, is put
-    at ``TARGET_THRESHOLD_V``. The rest condition of §4.1 (tips on the ground plate's front
-    edge) is checked for every hypothesis.
-``fig5_kick``
-    Fig. 5 / §4.1: the optimised hind-left kick (35 V and 80 V pulses, widths and delay
-    optimised) turns the sphere by sqrt(alpha^2 + beta^2) = ``TARGET_KICK_DEG`` towards -45 deg.
-    Every candidate value gets its own kick optimisation.
+    Fig. 4: the kick rises sharply between 40 and 45 V and the beams pull in "for voltages
+    larger than 44 V". The model's dynamic pull-in threshold of 5 ms pulses on all beams, with
+    the sphere on, is put at ``TARGET_THRESHOLD_V``. The rest condition of §4.1 (tips on the
+    ground plate's front edge) is checked for every hypothesis.
 
-A range is a physical bound: a target it cannot bracket is not forced. The fit then stops at the
-range's nearer end and :attr:`Fit.reached` is False, so that the shortfall is reported.
+The paper's other facts (the kick's direction and size, the width against tilt, the holding
+of a tilted sphere) are never targets: they test the calibrated model (test_paper_facts.py).
 
-Each parameter is fitted by bisection within its range with the others held; the fits run in
-the order of ``CALIBRATION_TARGETS`` and repeat until a pass changes no observation beyond its
-tolerance, since the threshold and the kick both depend a little on every parameter.
+The parameters of the target are fitted jointly: one observation cannot pin several
+parameters, so the fit takes the smallest change from a reference (Table A1's value; the
+range's centre where the range excludes the table's value, which then says nothing about where
+inside the range the value lies) that meets the target, in coordinates where each range spans
+0..1 (geometric for ranges of more than ``GEOMETRIC_RANGE_RATIO``). It moves along the
+threshold's gradient at the reference, each coordinate held ``RANGE_MARGIN`` off its bounds,
+and bisects along that path. A range is a physical bound: a target the path cannot bracket is
+not forced; the fit stops at the path's nearer end and :attr:`Fit.reached` is False, so that
+the shortfall is reported.
 """
 
 import dataclasses
@@ -26,50 +28,50 @@ import math
 
 import numpy as np
 
-from sphere_sim.kicks.discrete import PAPER_FULL_KICK_RAD
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.parameters import CALIBRATION_TARGETS
 from sphere_sim.model.scene import load_scene
 from sphere_sim.studies.pullin import dynamic_threshold
 
-# §4.1: "for voltages larger than 44 V a pull-in occurs"; Fig. 4's kick rises sharply in 40-45 V.
+# §4.1: "for voltages larger than 44 V a pull-in occurs"; Fig. 4's kick rises sharply in 40-45 V:
+# the fit aims at the middle of (44, 45).
 # The set the calibration fits and rewrites, and the literal reading of Table A1 it starts from.
 CALIBRATED_SET = 'calibrated'
 LITERAL_SET = 'table_a1'
-TARGET_THRESHOLD_V = 44.0
-FIT_TOLERANCE_V = 0.2
-TARGET_KICK_DEG = math.degrees(PAPER_FULL_KICK_RAD)
-KICK_TOLERANCE_DEG = 0.01
+TARGET_THRESHOLD_V = 44.5
+FIT_TOLERANCE_V = 0.25
 MAX_FIT_STEPS = 12
-MAX_PASSES = 3
-# The kick optimisation inside the fit: a smaller search than `sphere-twin optimize-kick`'s
-# (popsize 12, 25 generations), 312 simulations per candidate; the final design is optimised
-# with the full search afterwards and lands within ~0.01 deg of it.
-FIT_POPSIZE = 8
-FIT_MAXITER = 12
-# A range spanning more than this ratio is bisected geometrically (friction velocities).
+# A range spanning more than this ratio is fitted in log coordinates.
 GEOMETRIC_RANGE_RATIO = 10.0
+# A fitted value keeps this share of its range from either bound ("off its bounds").
+RANGE_MARGIN = 0.05
+# Step of the threshold's gradient at the reference, in range coordinates.
+GRADIENT_STEP = 0.05
 
 
 @dataclasses.dataclass(frozen=True)
 class Fit:
-    """The outcome of fitting one declared-uncertain parameter."""
+    """The outcome of fitting one declared-uncertain parameter (jointly with the others of its
+    target: ``observed`` and ``history`` are the joint fit's)."""
 
     spec: object  # UncertainParameter
     value: float
-    observed: float  # threshold (V) or kick (deg) at ``value``
+    observed: float  # threshold (V) at the fitted values
     target: float
-    history: tuple  # (value, observed) of every evaluation, in order
+    history: tuple  # (value of this parameter, observed) of every evaluation, in order
 
-    @property
-    def unit(self):
-        return 'V' if self.spec.target == 'fig4_threshold' else 'deg'
+    unit = 'V'
 
     @property
     def reached(self):
-        """False when the declared range stopped the fit short of its target."""
-        return abs(self.observed - self.target) < target_of(self.spec)[1]
+        """False when the declared ranges stopped the fit short of its target."""
+        return abs(self.observed - self.target) < FIT_TOLERANCE_V
+
+    @property
+    def at_margin(self):
+        """True when the value sits at its range's margin (the fit leaned on that bound)."""
+        return abs(range_coordinate(self.spec, self.value) - 0.5) >= 0.5 - RANGE_MARGIN - 1e-9
 
 
 def evaluate(params, with_beams_only=True):
@@ -91,22 +93,33 @@ def threshold_v(params):
     return evaluate(params, with_beams_only=False)[0]
 
 
-def kick_deg(params, workers=1, popsize=FIT_POPSIZE, maxiter=FIT_MAXITER):
-    """Fig. 5's observable: the optimised diagonal kick along -45 deg (deg).
-
-    ``workers`` is a number of local processes or a started engine
-    (:mod:`sphere_sim.kicks.engine`); a calibration passes one engine to all its
-    optimisations, whose workers then keep their set-ups between them.
-    """
-    from sphere_sim.kicks.optimization import optimise_kick
-
-    return optimise_kick(params=params, popsize=popsize, maxiter=maxiter,
-                         workers=workers).along_deg
-
-
 def with_value(params, spec, value):
     """``params`` with ``spec``'s path and every path tied to it set to ``value``."""
     return params.replace(**{path: float(value) for path in spec.paths})
+
+
+def with_values(params, specs, values):
+    for spec, value in zip(specs, values, strict=True):
+        params = with_value(params, spec, value)
+    return params
+
+
+def _geometric(spec):
+    return spec.low > 0 and spec.high / spec.low > GEOMETRIC_RANGE_RATIO
+
+
+def range_coordinate(spec, value):
+    """``value`` in ``spec``'s range coordinates: 0 at its low end, 1 at its high end."""
+    if _geometric(spec):
+        return math.log(value / spec.low) / math.log(spec.high / spec.low)
+    return (value - spec.low) / (spec.high - spec.low)
+
+
+def value_at(spec, coordinate):
+    """The inverse of :func:`range_coordinate`."""
+    if _geometric(spec):
+        return spec.low * (spec.high / spec.low) ** coordinate
+    return spec.low + coordinate * (spec.high - spec.low)
 
 
 def bisect(observe, low, high, target, tolerance, geometric=False, progress=None):
@@ -141,70 +154,98 @@ def bisect(observe, low, high, target, tolerance, geometric=False, progress=None
     return mid, f_mid, tuple(history)
 
 
-def target_of(spec):
-    """(target, tolerance) of the observation ``spec`` is fitted to (V or deg)."""
-    if spec.target == 'fig4_threshold':
-        return TARGET_THRESHOLD_V, FIT_TOLERANCE_V
-    return TARGET_KICK_DEG, KICK_TOLERANCE_DEG
+def start_coordinate(spec, reference_value):
+    """Where the joint fit starts for ``spec``: the reference value inside the range's margins;
+    a reference outside the range (a table value the range excludes) says nothing about where
+    inside it the value lies, so the range's centre."""
+    coordinate = range_coordinate(spec, reference_value)
+    if not 0.0 <= coordinate <= 1.0:
+        return 0.5
+    return min(max(coordinate, RANGE_MARGIN), 1.0 - RANGE_MARGIN)
 
 
-def observe(params, spec, workers=1):
-    """The observation ``spec`` is fitted to, for ``params``: (value, target, tolerance)."""
-    value = threshold_v(params) if spec.target == 'fig4_threshold' else kick_deg(params, workers)
-    return (value, *target_of(spec))
-
-
-def fit(params, spec, workers=1, progress=None):
-    """Fit one declared-uncertain parameter to its target, the others held at ``params``.
-
-    Returns
-    -------
-    Fit
-    """
-    target, tolerance = target_of(spec)
-    value, observed, history = bisect(
-        lambda value: observe(with_value(params, spec, value), spec, workers)[0],
-        spec.low, spec.high, target, tolerance,
-        geometric=spec.high / spec.low > GEOMETRIC_RANGE_RATIO, progress=progress)
-    return Fit(spec, value, observed, target, history)
-
-
-def calibrate(params, uncertain, workers=1, progress=None):
-    """Fit every declared-uncertain parameter, target by target, until a pass holds.
-
-    Each fit holds the others; after a pass every observation is checked again at the fitted
-    values, and another pass runs if one has moved beyond its tolerance.
+def fit_jointly(params, specs, reference, progress=None):
+    """Fit ``specs`` jointly to Fig. 4's threshold: the smallest move from ``reference``.
 
     Parameters
     ----------
     params : ParameterSet
-        Start values of the parameters not being fitted.
+        Values of everything not fitted.
+    specs : sequence of UncertainParameter
+        All of target ``fig4_threshold``.
+    reference : ParameterSet
+        Where the move starts (Table A1), each value brought inside its range's margins.
+
+    Returns
+    -------
+    list of Fit
+        One per spec, in order.
+    """
+    target, tolerance = TARGET_THRESHOLD_V, FIT_TOLERANCE_V
+    start = np.array([start_coordinate(spec, reference.get(spec.path)) for spec in specs])
+    history = []
+
+    def candidate(coordinates):
+        inside = np.clip(coordinates, RANGE_MARGIN, 1.0 - RANGE_MARGIN)
+        return with_values(params, specs, [value_at(spec, c)
+                                           for spec, c in zip(specs, inside, strict=True)])
+
+    def look(coordinates):
+        trial = candidate(coordinates)
+        observed = threshold_v(trial)
+        history.append((tuple(trial.get(spec.path) for spec in specs), observed))
+        if progress is not None:
+            progress(history[-1][0][0], observed)
+        return observed
+
+    f_start = look(start)
+    gradient = np.empty(len(specs))
+    for i in range(len(specs)):
+        step = np.zeros(len(specs))
+        forward = start[i] + GRADIENT_STEP <= 1.0 - RANGE_MARGIN
+        step[i] = GRADIENT_STEP if forward else -GRADIENT_STEP
+        gradient[i] = (look(start + step) - f_start) / step[i]
+    # Along the gradient, towards the target, until every coordinate has met its margin.
+    direction = gradient * math.copysign(1.0, target - f_start)
+    room = [((1.0 - RANGE_MARGIN - c) if d > 0 else (c - RANGE_MARGIN)) / abs(d)
+            for c, d in zip(start, direction, strict=True) if d != 0.0]
+    reach = max(room) if room else 0.0
+    if abs(f_start - target) < tolerance or reach == 0.0:
+        end, observed = start, f_start
+    else:
+        distance, observed, _ = bisect(lambda s: look(start + s * direction), 0.0, reach, target,
+                                       tolerance)
+        end = start + distance * direction
+    fitted = candidate(end)
+    return [Fit(spec, fitted.get(spec.path), observed, target,
+                tuple((values[i], seen) for values, seen in history))
+            for i, spec in enumerate(specs)]
+
+
+def calibrate(params, uncertain, progress=None, reference=None):
+    """Fit every declared-uncertain parameter of Fig. 4's threshold jointly.
+
+    Parameters
+    ----------
+    params : ParameterSet
+        Values of the parameters not being fitted.
     uncertain : sequence of UncertainParameter
         Those held at an estimate (``ESTIMATE_TARGET``) are left as they are.
+    reference : ParameterSet, optional
+        Where the fit starts from (default: Table A1 read literally).
 
     Returns
     -------
     params : ParameterSet
         With the fitted values.
     fits : list of Fit
-        The last pass's fits, in target order.
-    checks : list of (observed, target, tolerance)
-        Every observation at the returned ``params``, in the same order.
+        One per fitted parameter.
     """
-    ordered = sorted((spec for spec in uncertain if spec.target in CALIBRATION_TARGETS),
-                     key=lambda spec: CALIBRATION_TARGETS.index(spec.target))
-    fits, checks = [], []
-    for _ in range(MAX_PASSES):
-        fits = []
-        for spec in ordered:
-            result = fit(params, spec, workers, progress)
-            params = with_value(params, spec, result.value)
-            fits.append(result)
-        # The last fit's final evaluation is already at these values (and deterministic).
-        checks = [observe(params, spec, workers) for spec in ordered[:-1]]
-        checks.append((fits[-1].observed, *target_of(ordered[-1])))
-        # A fit that its range stopped short cannot improve in another pass.
-        if all(abs(value - target) < tolerance or not result.reached
-               for (value, target, tolerance), result in zip(checks, fits, strict=True)):
-            break
-    return params, fits, checks
+    from sphere_sim.model.parameters import load_parameter_set
+
+    reference = load_parameter_set(LITERAL_SET) if reference is None else reference
+    specs = [spec for spec in uncertain if spec.target in CALIBRATION_TARGETS]
+    if not specs:
+        return params, []
+    fits = fit_jointly(params, specs, reference, progress)
+    return with_values(params, specs, [f.value for f in fits]), fits

@@ -42,9 +42,9 @@ class KickDesign:
     direction_rad : float
         Nominal polar angle of the normal's displacement (the hind-left kick: -45 deg).
     low_beams, high_beams : tuple of int
-        The hind-left kick drives the hind-left pair (beams 1-2) high: with tips that stick,
-        the high pair lifts its side of the sphere and the face tilts away from it, towards
-        the front right (docs/parameters.md, "Friction that holds").
+        The paper's hind-left kick (§4.1): ``low_v`` on beams 1-2 and ``high_v`` on beams 3-4.
+        Under the paper's friction the sphere, lifted by the high pair, drifts to the hind left
+        and the oblique impact on beams 1-2 turns it towards the front right (Fig. 5).
     low_v, high_v : float
         Amplitudes (V) at full intensity.
     width_low_s, width_high_s : float
@@ -53,8 +53,8 @@ class KickDesign:
     """
 
     direction_rad: float = math.radians(-45.0)
-    low_beams: tuple = (3, 4)
-    high_beams: tuple = (1, 2)
+    low_beams: tuple = (1, 2)
+    high_beams: tuple = (3, 4)
     low_v: float = 35.0
     high_v: float = VOLTAGE_LIMIT_V
     width_low_s: float = 4e-3

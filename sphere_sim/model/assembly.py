@@ -13,7 +13,7 @@ import numpy as np
 from sphere_sim.model import dynamics as dyn
 from sphere_sim.model import gaps as gap_kernels
 from sphere_sim.model.contact_law import contact_force, elastic_energy
-from sphere_sim.model.friction import READING_STICTION, READINGS
+from sphere_sim.model.friction import BRISTLE_READINGS, READING_PAPER, READINGS
 from sphere_sim.model.parameters import ParameterSet
 from sphere_sim.model.rotations import quat_to_matrix
 from sphere_sim.model.scaling import state_scale
@@ -68,6 +68,10 @@ def pack_parameters(params: ParameterSet):
     p[dyn.P_PRESLIDING] = f.presliding_m
     p[dyn.P_VISC_PER_NEWTON] = f.viscous_s_per_m
     p[dyn.P_BRISTLE_DAMPING] = f.bristle_damping_s
+    p[dyn.P_STATIC_COEFF] = f.static_coefficient
+    p[dyn.P_BRISTLE_STIFFNESS] = f.bristle_stiffness_n_per_m
+    p[dyn.P_BRISTLE_SPEED] = f.bristle_speed_m_per_s
+    p[dyn.P_BREAKAWAY] = f.breakaway_ratio
     return p
 
 
@@ -117,7 +121,7 @@ class Model:
 
     @property
     def has_bristles(self):
-        """True when each tip carries a friction bristle (the ``stiction`` reading)."""
+        """True when each tip carries a friction bristle (``paper`` and ``stiction`` readings)."""
         return bool(self.flags[dyn.F_STICTION])
 
     @property
@@ -135,7 +139,7 @@ class Model:
         return 4 * self.n_beams + (SPHERE_STATES if self.has_sphere else 0)
 
     def bristles(self, x):
-        """Bristle deflections (m), shape (n_beams, 3) (zeros without the ``stiction`` reading)."""
+        """Bristle deflections (m), shape (n_beams, 3) (zeros without a bristle reading)."""
         if not self.has_bristles:
             return np.zeros((self.n_beams, 3))
         o = self.bristle_offset
@@ -288,11 +292,16 @@ class Model:
         return energy
 
     def bristle_energy(self, x):
-        """Elastic energy held in the friction bristles (J): 1/2 mu_c F_n |b_t|^2 / delta each,
-        with F_n the contact's elastic normal force (the ``stiction`` reading; 0 otherwise)."""
+        """Elastic energy held in the friction bristles (J): 1/2 k_b |b|^2 each with the
+        ``paper`` reading's constant stiffness, whether in contact or relaxing; with the
+        ``stiction`` reading 1/2 mu_c F_n |b_t|^2 / delta each, with F_n the contact's elastic
+        normal force (0 without bristles)."""
         if not self.has_bristles:
             return 0.0
         f = self.params.friction
+        if self.flags[dyn.F_FRICTION_READING] == READING_PAPER:
+            b = self.bristles(x)
+            return 0.5 * f.bristle_stiffness_n_per_m * float(np.sum(b * b))
         kc, ct = self.params.contact.stiffness_n_per_m, self.params.contact.transition_force_n
         rel = self._tips_from_centre(x)
         gaps = np.linalg.norm(rel, axis=1) - self.params.sphere.radius_m
@@ -305,6 +314,19 @@ class Model:
             f_n = contact_force(gap, 0.0, kc, ct, 0.0)
             energy += 0.5 * f.coulomb * f_n * float(tangential @ tangential) / f.presliding_m
         return energy
+
+    def bristle_limits_m(self, x):
+        """Largest deflection (m) each tip's bristle holds elastically at state ``x``, shape
+        (n_beams,): the presliding delta of the ``stiction`` reading; with the ``paper``
+        reading the edge of the elastic zone at rest, the break-away ratio of mu_b F_n / k_b
+        with F_n the contact's elastic normal force (0 for a tip out of contact)."""
+        f = self.params.friction
+        if self.flags[dyn.F_FRICTION_READING] != READING_PAPER:
+            return np.full(self.n_beams, f.presliding_m)
+        kc, ct = self.params.contact.stiffness_n_per_m, self.params.contact.transition_force_n
+        normal = np.array([contact_force(gap, 0.0, kc, ct, 0.0) if gap < 0.0 else 0.0
+                           for gap in self.sphere_gaps(x)])
+        return f.breakaway_ratio * f.static_coefficient * normal / f.bristle_stiffness_n_per_m
 
     def sphere_centre(self, x):
         o = self.sphere_offset
@@ -375,7 +397,7 @@ def assemble(scene, params=None, jit=True):
     flags[dyn.F_STRIBECK] = sphere_contact and fx.stribeck
     flags[dyn.F_FRICTION_READING] = READINGS.index(params.friction.reading)
     flags[dyn.F_STICTION] = (sphere_contact and fx.coulomb
-                             and flags[dyn.F_FRICTION_READING] == READING_STICTION)
+                             and flags[dyn.F_FRICTION_READING] in BRISTLE_READINGS)
 
     p = pack_parameters(params)
     rbf_cz = rbf_cphi = np.zeros(1)

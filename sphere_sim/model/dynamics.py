@@ -11,7 +11,7 @@ is off is never entered. State layout for ``n`` beams, with ``o = 4 n``:
 ``x[o+7:o+10]``         velocity of the centre of gravity (m/s)
 ``x[o+10:o+13]``        angular velocity in the body frame (rad/s)
 ``x[o+13+3k:o+16+3k]``  deflection of beam k's friction bristle (m), inertial
-                        frame; only with the ``stiction`` reading (``F_STICTION``)
+                        frame; only with a bristle reading (``F_STICTION``)
 ======================  =====================================================
 
 Corrections to the printed equations (each tested, see docs/parameters.md): the mass matrix
@@ -31,9 +31,13 @@ from sphere_sim.model.capacitance import closed_form, rbf_evaluate
 from sphere_sim.model.contact_law import contact_force
 from sphere_sim.model.friction import (
     BRISTLE_RELEASE_S,
+    READING_PAPER,
     bristle_rate,
+    elastoplastic_steady_force,
     friction_magnitude,
     onset_gate,
+    plastic_share,
+    plastic_speed,
 )
 from sphere_sim.model.rotations import quat_rows
 from sphere_sim.model.vec3 import add, cross, dot, mat_t_vec, matvec, scale, sub
@@ -79,7 +83,11 @@ P_RBF_SIGMA_PHI = 36
 P_PRESLIDING = 37
 P_VISC_PER_NEWTON = 38
 P_BRISTLE_DAMPING = 39
-N_PARAMS = 40
+P_STATIC_COEFF = 40
+P_BRISTLE_STIFFNESS = 41
+P_BRISTLE_SPEED = 42
+P_BREAKAWAY = 43
+N_PARAMS = 44
 
 # Indices into the integer ``flags`` vector: which parts the scene assembled.
 F_N_BEAMS = 0
@@ -96,7 +104,7 @@ F_VISCOUS = 10
 F_COULOMB = 11
 F_STRIBECK = 12
 F_FRICTION_READING = 13  # a code of sphere_sim.model.friction.READINGS
-F_STICTION = 14  # the model carries a bristle per tip (reading ``stiction``)
+F_STICTION = 14  # the model carries a bristle per tip (readings ``paper`` and ``stiction``)
 N_FLAGS = 15
 
 SPHERE_STATES = 13
@@ -182,6 +190,44 @@ def _bristle_drag(x, ob, e, slip_t, f_n, gate, p, flags, dxdt):
     return (-stiffness * tangential[0] - eta * f_n * slip_t[0],
             -stiffness * tangential[1] - eta * f_n * slip_t[1],
             -stiffness * tangential[2] - eta * f_n * slip_t[2])
+
+
+@numba.njit(cache=True)
+def _elastoplastic_drag(x, ob, e, slip_t, f_n, gate, p, flags, dxdt):
+    """Friction force on the sphere (N) of the ``paper`` reading's elasto-plastic bristle at
+    ``x[ob:ob+3]``, whose rate it writes into ``dxdt``.
+
+    The bristle b follows the slip, ``db/dt = v_t - alpha |v_t| b / b_ss`` in contact, with
+    ``b_ss = f_ss(|v_t|) / k_b`` (:func:`~sphere_sim.model.friction.elastoplastic_steady_force`)
+    and alpha the plastic share (0 in the elastic zone); out of contact it relaxes. The force is
+    ``-gate (k_b b + tau_b k_b (1 - alpha) (v_t - alpha |v_t| b / b_ss))_t``: its damping acts
+    on the elastic part of the rate only, which keeps every term's dissipation >= 0 with the
+    stored energy 1/2 k_b |b|^2 (Model.bristle_energy).
+    """
+    bristle = (x[ob], x[ob + 1], x[ob + 2])
+    speed = plastic_speed(dot(slip_t, slip_t))
+    viscous = p[P_MU_VISC] if flags[F_VISCOUS] else 0.0
+    coulomb = p[P_MU_C]
+    # Without the Stribeck part its peak is nothing beyond the Coulomb term's value at v_s.
+    stribeck = (p[P_MU_S] if flags[F_STRIBECK]
+                else coulomb * math.tanh(p[P_V_S] / p[P_V_C]))
+    stiffness = p[P_BRISTLE_STIFFNESS]
+    steady = elastoplastic_steady_force(speed, f_n, gate, viscous, coulomb, p[P_V_C], stribeck,
+                                        p[P_V_S], p[P_STATIC_COEFF], p[P_BRISTLE_SPEED])
+    steady_deflection = steady / stiffness
+    length = math.sqrt(dot(bristle, bristle))
+    alpha = plastic_share(length / steady_deflection, p[P_BREAKAWAY])
+    flow = alpha * speed / steady_deflection
+    elastic = (slip_t[0] - flow * bristle[0], slip_t[1] - flow * bristle[1],
+               slip_t[2] - flow * bristle[2])
+    release = (1.0 - gate) / BRISTLE_RELEASE_S
+    for i in range(BRISTLE_STATES):
+        dxdt[ob + i] = gate * elastic[i] - release * bristle[i]
+    damping = p[P_BRISTLE_DAMPING] * (1.0 - alpha)
+    loaded = (bristle[0] + damping * elastic[0], bristle[1] + damping * elastic[1],
+              bristle[2] + damping * elastic[2])
+    tangential = sub(loaded, scale(dot(e, loaded), e))
+    return scale(-gate * stiffness, tangential)
 
 
 # Exempt from C901: one compiled pass over the beams accumulates every switched-on part's
@@ -326,7 +372,9 @@ def rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, dxdt, dia
                     slip = sub(add(vel, cross(omega_i, r_sp)), tip_vel)
                     slip_t = sub(slip, scale(dot(e, slip), e))
                     gate = onset_gate(gap, p[P_VISC_ONSET])
-                    if stiction:
+                    if stiction and flags[F_FRICTION_READING] == READING_PAPER:
+                        drag = _elastoplastic_drag(x, ob, e, slip_t, f_n, gate, p, flags, dxdt)
+                    elif stiction:
                         drag = _bristle_drag(x, ob, e, slip_t, f_n, gate, p, flags, dxdt)
                     else:
                         speed = math.sqrt(p[P_EPS] + dot(slip_t, slip_t))
@@ -411,8 +459,8 @@ def jacobian_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, scal
     enters the sphere's rows and the beams' through their tips, so its columns difference the
     kernel without the beams' own forces (and their capacitances). For four beams: 14 calls
     of ``SPHERE_DEPENDENT`` and 20 of one beam, and 12 more of ``SPHERE_DEPENDENT`` for the
-    bristles of the ``stiction`` reading (a bristle enters its beam's rates, the sphere's and
-    its own, all of which that part evaluates).
+    bristles of the ``paper`` and ``stiction`` readings (a bristle enters its beam's rates, the
+    sphere's and its own, all of which that part evaluates).
     """
     n = x.size
     nb = flags[F_N_BEAMS]

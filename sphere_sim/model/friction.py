@@ -1,8 +1,20 @@
 """Tangential friction at a beam tip, eq. (45)-(51), and the bristle that makes it stick.
 
-Four readings of the paper's friction (docs/parameters.md compares them):
+Five readings of the paper's friction (docs/parameters.md compares them):
 
-``stiction`` (default)
+``paper`` (default)
+    The paper's law while sliding, with stiction added below it. Sliding at |v| the force is
+    ``f(v) = d_v v + mu_c F_n tanh(v/v_c) + (mu_s - mu_c tanh(v_s/v_c)) F_n x exp((1 - x^2)/2)``,
+    ``x = v/v_s``: eq. (47)-(48) with Table A1's coefficients (as magnitudes: Table A1's signs
+    with Q = F d|v|/dq_dot), which make the Coulomb and Stribeck terms total ``mu_s F_n`` at
+    v_s, and eq. (46)'s load-independent viscous term beside them (so the total at v_s is
+    ``mu_s F_n + d_v v_s``). Below a bristle speed ``v_b`` far under v_c an elasto-plastic
+    bristle (Dupont et al. 2002) carries the force: a spring of constant stiffness ``k_b``,
+    purely elastic up to a break-away deflection, whose steady sliding force is
+    ``f(v) + mu_b F_n exp(-(v/v_b)^2)``: the static limit ``mu_b F_n`` at rest, the paper's
+    law (exactly) from a few v_b on. Sub-break-away loads, however they oscillate, cause no
+    drift.
+``stiction``
     An elastic bristle per contact (LuGre family) carries the friction force, so that a contact
     loaded below its static limit sticks instead of creeping. Its deflection ``b`` (m) obeys
     ``db/dt = v_t - p b / (delta mu(|v_t|)/mu_c)``, p the slip rate |v_t| (smoothed below
@@ -31,11 +43,14 @@ import math
 import numba
 
 # Codes of the readings in the compiled kernel (index into READINGS).
-READINGS = ('stiction', 'structure', 'additive', 'printed')
+READINGS = ('stiction', 'structure', 'additive', 'printed', 'paper')
 READING_STICTION = 0
 READING_STRUCTURE = 1
 READING_ADDITIVE = 2
 READING_PRINTED = 3
+READING_PAPER = 4
+# The readings that carry a bristle per tip (states of the model).
+BRISTLE_READINGS = (READING_STICTION, READING_PAPER)
 
 # A bristle whose tip has left the sphere relaxes with this time constant, so that the next
 # touch starts unloaded: 10 us, short against a flight (>= 0.3 ms) and long against the
@@ -156,3 +171,45 @@ def friction_magnitude(speed_m_per_s, normal_force_n, gate, viscous_ns_per_m, co
     if use_stribeck:
         f += stribeck * normal_force_n * bump
     return f
+
+
+@numba.njit(cache=True)
+def paper_sliding_force(speed_m_per_s, normal_force_n, gate, viscous_ns_per_m, coulomb,
+                        coulomb_velocity_m_per_s, stribeck, stribeck_velocity_m_per_s):
+    """f(v) in N of the ``paper`` reading while sliding at ``speed_m_per_s`` (>= 0).
+
+    Eq. (47) and (48) with the Coulomb and Stribeck coefficients of Table A1 (their total at
+    v_s is ``stribeck`` F_n), and eq. (46)'s viscous term, which does not scale with the normal
+    force and so is ramped in by the contact's onset ``gate``.
+    """
+    peak = stribeck - coulomb * math.tanh(stribeck_velocity_m_per_s / coulomb_velocity_m_per_s)
+    loaded = (coulomb * math.tanh(speed_m_per_s / coulomb_velocity_m_per_s)
+              + peak * stribeck_bump(speed_m_per_s / stribeck_velocity_m_per_s))
+    return gate * viscous_ns_per_m * speed_m_per_s + normal_force_n * loaded
+
+
+@numba.njit(cache=True)
+def plastic_share(deflection_ratio, breakaway_ratio):
+    """alpha of the elasto-plastic bristle (Dupont et al. 2002), 0..1, of |b| / b_ss.
+
+    0 up to the break-away ``breakaway_ratio`` (the elastic zone: no slip of the bristle at
+    all), 1 from the steady deflection b_ss on, a half sine between (C1).
+    """
+    if deflection_ratio <= breakaway_ratio:
+        return 0.0
+    if deflection_ratio >= 1.0:
+        return 1.0
+    middle = 0.5 * (1.0 + breakaway_ratio)
+    return 0.5 + 0.5 * math.sin(math.pi * (deflection_ratio - middle) / (1.0 - breakaway_ratio))
+
+
+@numba.njit(cache=True)
+def elastoplastic_steady_force(speed_m_per_s, normal_force_n, gate, viscous_ns_per_m, coulomb,
+                               coulomb_velocity_m_per_s, stribeck, stribeck_velocity_m_per_s,
+                               static_coefficient, bristle_speed_m_per_s):
+    """The bristle's steady sliding force (N) of the ``paper`` reading at a slip speed: the
+    paper's law plus the static limit ``mu_b F_n``, which fades as exp(-(v/v_b)^2)."""
+    ratio = speed_m_per_s / bristle_speed_m_per_s
+    return (paper_sliding_force(speed_m_per_s, normal_force_n, gate, viscous_ns_per_m, coulomb,
+                                coulomb_velocity_m_per_s, stribeck, stribeck_velocity_m_per_s)
+            + static_coefficient * normal_force_n * math.exp(-ratio * ratio))

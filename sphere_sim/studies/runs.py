@@ -8,6 +8,7 @@ from sphere_sim.integrate.solve import simulate
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import initial_state
 from sphere_sim.model.rotations import quat_to_cardan
+from sphere_sim.model.scene import load_scene
 
 DEFAULT_RTOL = 1e-6
 
@@ -74,3 +75,13 @@ def summarize(traj):
         airborne_s=airborne,
         wall_time_s=traj.stats.wall_time_s,
     )
+
+
+LITERAL_KICK_SCENE = 'literal_kick'
+
+
+def literal_kick(params=None, rtol=DEFAULT_RTOL):
+    """The :class:`KickOutcome` of the paper's kick read literally (35 V on beams 1-2, 80 V on
+    beams 3-4, §4.1; the ``literal_kick`` scene) on ``params`` (default: the scene's set)."""
+    scene = load_scene(LITERAL_KICK_SCENE)
+    return summarize(run_scene(scene, scene.parameters(params), rtol=rtol))

@@ -1,6 +1,7 @@
 """Validation figures of the continuous model (rest, symmetry, energy), shared by CLI and tests."""
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -145,9 +146,9 @@ def tilted_creep_rate(tilt_deg=20.0, duration_s=1.0, params=None):
     """How fast a tilted sphere released at rest turns back towards zero tilt (rad/s).
 
     The centre of gravity below the full-sphere centre gives a restoring torque of
-    m g d_cog sin(tilt). A friction that sticks holds it (the ``stiction`` reading: the rate is
-    zero to the solver's tolerance); a regularised one (tanh(|v|/v_c), no stiction) only slows
-    the return. The rate is the tilt lost over ``duration_s`` divided by it.
+    m g d_cog sin(tilt). A friction that sticks holds it (the ``paper`` and ``stiction``
+    readings: the rate is zero to the solver's tolerance); a regularised one (tanh(|v|/v_c), no
+    stiction) only slows the return. The rate is the tilt lost over ``duration_s`` divided by it.
     """
     model = rest_model(params)
     x0 = rest_state(model, (tilt_deg, 0.0, 0.0))
@@ -155,3 +156,30 @@ def tilted_creep_rate(tilt_deg=20.0, duration_s=1.0, params=None):
                     sample_period_s=duration_s / 4)
     tilt = tilt_rad(traj.surface_normal())
     return float((tilt[0] - tilt[-1]) / duration_s)
+
+
+
+TILTED_REST_DEG = (5.0, 10.0, 20.0, 35.0)
+
+
+def tilted_rests(tilts_deg=TILTED_REST_DEG, params=None):
+    """The solved rest at each tilt (about x): (tilt, largest force imbalance relative to the
+    weight per tip, how far the normal ended from the tilt asked for in rad). ``rest_state``
+    raises RestError where it finds none."""
+    model = rest_model(params)
+    weight = model.params.sphere.mass_kg * model.params.gravity_m_per_s2 / 4.0
+    b, s = model.params.beam, model.params.sphere
+    n, o = model.n_beams, model.sphere_offset
+    out = []
+    for tilt in tilts_deg:
+        x = rest_state(model, (tilt, 0.0, 0.0))
+        dxdt = model.rhs(0.0, x, np.zeros(n))
+        forces = np.concatenate([dxdt[2 * n:4 * n:2] * b.mass_kg,
+                                 dxdt[2 * n + 1:4 * n:2] * b.inertia_suspension_kg_m2
+                                 / b.length_m,
+                                 dxdt[o + 7:o + 10] * s.mass_kg])
+        asked = np.array([0.0, -math.sin(math.radians(tilt)), math.cos(math.radians(tilt))])
+        normal = model.surface_normal(x)
+        out.append((tilt, float(np.max(np.abs(forces)) / weight),
+                    math.atan2(np.linalg.norm(np.cross(asked, normal)), float(asked @ normal))))
+    return out

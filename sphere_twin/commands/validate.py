@@ -1,17 +1,27 @@
 """``sphere-twin validate``: the continuous model's rest, symmetry and energy figures."""
 
 import math
+from pathlib import Path
 
+from sphere_sim.kicks import holding
+from sphere_sim.kicks.design import DesignError, KickDesign
 from sphere_sim.studies import validation
-from sphere_twin.commands.options import add_params_option
+from sphere_twin.commands.options import CommandError, add_params_option
+
+DEFAULT_DESIGN = Path('bench/results/kick_optimization.json')
 
 
 def register(subparsers):
     parser = subparsers.add_parser(
         'validate', help='print the rest, symmetry and energy figures of the physics model',
         description='Rest equilibrium (§4.1), symmetry of equal and mirrored pulses, and the '
-                    'energy balance with and without losses; the same functions the tests use.')
+                    'energy balance with and without losses, and how a sphere that landed from a '
+                    'kick holds (creep, ratchet) and how the kick narrows with tilt; the same '
+                    'functions the tests use.')
     add_params_option(parser)
+    parser.add_argument('--design', type=Path, default=None,
+                        help=f'kick design JSON of `sphere-twin optimize-kick` (default '
+                             f'{DEFAULT_DESIGN} where it exists, else the paper\'s template)')
     parser.set_defaults(func=run)
 
 
@@ -38,7 +48,31 @@ def run(args):
     peak, final = validation.lossy_kick(params=params)
     print(f'kick with losses: energy surplus at most {peak:+.2e}, finally {final:+.2e} of the '
           'electrical work')
+    rests = validation.tilted_rests(params=params)
+    print('tilted rest (solved) at ' + ', '.join(f'{t:.0f}' for t, _, _ in rests)
+          + f' deg: largest force imbalance {max(r for _, r, _ in rests):.2e} of the weight per '
+          f'tip, normal within {max(e for _, _, e in rests):.1e} rad of the tilt asked for')
+    design = _design(args.design)
     for tilt_deg in (20.0, 35.0):
-        rate = validation.tilted_creep_rate(tilt_deg, params=params)
-        print(f'tilted rest at {tilt_deg:.0f} deg creeps back at {math.degrees(rate):.2g} deg/s')
+        rate = holding.landed_creep_rate(tilt_deg, params=params, design=design)
+        print(f'tilted rest at {tilt_deg:.0f} deg creeps back at {math.degrees(rate):.2g} deg/s '
+              f'(landed from a kick, over {holding.HOLD_DURATION_S:.0f} s)')
+    moved = holding.ratchet_rad(35.0, params=params, design=design)
+    print(f'ratchet at 35 deg: {math.degrees(moved):.2g} deg after '
+          f'{holding.RATCHET_PULSES} pulses')
+    ratio = holding.width_ratio(35.0, params=params, design=design)
+    print(f'width at 35 deg: {ratio:.2f} of level')
     return 0
+
+
+def _design(path):
+    """The kick the hold and width figures use: ``path``, the committed optimised kick, or the
+    paper's template."""
+    if path is None:
+        if not DEFAULT_DESIGN.exists():
+            return KickDesign()
+        path = DEFAULT_DESIGN
+    try:
+        return KickDesign.load(path)
+    except (OSError, DesignError) as exc:
+        raise CommandError(str(exc)) from exc
