@@ -5,7 +5,7 @@ stably between kicks, as the paper's discrete model assumes (the contacts' frict
 docs/parameters.md).
 
 Kick size. The paper's full kick turns the normal by 0.54 deg; a plant may kick more or less
-(the calibrated table: 0.734 deg, nothing fitted to it; other parameter sets or analytic plants
+(the calibrated table: 0.508 deg, nothing fitted to it; other parameter sets or analytic plants
 differ). Distances in the setpoint scenario are used as the paper gives them (the reference is
 1.28 deg away); the resting band Phi_min is reported both as the paper's value and scaled by
 the kick-size ratio, since what decides whether the basic controller oscillates is Phi_min

@@ -165,7 +165,7 @@ class SyntheticDevice:
 
 # The study's devices: each changes two physical parameters by 10-40 % (the Coulomb and
 # Stribeck coefficients move together, as the set ties them). device_a is fitted on what the
-# calibrated set declares uncertain; device_b changes a pair its kicks cannot tell apart
+# dry_contact set declares uncertain; device_b changes a pair its kicks cannot tell apart
 # (docs/identification.md); device_d leaves out the presliding distance that device_a shows
 # trading against the friction coefficient.
 DEVICES = (

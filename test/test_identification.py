@@ -14,7 +14,7 @@ import yaml
 from sphere_sim.kicks import identification as idf
 from sphere_sim.model.parameters import load_parameter_set
 
-BASE = load_parameter_set('calibrated')
+BASE = load_parameter_set(idf.START_PARAMETER_SET)
 SIGMA = 1e-3
 
 

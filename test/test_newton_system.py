@@ -69,7 +69,7 @@ def test_reduced_solve_equals_the_full_newton_system_along_a_kick(kick_states):
     n, m = model.n_states, red.size
     dense = block_lu.dense_structure(m)
     rng = np.random.default_rng(6)
-    worst = 0.0
+    worst = worst_backward = 0.0
     for x, u in zip(states, voltages, strict=True):
         jac = model.jacobian(0.0, x, u)
         assert newton_system.is_arrow(jac, red, pos_of, start, end, tail)
@@ -88,10 +88,17 @@ def test_reduced_solve_equals_the_full_newton_system_along_a_kick(kick_states):
                 d = b.copy()
                 newton_system.solve(lu, piv, position_columns(jac, red, pos), gamma, d, red,
                                     pos, vel, np.empty(m, dtype=dtype), *structure)
-                exact = np.linalg.solve(gamma * np.eye(n) - full, b)
+                matrix = gamma * np.eye(n) - full
+                exact = np.linalg.solve(matrix, b)
                 worst = max(worst, np.max(np.abs(d - exact)) / np.max(np.abs(exact)))
-    # Measured 1.8e-12 (the block-arrow pivots, block_lu); the Newton iteration needs far less.
-    assert worst < 1e-10
+                backward = (np.max(np.abs(matrix @ d - b))
+                            / (np.max(np.abs(matrix)) * np.max(np.abs(d)) + np.max(np.abs(b))))
+                worst_backward = max(worst_backward, backward)
+    # The solve is backward stable (measured 1e-16 and below); against the dense solve of a
+    # matrix whose bristle rows reach 1e6 /s over metres of 1e-10 it agrees to 1e-9 (measured
+    # 9.9e-10, the conditioning's share); the Newton iteration needs far less.
+    assert worst_backward < 1e-13
+    assert worst < 1e-8
 
 
 def test_paired_factor_and_solve_equal_the_real_and_complex_apart(kick_states):

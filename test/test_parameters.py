@@ -15,7 +15,8 @@ def test_table_a1_is_in_si_units():
     assert p.beam.inertia_kg_m2 == pytest.approx(2.665e-14, rel=1e-12, abs=0)
     assert p.sphere.mass_kg == pytest.approx(30.973e-6, rel=1e-12, abs=0)
     assert p.sphere.cut_angle_rad == pytest.approx(math.pi / 2)
-    assert p.friction.reading == 'stiction'
+    assert p.friction.reading == 'paper'
+    assert load_parameter_set('dry_contact').friction.reading == 'stiction'
 
 
 def test_bare_parallel_plate_pull_in_of_table_is_near_42_volts():
@@ -42,13 +43,17 @@ def test_calibrated_moves_only_declared_uncertain_parameters():
         assert u.low <= cal.get(u.path) <= u.high, u.path
         assert u.reason.strip()
         assert all(cal.get(tied) == cal.get(u.path) for tied in u.tied), u.path
-    # Fig. 4 pins one parameter; the friction is held at physical estimates, since Fig. 5's
-    # kick is met across their whole ranges (docs/parameters.md); so is the beams' damping,
-    # which only a device's recordings pin (docs/identification.md).
+    # Fig. 4's pull-in is the one target, fitted jointly by the suspension and the gap; the
+    # bristle and the beams' damping are held at physical estimates (docs/parameters.md).
     targets = {u.path: u.target for u in cal.uncertain}
-    assert targets == {'beam.stiffness_phi_nm_per_rad': 'fig4_threshold',
-                       'friction.coulomb': 'estimate', 'friction.presliding_m': 'estimate',
+    assert targets == {'beam.stiffness_z_n_per_m': 'fig4_threshold',
+                       'beam.stiffness_phi_nm_per_rad': 'fig4_threshold',
+                       'beam.ground_z_m': 'fig4_threshold',
+                       'friction.static_coefficient': 'estimate',
+                       'friction.bristle_stiffness_n_per_m': 'estimate',
                        'beam.damping_phi_nms_per_rad': 'estimate'}
+    # The friction is Table A1's own: nothing of it is moved.
+    assert cal.friction == load_parameter_set('table_a1').friction
 
 
 def test_an_uncertain_entry_must_name_its_target(tmp_path):

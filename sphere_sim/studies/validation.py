@@ -11,6 +11,7 @@ from sphere_sim.model.assembly import assemble
 from sphere_sim.model.energy import energy_balance
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.programme import Pulse, PulseProgramme
+from sphere_sim.model.rotations import angle_between
 from sphere_sim.model.scene import load_scene
 
 LOSSLESS = dict(damping=False, contact_losses=False, viscous=False, coulomb=False,
@@ -48,23 +49,28 @@ class RestReport:
     duration_s: float
 
 
+def force_imbalance(model, x):
+    """Largest force (or torque over beam length) left on a beam or the sphere's centre at
+    ``x`` with no voltage, relative to the weight per tip."""
+    dxdt = model.rhs(0.0, x, np.zeros(model.n_beams))
+    b, s = model.params.beam, model.params.sphere
+    n, o = model.n_beams, model.sphere_offset
+    forces = np.concatenate([dxdt[2 * n:4 * n:2] * b.mass_kg,
+                             dxdt[2 * n + 1:4 * n:2] * b.inertia_suspension_kg_m2 / b.length_m,
+                             dxdt[o + 7:o + 10] * s.mass_kg])
+    return float(np.max(np.abs(forces)) / (s.mass_kg * model.params.gravity_m_per_s2 / 4.0))
+
+
 def rest_report(params=None, duration_s=1.0):
     """Rest equilibrium and how far the sphere moves from it in ``duration_s``."""
     model = rest_model(params)
     x0 = rest_state(model)
-    dxdt = model.rhs(0.0, x0, np.zeros(model.n_beams))
-    b, s = model.params.beam, model.params.sphere
-    weight = s.mass_kg * model.params.gravity_m_per_s2 / 4.0
-    n = model.n_beams
-    forces = np.concatenate([dxdt[2 * n:4 * n:2] * b.mass_kg,
-                             dxdt[2 * n + 1:4 * n:2] * b.inertia_suspension_kg_m2 / b.length_m,
-                             dxdt[model.sphere_offset + 7:model.sphere_offset + 10] * s.mass_kg])
     traj = simulate(model, x0, duration_s, PulseProgramme(), rtol=1e-7,
                     sample_period_s=duration_s / 10)
     o = model.sphere_offset
     rear, front = model.ground_gaps(x0)
     return RestReport(
-        force_imbalance=float(np.max(np.abs(forces)) / weight),
+        force_imbalance=force_imbalance(model, x0),
         front_gaps_m=front, rear_gaps_m=rear,
         tilt_drift_rad=float(np.max(tilt_rad(traj.surface_normal()))),
         position_drift_m=float(np.max(np.abs(traj.x[o:o + 3] - x0[o:o + 3, None]))),
@@ -167,19 +173,10 @@ def tilted_rests(tilts_deg=TILTED_REST_DEG, params=None):
     weight per tip, how far the normal ended from the tilt asked for in rad). ``rest_state``
     raises RestError where it finds none."""
     model = rest_model(params)
-    weight = model.params.sphere.mass_kg * model.params.gravity_m_per_s2 / 4.0
-    b, s = model.params.beam, model.params.sphere
-    n, o = model.n_beams, model.sphere_offset
     out = []
     for tilt in tilts_deg:
         x = rest_state(model, (tilt, 0.0, 0.0))
-        dxdt = model.rhs(0.0, x, np.zeros(n))
-        forces = np.concatenate([dxdt[2 * n:4 * n:2] * b.mass_kg,
-                                 dxdt[2 * n + 1:4 * n:2] * b.inertia_suspension_kg_m2
-                                 / b.length_m,
-                                 dxdt[o + 7:o + 10] * s.mass_kg])
         asked = np.array([0.0, -math.sin(math.radians(tilt)), math.cos(math.radians(tilt))])
         normal = model.surface_normal(x)
-        out.append((tilt, float(np.max(np.abs(forces)) / weight),
-                    math.atan2(np.linalg.norm(np.cross(asked, normal)), float(asked @ normal))))
+        out.append((tilt, force_imbalance(model, x), angle_between(asked, normal)))
     return out

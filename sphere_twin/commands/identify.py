@@ -15,7 +15,7 @@ import numpy as np
 import yaml
 from tqdm import tqdm
 
-from msg_defs.device import DEFAULT_PARAMETER_SET
+from sphere_sim.kicks.identification import START_PARAMETER_SET
 from sphere_twin.commands.bag import BAG_HELP
 from sphere_twin.commands.options import CommandError, add_params_option, positive_int
 
@@ -32,8 +32,10 @@ def register(subparsers):
                     'usable with every --params and a plot of recorded against fitted normals. '
                     'Resumable: an interrupted fit goes on from its checkpoint file.')
     parser.add_argument('bags', nargs='+', metavar='BAG', help=BAG_HELP)
-    add_params_option(parser, help='the start, and every parameter not fitted: a set\'s name '
-                                   f'or a YAML file (default {DEFAULT_PARAMETER_SET})')
+    add_params_option(parser, default=START_PARAMETER_SET,
+                      help='the start, and every parameter not fitted: a set\'s name or a YAML '
+                           f'file (default {START_PARAMETER_SET}, the dry holding contact a '
+                           'device is identified towards)')
     parser.add_argument('--fit', nargs='+', metavar='NAME', default=None,
                         help='parameter paths to fit (default: those the set declares '
                              'uncertain), e.g. beam.damping_phi_nms_per_rad')

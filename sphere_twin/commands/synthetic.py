@@ -9,7 +9,6 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from msg_defs.device import DEFAULT_PARAMETER_SET
 from sphere_twin.commands.identify import interval_text
 from sphere_twin.commands.options import CommandError, positive_int
 from sphere_twin.synthetic_device import PUBLISH_RATE_HZ
@@ -60,17 +59,18 @@ def _device(name):
 
 def record(device, out, kicks, seed=None):
     """Record ``device`` into the bag ``out`` with its truth.yaml; returns the sample count."""
+    from sphere_sim.kicks.identification import START_PARAMETER_SET
     from sphere_sim.model.parameters import load_parameter_set
     from sphere_twin.synthetic_device import record_device
 
     if Path(out).exists():
         raise CommandError(f'{out} exists: give a new bag directory')
-    base = load_parameter_set(DEFAULT_PARAMETER_SET)
+    base = load_parameter_set(START_PARAMETER_SET)
     with tqdm(total=kicks, desc=device.name, unit='kick', leave=False) as bar:
         samples = record_device(out, device.truth(base), kicks,
                                 device.seed if seed is None else seed,
                                 progress=lambda done, total: bar.update())
-    device.write_truth(Path(out) / 'truth.yaml', DEFAULT_PARAMETER_SET, base)
+    device.write_truth(Path(out) / 'truth.yaml', START_PARAMETER_SET, base)
     return samples
 
 
@@ -84,12 +84,17 @@ def run_record(args):
 
 def run_study(args):
     from sphere_sim.kicks.engine import engine_of
-    from sphere_sim.kicks.identification import fit_parameters, identify, within_truth
+    from sphere_sim.kicks.identification import (
+        START_PARAMETER_SET,
+        fit_parameters,
+        identify,
+        within_truth,
+    )
     from sphere_sim.model.parameters import load_parameter_set
     from sphere_twin.commands.identify import read_observations
     from sphere_twin.synthetic_device import DEVICES, NOISE_STUDY_STD_RAD
 
-    base = load_parameter_set(DEFAULT_PARAMETER_SET)
+    base = load_parameter_set(START_PARAMETER_SET)
     devices = [_device(name) for name in args.devices] if args.devices else DEVICES
     rows = []
     with tempfile.TemporaryDirectory() as tmp, engine_of(args.workers, args.scheduler) as eng:
@@ -157,7 +162,7 @@ def _markdown(rows, args, noise):
     only = ''.join(f' --device {name}' for name in args.devices or ())
     lines = ['# Identification of synthetic devices', '',
              f'Made by `sphere-twin synthetic study --kicks {args.kicks} --workers '
-             f'{args.workers}{only}`: each device is the `calibrated` set with two physical '
+             f'{args.workers}{only}`: each device is the `dry_contact` set with two physical '
              f'parameters changed; {args.kicks} kicks recorded open loop by the continuous twin '
              f'(one a second, {PUBLISH_RATE_HZ:g} Hz samples, sensor noise {noise:.3g} rad per '
              'axis: the noise '
