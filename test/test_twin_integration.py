@@ -7,6 +7,7 @@ import pytest
 from test_nodes_in_process import BAD_PROGRAMMES, BAD_VOLTAGES
 
 from msg_defs.topics import PULSE_PROGRAM, VOLTAGE_COMMAND
+from sphere_sim.kicks.discrete import kick_period_s
 from sphere_sim.kicks.lookup_table import LookupTable
 from sphere_sim.model.rotations import angle_between
 from sphere_sim.twin.report_limit import REPORTS_PER_WINDOW
@@ -55,8 +56,9 @@ def test_lockstep_runs_with_the_same_seed_are_identical():
     # Idle repeats of the last sample depend on wall time: compare the distinct samples.
     distinct = [dict(first), dict(second)]
     assert distinct[0] == distinct[1]
-    # The initial sample and three kick periods of 50 ms at the default 100 Hz.
-    assert len(distinct[0]) == 1 + 3 * 5
+    # The initial sample and three kick periods (the shipped table's: 40 ms) at 100 Hz.
+    period_samples = round(kick_period_s(LookupTable.load_current()) / 0.01)
+    assert len(distinct[0]) == 1 + 3 * period_samples
 
 
 def test_a_healthy_twin_reports_its_status_every_second(twin):

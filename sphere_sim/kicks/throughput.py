@@ -40,10 +40,10 @@ WORKLOADS = ('table', 'optimisation', 'calibration')
 # instead of 0.07 CPU s per s, which a kick-bound worker would otherwise give up.
 DASK_QUIET = {'distributed.worker.profile.enabled': False,
               'distributed.admin.system-monitor.interval': '1s'}
-# The parameter a calibration bisection moves in the bench: the calibrated set's friction
-# estimate, whose sensitivity run optimises a kick at each end of its range, as a fit's first
-# bisection step does (sphere_sim.kicks.calibration.bisect looks at both ends first).
-CALIBRATION_PATH = 'friction.coulomb'
+# The parameter whose range the calibration workload spans: an estimate of the calibrated set
+# (the bristle's static coefficient), a kick optimised at each end of its range, as a
+# sensitivity study of a declared estimate runs them.
+CALIBRATION_PATH = 'friction.static_coefficient'
 
 
 @dataclasses.dataclass(frozen=True)
@@ -189,8 +189,7 @@ def _optimisation(plan, params, engine, maxiter=None):
 
 
 def _calibration(plan, params, engine):
-    """The first step of a bisection on the kick: an optimisation at each end of the range,
-    as :func:`sphere_sim.kicks.calibration.kick_deg` runs it, on one engine."""
+    """A kick optimisation at each end of an estimate's range, on one engine."""
     spec = next(s for s in params.uncertain if s.path == CALIBRATION_PATH)
     return sum(_optimisation(plan, with_value(params, spec, value), engine,
                              plan.calibration_maxiter) for value in (spec.low, spec.high))

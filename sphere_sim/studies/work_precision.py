@@ -59,8 +59,9 @@ FINAL_WINDOW_S = 10e-3
 # same method are skipped: DOP853 on this stiff model needs minutes.
 RUN_BUDGET_S = 30.0
 REPEAT_LIMIT_S = 20.0  # a first run longer than this is reported as one timed run
-QUICK_RUN_BUDGET_S = 10.0
+QUICK_RUN_BUDGET_S = 30.0  # Python-stepped Radau at 1e-7 on the paper's friction: 10-20 s
 TILT_DEG = 35.0
+OFF_LINE_TILT_DEG = 2.0
 ALL_BEAMS_V = VOLTAGE_LIMIT_V
 ALL_BEAMS_WIDTH_S = 5e-3  # the pulse width of Fig. 4
 ALL_BEAMS_WINDOW_S = 0.03
@@ -128,7 +129,10 @@ def bench_scenes(model, kick, kick_label):
     """The three scenes: ``kick`` (a PulseProgramme) from rest and from a 35 deg tilt, and the
     80 V pulse on all beams from rest, on ``model``."""
     return [
-        BenchScene('diagonal_kick', f'{kick_label} from rest', model, rest_state(model), kick,
+        # Off the kick's mirror line: from level exactly, rounding tips the landing to either
+        # side (the reference integrators disagree by 5e-6 rad there, docs/numerics.md).
+        BenchScene('diagonal_kick', f'{kick_label} from a {OFF_LINE_TILT_DEG:.0f} deg tilt',
+                   model, rest_state(model, (OFF_LINE_TILT_DEG, 0.0, 0.0)), kick,
                    KICK_WINDOW_S),
         BenchScene('all_beams_80v', f'{ALL_BEAMS_V:.0f} V, {ALL_BEAMS_WIDTH_S * 1e3:.0f} ms on '
                    'all four beams from rest', model, rest_state(model), all_beams_programme(),

@@ -37,7 +37,7 @@ DEFAULT_TRAJECTORY_S = 25.0  # half a period of eq. (64): out to A_max and back 
 # At the paper's kick rate (a kick every 60 ms) the physics costs about 50 ms of compute per
 # kick here, so it runs at half the device's pace to keep every programme on time (bench twin:
 # 1.9 unpaced at 9 kicks per simulated second); the kick table, which costs nothing, faster.
-DEFAULT_REAL_TIME_FACTOR = {'continuous': 0.5, 'discrete': 2.0}
+DEFAULT_REAL_TIME_FACTOR = {'continuous': 0.25, 'discrete': 2.0}
 DEFAULT_PLANT = 'continuous'
 START_TIMEOUT_S = 60.0
 WALL_MARGIN = 3.0  # the run may take this many times its paced duration before it is cut
