@@ -34,6 +34,7 @@ from sphere_twin.processes import fresh_domain_id, parameter_args, running_nodes
 
 DEFAULT_TIMEOUT_S = 30.0
 SPIN_PERIOD_S = 0.02
+RECORD_DEPTH = 1000  # messages a probe keeps per topic between two spins
 
 
 class TwinTimeoutError(TimeoutError):
@@ -72,9 +73,12 @@ class TopicProbe:
         self._executor.add_node(self.node)
         self._publishers = {}
         for topic in topics:
+            # A deep history: while the test publishes a burst it takes nothing, and the
+            # topic's own depth would let DDS overwrite what the test then looks for.
+            profile = topic.qos.to_profile()
+            profile.depth = max(profile.depth, RECORD_DEPTH)
             self.node.create_subscription(topic.msg_type, topic.name,
-                                          self.messages[topic.name].append,
-                                          topic.qos.to_profile())
+                                          self.messages[topic.name].append, profile)
 
     def publisher(self, topic):
         """The probe's publisher on ``topic`` (created once)."""
