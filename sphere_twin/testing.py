@@ -110,6 +110,15 @@ class TopicProbe:
         """Process the messages that are there, waiting up to ``timeout_s`` for one."""
         self._executor.spin_once(timeout_sec=timeout_s)
 
+    def wait_for_graph(self, topic, publishers=0, subscribers=0, timeout_s=DEFAULT_TIMEOUT_S):
+        """Until the probe sees at least that many publishers and subscribers on ``topic``
+        (its own not counted)."""
+        node = self.node
+        self.spin_until(lambda: node.count_publishers(topic.name) >= publishers
+                        and node.count_subscribers(topic.name) >= subscribers, timeout_s,
+                        f'{publishers} publisher(s) and {subscribers} subscriber(s) on '
+                        f'{topic.name}')
+
     def wait_for_subscribers(self, topic, timeout_s=DEFAULT_TIMEOUT_S):
         """Until someone subscribes to ``topic`` (discovery is asynchronous)."""
         publisher = self.publisher(topic)

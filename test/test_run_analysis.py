@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from msg_defs.topics import CONTROLLER_STATUS
+from msg_defs.topics import CONTROLLER_STATUS, PULSE_PROGRAM
 from sphere_sim.kicks.discrete import normal_from_xy
 from sphere_sim.twin.plants import LIVE_ERROR_BOUND_RAD
 from sphere_twin.cli import build_parser
@@ -91,13 +91,16 @@ def test_lockstep_recording_reports_and_replays_exactly(ros_nodes, tmp_path):
 
     bag = tmp_path / 'run'
     ros_nodes.start('recorder', parameter_args(output_dir=str(bag)))
-    simulator = ros_nodes.start('simulator', parameter_args(plant='discrete', lockstep=True,
-                                                            wait_for_subscribers=2))
     ros_nodes.start('reference', parameter_args(setpoint_xy=[0.01, 0.02]))
     ros_nodes.start('controller', parameter_args(controller='extended'))
-    probe = TopicProbe(ros_nodes.domain_id, (CONTROLLER_STATUS,), simulator)
+    probe = TopicProbe(ros_nodes.domain_id, (CONTROLLER_STATUS,))
     statuses = probe.messages[CONTROLLER_STATUS.name]
     try:
+        # A lockstep run is over in a few seconds: the simulator starts only once the
+        # controller's programmes have their recorder, or the bag may hold no kick.
+        probe.wait_for_graph(PULSE_PROGRAM, publishers=1, subscribers=1, timeout_s=60.0)
+        probe.process = ros_nodes.start('simulator', parameter_args(
+            plant='discrete', lockstep=True, wait_for_subscribers=2))
         probe.spin_until(lambda: any(m.status[0].message == 'resting' for m in statuses[-3:])
                          and len(statuses) > 20, 90.0, 'resting controller')
     finally:
@@ -167,7 +170,7 @@ def test_recorded_commands_that_break_the_rules_are_dropped_as_the_twin_dropped_
     """A recording is a boundary where data enters: a programme or a hold beyond the device's
     rules (msg_defs.voltage_rules) is skipped on reading, as the twin refused it when live."""
     from msg_defs.conversions import programme_to_msg, voltages_to_msg
-    from msg_defs.topics import PULSE_PROGRAM, VOLTAGE_COMMAND
+    from msg_defs.topics import VOLTAGE_COMMAND
     from sphere_twin.run_analysis import load_run
 
     good = programme_to_msg([0.0, 1e-3], [[80.0, 0.0, 0.0, 0.0], [0.0] * 4])
@@ -189,7 +192,7 @@ def test_programmes_start_where_the_device_reported_and_refused_ones_never_run(t
     a refused one is not replayed; one whose report was not recorded starts at its stamp."""
     from msg_defs.conversions import programme_event_to_msg, programme_to_msg, time_from_ns
     from msg_defs.programme_events import ProgrammeEvent, ProgrammeState
-    from msg_defs.topics import PROGRAMME_STATUS, PULSE_PROGRAM
+    from msg_defs.topics import PROGRAMME_STATUS
     from sphere_twin.run_analysis import load_run
 
     def programme(volts, stamp_s):
