@@ -208,7 +208,9 @@ def test_the_compiled_radau_agrees_with_scipy_on_a_kick_with_stiction(bristle_mo
     x0 = rest_state(stiction_model)
     programme = KickDesign().programme()
     fast = simulate(stiction_model, x0, 0.02, programme, rtol=1e-7, sample_period_s=1e-3)
-    ref = simulate(stiction_model, x0, 0.02, programme, rtol=1e-9, method='Radau',
+    # SciPy's Radau at 1e-8 is within 2.5e-6 rad of itself at 1e-9 (a tenth of the bound
+    # below) and takes a third of the time (measured on calibrated: 15 s against 49 s).
+    ref = simulate(stiction_model, x0, 0.02, programme, rtol=1e-8, method='Radau',
                    sample_period_s=1e-3)
     turned = np.max(np.abs(ref.surface_normal()[:2]))
     assert turned > 1e-3  # the kick turned the sphere
