@@ -35,6 +35,24 @@ def test_the_papers_layout_turns_the_sphere_towards_minus_45_deg():
     assert kick.rotation_deg > 0.1
 
 
+def test_the_dry_contact_turns_the_papers_way_only_with_the_layout_swapped(tmp_path):
+    """dry_contact's finding: the paper's layout turns it backwards, along the mirror line
+    towards +135 deg; its own kick, searched with the low and high beams exchanged, goes
+    towards -45 deg (a symmetric design cannot leave that line)."""
+    from sphere_twin import cli
+
+    dry = load_parameter_set('dry_contact')
+    assert literal_kick(dry).direction_deg == pytest.approx(135.0, abs=5.0)
+    out = tmp_path / 'dry.json'
+    assert cli.main(['optimize-kick', '--params', 'dry_contact', '--layout', 'swapped',
+                     '--popsize', '1', '--maxiter', '1', '--workers', '1',
+                     '--output', str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert (data['design']['low_beams'], data['design']['high_beams']) == ([3, 4], [1, 2])
+    assert data['parameter_set'] == 'dry_contact' and data['parameter_digest'] == dry.digest()
+    assert data['direction_deg'] == pytest.approx(-45.0, abs=1.0) and data['rotation_deg'] > 0.0
+
+
 def test_the_optimised_kick_keeps_the_papers_layout_size_and_settling(optimised):
     """§4.1: the GA over the widths and the delay with 35/80 V fixed gives 0.54 deg on the
     diagonal (alpha = beta), settled after about 50 ms."""

@@ -1,5 +1,6 @@
 """``sphere-twin optimize-kick``: the optimised hind-left kick of §4.1, saved as JSON."""
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -22,6 +23,18 @@ TEMPLATES = {
     'diagonal': KickDesign(),
     'axis': KickDesign(direction_rad=0.0, low_beams=(1, 2, 4), high_beams=(3,)),
 }
+# The paper's layout, or its low and high beams exchanged: the layout that turns the dry
+# contact (`dry_contact`) towards the kick's direction, its own finding (docs/parameters.md).
+LAYOUTS = ('paper', 'swapped')
+
+
+def template(kick, layout='paper'):
+    """The design the search starts from: ``kick``'s template in ``layout``."""
+    design = TEMPLATES[kick]
+    if layout == 'swapped':
+        design = dataclasses.replace(design, low_beams=design.high_beams,
+                                     high_beams=design.low_beams)
+    return design
 
 
 def register(subparsers):
@@ -33,6 +46,9 @@ def register(subparsers):
                     'as JSON.')
     parser.add_argument('--kick', choices=sorted(TEMPLATES), default='diagonal',
                         help='diagonal (hind-left, towards -45 deg) or axis (towards +x)')
+    parser.add_argument('--layout', choices=LAYOUTS, default='paper',
+                        help='paper (35 V on the low beams, 80 V on the high ones, as §4.1) or '
+                             'swapped (low and high beams exchanged: the dry contact\'s own)')
     add_params_option(parser)
     parser.add_argument('--seed', type=int, default=1)
     parser.add_argument('--popsize', type=positive_int, default=8, help='population per parameter')
@@ -49,7 +65,7 @@ def run(args):
             bar.set_postfix(best_deg=f'{math.degrees(best):.4f}')
             bar.update()
 
-        best = optimise_kick(TEMPLATES[args.kick], args.params, seed=args.seed,
+        best = optimise_kick(template(args.kick, args.layout), args.params, seed=args.seed,
                              popsize=args.popsize, maxiter=args.maxiter, workers=args.workers,
                              progress=progress)
     data = best.to_dict()
