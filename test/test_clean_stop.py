@@ -94,6 +94,9 @@ def test_controller_reference_and_recorder_stop_cleanly_while_the_loop_runs(
     try:
         log = RunLog(probe)
         probe.spin_until(lambda: log.kicks() >= 3, READY_TIMEOUT_S, 'three kicks')
+        # The probe hearing kicks does not mean the recorder does (discovery matches each
+        # pair on its own): it says so with its first programme, and the loop kicks on.
+        recorder.wait_for_output(f'recording {PULSE_PROGRAM.name}', READY_TIMEOUT_S)
     finally:
         probe.close()
     # Each while the others still run: the controller amid samples, the reference on its

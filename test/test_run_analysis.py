@@ -133,10 +133,12 @@ def test_continuous_plant_replays_a_recording_to_the_integrator_tolerance(ros_no
     ros_nodes.start('recorder', parameter_args(output_dir=str(bag)))
     ros_nodes.start('controller', parameter_args(controller='extended'))
     ros_nodes.start('reference', parameter_args(setpoint_xy=[0.01, 0.02]))
-    simulator = ros_nodes.start('simulator', parameter_args(plant='continuous', lockstep=True,
-                                                            wait_for_subscribers=2))
-    probe = TopicProbe(ros_nodes.domain_id, (CONTROLLER_STATUS,), simulator)
+    probe = TopicProbe(ros_nodes.domain_id, (CONTROLLER_STATUS,))
     statuses = probe.messages[CONTROLLER_STATUS.name]
+    # As in the lockstep recording: the kicks start once the recorder can hear them.
+    probe.wait_for_graph(PULSE_PROGRAM, publishers=1, subscribers=1, timeout_s=60.0)
+    probe.process = ros_nodes.start('simulator', parameter_args(
+        plant='continuous', lockstep=True, wait_for_subscribers=2))
 
     def kicked_enough():
         # The status's running count, not the kick messages seen: in lockstep the first kicks

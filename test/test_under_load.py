@@ -3,6 +3,7 @@ stops and jumps, a bag with a gap."""
 
 import itertools
 import math
+import re
 import time
 
 import numpy as np
@@ -121,8 +122,17 @@ def test_a_burst_of_commands_leaves_the_twin_publishing_within_limits_and_bounde
     reports = [s for s in statuses if s.level in (DiagnosticStatus.ERROR, DiagnosticStatus.WARN)]
     seconds = burst_end - burst_start + 3.0
     assert 0 < len(reports) <= REPORTS_PER_WINDOW * (seconds + 1)
-    # What was left out is said by the next report or the next periodic status.
-    assert any('more reports left out' in s.message for s in statuses)
+    # Nothing is left out in silence: up to the last periodic status, every rejection (and
+    # every cut) was reported on its own or counted in a '(N more reports left out)' that
+    # followed. How many there were depends on how many commands the simulator took while
+    # integrating the burst's kicks (its queues keep the contract's depth): the count, not a
+    # fixed number, is what the test holds it to.
+    last = max(i for i, s in enumerate(statuses) if s.level == DiagnosticStatus.OK)
+    said = sum(1 for s in statuses[:last + 1] if s.level != DiagnosticStatus.OK) + sum(
+        int(n) for s in statuses[:last + 1]
+        for n in re.findall(r'\((\d+) more reports left out\)', s.message))
+    rejected, cut = int(periodic[-1]['rejected']), int(periodic[-1]['cut'])
+    assert rejected <= said <= rejected + cut, (said, periodic[-1])
     assert rss_after - rss_before < RSS_GROWTH_LIMIT_KIB
 
 
