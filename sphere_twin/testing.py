@@ -112,7 +112,7 @@ class TopicProbe:
 
     def wait_for_graph(self, topic, publishers=0, subscribers=0, timeout_s=DEFAULT_TIMEOUT_S):
         """Until the probe sees at least that many publishers and subscribers on ``topic``
-        (its own not counted)."""
+        (its own endpoints on it, if any, count too)."""
         node = self.node
         self.spin_until(lambda: node.count_publishers(topic.name) >= publishers
                         and node.count_subscribers(topic.name) >= subscribers, timeout_s,
