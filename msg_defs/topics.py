@@ -74,8 +74,10 @@ class QosSpec:
     reliable: bool = True
     transient_local: bool = False
 
-    def to_profile(self):
-        """The equivalent ``rclpy.qos.QoSProfile``.
+    def to_profile(self, min_depth=0):
+        """The equivalent ``rclpy.qos.QoSProfile``; a subscriber that takes messages in bursts
+        (a recorder, a test probe) asks for a history of at least ``min_depth``, which does
+        not affect QoS compatibility.
 
         rclpy is imported here rather than at module level so that the contract can be read
         by tools that never join a ROS graph (the CLI, the process supervisor, analysis).
@@ -84,7 +86,7 @@ class QosSpec:
 
         return QoSProfile(
             history=HistoryPolicy.KEEP_LAST,
-            depth=self.depth,
+            depth=max(self.depth, min_depth),
             reliability=(ReliabilityPolicy.RELIABLE if self.reliable
                          else ReliabilityPolicy.BEST_EFFORT),
             durability=(DurabilityPolicy.TRANSIENT_LOCAL if self.transient_local

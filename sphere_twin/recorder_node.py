@@ -99,10 +99,9 @@ class RecorderNode(Node):
         self.writer = BagWriter(output_dir, compression=p['compression'],
                                 chunk_size_bytes=p['chunk_size_bytes'])
         for topic in self.topics:
-            profile = topic.qos.to_profile()
-            profile.depth = max(profile.depth, RECORDER_HISTORY_DEPTH)
             self.create_subscription(topic.msg_type, topic.name,
-                                     functools.partial(self.on_message, topic), profile,
+                                     functools.partial(self.on_message, topic),
+                                     topic.qos.to_profile(min_depth=RECORDER_HISTORY_DEPTH),
                                      raw=True)
         if p['flush_period_s'] > 0:
             self.create_timer(p['flush_period_s'], self.on_flush_timer)

@@ -75,10 +75,9 @@ class TopicProbe:
         for topic in topics:
             # A deep history: while the test publishes a burst it takes nothing, and the
             # topic's own depth would let DDS overwrite what the test then looks for.
-            profile = topic.qos.to_profile()
-            profile.depth = max(profile.depth, RECORD_DEPTH)
             self.node.create_subscription(topic.msg_type, topic.name,
-                                          self.messages[topic.name].append, profile)
+                                          self.messages[topic.name].append,
+                                          topic.qos.to_profile(min_depth=RECORD_DEPTH))
 
     def publisher(self, topic):
         """The probe's publisher on ``topic`` (created once)."""
