@@ -146,7 +146,7 @@ class ControllerNode(Node):
         stamp = time_from_ns(round(sample_s * NS_PER_S))
         if decision.command is not None:
             programme = self.kicks.programme(decision.command.action,
-                                             decision.command.intensity)
+                                             decision.command.intensity, self.cycle.latest[1])
             start = time_from_ns(round(decision.start_s * NS_PER_S))
             self._programme_pub.publish(programme_to_msg(*programme.segments(), stamp=start))
         elif decision.phase is Phase.RESTING and sample_s > self._hold_sent_at_s:

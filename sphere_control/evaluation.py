@@ -373,7 +373,7 @@ def continuous_study(table, put, config, continuous_plant=None):
     if continuous_plant is None:
         from sphere_control.kick_plants import ContinuousKickPlant
 
-        continuous_plant = ContinuousKickPlant(table.spec.design, table.parameters())
+        continuous_plant = ContinuousKickPlant(table.spec, table.parameters())
     recorder = _RecordingPlant(continuous_plant)
     phi = PAPER_PHI_MIN_RAD[0] * put.kick_scale
     settings = LoopSettings(max_steps=config.continuous_kicks, kick_period_s=KICK_WINDOW_S)

@@ -100,28 +100,28 @@ class ContinuousKickPlant:
 
     Parameters
     ----------
-    design : sphere_sim.kicks.design.KickDesign
-        The reference (hind-left) kick; action a is it turned by a quarter turns.
+    spec : sphere_sim.kicks.lookup_table.TableSpec
+        The table's kick: its reference (hind-left) design, turned a quarter turns for action
+        a, and its voltage offsets.
     params : ParameterSet, optional
         The default set unless given.
     """
 
-    def __init__(self, design, params=None):
+    def __init__(self, spec, params=None):
         from sphere_sim.kicks.characteristics import KickBench
 
-        self.design = design
+        self.spec = spec
         self.bench = KickBench(params)
-        self.directions_rad = tuple(design.direction_rad + q * 0.5 * math.pi for q in range(4))
+        self.directions_rad = tuple(spec.design.direction_rad + q * 0.5 * math.pi
+                                    for q in range(4))
 
     def kick(self, normal, action, intensity):
         from sphere_sim.kicks.design import simulate_kick
-        from sphere_sim.model.symmetry import Symmetry
 
         normal = np.asarray(normal, dtype=float)
-        g = Symmetry(int(action) % 4)
         rest = self.bench.rest(normal)
         kicked, _ = simulate_kick(self.bench.model, normal,
-                                  g.apply_programme(self.design.programme(float(intensity))),
+                                  self.spec.programme(action, float(intensity), normal),
                                   window_s=self.bench.window_s, rtol=self.bench.rtol,
                                   x_rest=rest)
         return kicked
@@ -140,7 +140,8 @@ class TwinKickPlant:
     Parameters
     ----------
     kick_model : LookupTable or CombinedKickPlant
-        The kicks' programmes (``programme(action, intensity)``) and nominal directions.
+        The kicks' programmes (``programme(action, intensity, normal)``, with the voltage
+        offset for the normal) and nominal directions.
     plant : sphere_sim.twin.plants.ContinuousPlant
     period_s : float
         Simulated time per kick (s), at least the longest programme.
@@ -153,7 +154,7 @@ class TwinKickPlant:
         self.directions_rad = tuple(kick_model.directions_rad)
 
     def kick(self, normal, action, intensity):
-        programme = self.kick_model.programme(int(action), float(intensity))
+        programme = self.kick_model.programme(int(action), float(intensity), normal)
         self.plant.run_programme(programme)
         self.plant.advance(self.plant.time_s + max(self.period_s, programme.duration_s))
         return KickResult(self.plant.snapshot().normal)

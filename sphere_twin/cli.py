@@ -47,6 +47,7 @@ def user_errors():
     from sphere_sim.integrate.solve import SolverError
     from sphere_sim.kicks.design import DesignError
     from sphere_sim.kicks.lookup_table import TableError
+    from sphere_sim.kicks.offset_lookup import OffsetError
     from sphere_sim.model.initial_state import RestError
     from sphere_sim.model.parameters import ParameterError
     from sphere_sim.model.programme import ProgrammeError
@@ -56,8 +57,8 @@ def user_errors():
     from sphere_twin.commands.options import CommandError
 
     return (CommandError, SceneError, ParameterError, ProgrammeError, TableError, BagError,
-            DesignError, VoltageRuleError, PlantError, RestError, SolverError, yaml.YAMLError,
-            OSError)
+            DesignError, OffsetError, VoltageRuleError, PlantError, RestError, SolverError,
+            yaml.YAMLError, OSError)
 
 
 def one_line(error):

@@ -214,8 +214,8 @@ class TwinClient(TopicProbe):
         nothing comes after it until the next command.
         """
         self.wait_for_normal()
-        start_s = self.latest_sample()[0]
-        programme = self.kicks.programme(action, intensity)
+        start_s, normal = self.latest_sample()
+        programme = self.kicks.programme(action, intensity, normal)
         self.send_programme(*programme.segments())
         window_s = max(programme.duration_s, self.window_s)
         self.spin_until(lambda: self.latest_sample()[0] >= start_s + window_s - 1e-9,

@@ -5,10 +5,13 @@ import math
 import numpy as np
 import pytest
 
-from sphere_sim.kicks.characteristics import KickEffect, compensating_beam, find_offset, offset_grid
+from sphere_sim.kicks.characteristics import (
+    KickEffect,
+    find_offset,
+    offset_grid,
+    upper_right_nodes,
+)
 from sphere_sim.kicks.design import KickDesign
-from sphere_sim.kicks.discrete import normal_from_xy
-from sphere_sim.model.symmetry import KICK_AXIS_MIRROR
 
 
 def test_offset_search_finds_the_root_inside_the_bracket_of_a_non_monotone_error():
@@ -32,20 +35,16 @@ def test_offset_search_without_a_sign_change_returns_the_best_scanned_offset():
     assert residual == pytest.approx(0.1)
 
 
-def test_compensating_beam_follows_the_half_space_and_mirrors_with_the_kick_axis():
+def test_offsets_are_searched_on_the_upper_right_half_whose_mirror_is_the_rest():
     design = KickDesign()
-    upper_right = normal_from_xy(0.2, 0.1)
-    lower_left = normal_from_xy(-0.2, -0.1)
-    assert compensating_beam(design, upper_right) == design.low_beams[0]
-    assert compensating_beam(design, lower_left) == design.low_beams[1]
-    # Mirroring at the kick axis swaps the half-spaces and the two low beams.
-    for x, y in offset_grid(0.16, math.radians(40.0)):
-        normal = normal_from_xy(x, y)
-        if abs(x + y) < 1e-9:
-            continue  # on the kick line itself
-        image = KICK_AXIS_MIRROR.apply_vector(normal)
-        assert KICK_AXIS_MIRROR.beam_map()[compensating_beam(design, normal)] == \
-            compensating_beam(design, image)
+    nodes = offset_grid(0.16, math.radians(40.0))
+    half = upper_right_nodes(design, 0.16, math.radians(40.0))
+    assert all(x + y >= -1e-9 for x, y in half)
+    # The half and its mirror image at y = -x cover the grid, the axis belongs to the half.
+    images = {(round(-y, 9), round(-x, 9)) for x, y in half}
+    assert images | {(round(x, 9), round(y, 9)) for x, y in half} == \
+        {(round(x, 9), round(y, 9)) for x, y in nodes}
+    assert len(half) == (len(nodes) + sum(abs(x + y) < 1e-9 for x, y in nodes)) // 2
 
 
 def test_offset_grid_stays_inside_the_cone_and_is_symmetric():

@@ -41,27 +41,44 @@ def test_schedule_keeps_the_past_and_lets_the_latest_command_win():
     np.testing.assert_array_equal(schedule.voltages_at(1.2e-3, beams=(2, 4)), [2, 2])
 
 
+TILTED = normal_from_xy(0.05, 0.3)  # 17.7 deg: the offset of §4.1 is several volts here
+
+
 def test_every_kick_decodes_to_its_action_and_intensity_after_a_message_round_trip(table):
-    for intensity in (0.2, 0.55, 1.0):
-        for action in range(4):
-            programme = table.programme(action, intensity)
-            times, volts = programme_from_msg(programme_to_msg(*programme.segments()))
-            received = PulseProgramme.from_segments(times, volts)
-            decoded_action, decoded_intensity = decode_kick(table, received)
-            assert decoded_action == action
-            assert decoded_intensity == pytest.approx(intensity, abs=1e-12)
+    for normal in (np.array([0.0, 0.0, 1.0]), TILTED):
+        for intensity in (0.2, 0.55, 1.0):
+            for action in range(4):
+                programme = table.programme(action, intensity, normal)
+                times, volts = programme_from_msg(programme_to_msg(*programme.segments()))
+                received = PulseProgramme.from_segments(times, volts)
+                decoded_action, decoded_intensity = decode_kick(table, received, normal)
+                assert decoded_action == action
+                assert decoded_intensity == pytest.approx(intensity, abs=1e-12)
+
+
+def test_a_kick_with_the_offset_of_a_nearby_normal_decodes_and_a_wrong_offset_is_refused(table):
+    """The sender measured its normal, the plant holds its own: a milliradian apart they are the
+    same kick; an offset a volt off (or none where the table has one) is another kick."""
+    offset = table.spec.offsets.offset_v(table.spec.design.direction_rad, *TILTED[:2])
+    assert abs(offset) > 1.0  # the shipped table carries §4.1's offsets
+    nearby = normal_from_xy(TILTED[0] + 1e-3, TILTED[1] - 1e-3)
+    assert decode_kick(table, table.programme(1, 1.0, nearby), TILTED) == (1, 1.0)
+    for wrong in (table.spec.design.programme(1.0),
+                  table.spec.design.programme(1.0, offset + 1.0, 1)):
+        with pytest.raises(PlantError, match='none of them'):
+            decode_kick(table, wrong, TILTED)
 
 
 def test_a_programme_that_is_no_kick_of_the_design_is_refused(table):
     other = PulseProgramme((Pulse(1, 60.0, 0.0, 2e-3),))
     with pytest.raises(PlantError, match='none of them'):
-        decode_kick(table, other)
+        decode_kick(table, other, np.array([0.0, 0.0, 1.0]))
 
 
 def test_discrete_plant_jumps_to_the_tables_outcome_at_the_end_of_the_window(table):
     start = normal_from_xy(0.1, -0.05)
     plant = DiscretePlant(table, start, table.spec.window_s)
-    plant.run_programme(table.programme(2, 0.8))
+    plant.run_programme(table.programme(2, 0.8, start))
     expected = table.kick(start, 2, 0.8).normal
     plant.advance(0.5 * table.spec.window_s)
     np.testing.assert_array_equal(plant.snapshot().normal, start)

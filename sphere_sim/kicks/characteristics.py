@@ -16,6 +16,13 @@ import numpy as np
 from msg_defs.device import KICK_WINDOW_S
 from sphere_sim.kicks.design import KickDesign, cardan_of_normal, simulate_kick
 from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD, normal_from_cardan, normal_from_xy
+from sphere_sim.kicks.lookup_table import TableSpec
+from sphere_sim.kicks.offset_lookup import (
+    ON_AXIS_TOL,
+    OffsetLookup,
+    compensating_beam,
+    side_of_axis,
+)
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.scene import load_scene
@@ -116,15 +123,6 @@ def rotation_width_curves(design=None, alphas_deg=(0.0, 20.0, 35.0), intensities
     return curves
 
 
-def compensating_beam(design, normal):
-    """The low beam that takes the offset: the first in the upper-right half-space of the kick
-    line (through the origin along the kick direction), the second in the other half (§4.1)."""
-    d = design.direction_rad
-    # Left of the kick direction is the half-space the paper calls upper right for d = -45 deg.
-    side = -math.sin(d) * normal[0] + math.cos(d) * normal[1]
-    return design.low_beams[0] if side >= 0.0 else design.low_beams[1]
-
-
 def direction_error(effect, design):
     return math.remainder(effect.direction_rad - design.direction_rad, 2.0 * math.pi)
 
@@ -186,7 +184,7 @@ def _offset_job(args):
     params, design, intensity, x_sn, y_sn = args
     bench = _bench(params)
     normal = normal_from_xy(x_sn, y_sn)
-    beam = compensating_beam(design, normal)
+    beam = compensating_beam(design, upper_right=True)
     high = design.voltage_limit_v - design.low_v
     candidates = [v for v in OFFSET_SCAN_V if -design.low_v <= v <= high]
 
@@ -223,9 +221,23 @@ def offset_grid(grid_step, cone_half_angle_rad):
             if math.hypot(x, y) <= math.sin(cone_half_angle_rad) + 1e-12]
 
 
-def voltage_offsets(design=None, grid_step=0.16, cone_half_angle_rad=CONE_HALF_ANGLE_RAD,
-                    intensity=1.0, params=None, workers=1, progress=None):
-    """Fig. 8: the offset on the compensating beam for every grid state.
+def upper_right_nodes(design, grid_step, cone_half_angle_rad):
+    """The grid nodes of the upper-right half-space of the kick's axis (and on it): the lower
+    left half is their mirror image (Fig. 7)."""
+    return [(x, y) for x, y in offset_grid(grid_step, cone_half_angle_rad)
+            if side_of_axis(design.direction_rad, x, y) >= -ON_AXIS_TOL]
+
+
+def offset_lookup(solutions, grid_step):
+    """The :class:`OffsetLookup` of :func:`voltage_offsets`' solutions."""
+    return OffsetLookup(grid_step, tuple((s.x_sn, s.y_sn, s.offset_v) for s in solutions))
+
+
+def voltage_offsets(design=None, grid_step=TableSpec.grid_step,
+                    cone_half_angle_rad=CONE_HALF_ANGLE_RAD, intensity=1.0, params=None,
+                    workers=1, progress=None):
+    """Fig. 8: the offset on the upper-right half's compensating beam (§4.1's V1) for every
+    grid state of that half.
 
     Returns
     -------
@@ -233,7 +245,7 @@ def voltage_offsets(design=None, grid_step=0.16, cone_half_angle_rad=CONE_HALF_A
     """
     design = KickDesign() if design is None else design
     jobs = [(params, design, intensity, x, y)
-            for x, y in offset_grid(grid_step, cone_half_angle_rad)]
+            for x, y in upper_right_nodes(design, grid_step, cone_half_angle_rad)]
     out = []
     if workers > 1:
         with concurrent.futures.ProcessPoolExecutor(max_workers=workers) as pool:

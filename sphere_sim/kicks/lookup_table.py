@@ -4,7 +4,9 @@ The table holds, for the reference kick (the hind-left design) at resting normal
 (x_sn, y_sn) inside the cone and intensities u_K, the normal's displacement at the end of the
 kick window, the transient peak and the settling time; it is linearly interpolated. Other kick
 directions and the other half of the cone are images under the device's symmetry (Fig. 7): the
-grid covers only y_sn >= -x_sn (plus one band of nodes beyond it, for interpolation).
+grid covers only y_sn >= -x_sn (plus one band of nodes beyond it, for interpolation). Each kick
+carries §4.1's voltage offset for its state (:mod:`sphere_sim.kicks.offset_lookup`), so a kick's
+programme depends on the normal it starts from: ``programme(action, intensity, normal)``.
 
 A table is a ``.npz`` file carrying its format version and the digests of the parameter set and
 of the kick it was built from; loading it for other parameters is refused.
@@ -21,7 +23,8 @@ from scipy.interpolate import RegularGridInterpolator
 
 from msg_defs.device import DEFAULT_PARAMETER_SET, KICK_WINDOW_S
 from sphere_sim.kicks.design import KickDesign
-from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD, KickResult
+from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD, LEVEL_NORMAL, KickResult
+from sphere_sim.kicks.offset_lookup import OffsetLookup, side_of_axis
 from sphere_sim.model.parameters import load_parameter_set
 from sphere_sim.model.symmetry import Symmetry, kick_axis_mirror
 
@@ -53,6 +56,8 @@ class TableSpec:
     parameter_set: str = DEFAULT_PARAMETER_SET
     design: KickDesign = dataclasses.field(default_factory=KickDesign)
     cone_half_angle_rad: float = CONE_HALF_ANGLE_RAD
+    # §4.1's voltage offsets on the design's compensating beams; none by default.
+    offsets: OffsetLookup = dataclasses.field(default_factory=OffsetLookup)
 
     def __post_init__(self):
         outside = [math.hypot(x, y) for _, _, x, y in self.nodes() if math.hypot(x, y) >= 1.0]
@@ -88,8 +93,21 @@ class TableSpec:
 
     def side(self, x, y):
         """Signed distance of (x, y) from the kick's own axis, > 0 on the simulated side."""
-        d = self.design.direction_rad
-        return -math.sin(d) * x + math.cos(d) * y
+        return side_of_axis(self.design.direction_rad, x, y)
+
+    def node_programme(self, x_sn, y_sn, intensity):
+        """The programme simulated at a node: the design with the offset of the upper-right
+        half's beam, also at the band of nodes beyond the axis, so that the interpolation
+        between the axis and those nodes follows one programme."""
+        return self.offsets.programme(self.design, x_sn, y_sn, intensity, upper_right=True)
+
+    def programme(self, action, intensity, normal=LEVEL_NORMAL):
+        """Kick ``action`` (the design turned by ``action`` quarter turns) at ``intensity`` from
+        rest at ``normal``, with the offset §4.1's half-space rule gives for that normal."""
+        g = Symmetry(int(action) % 4)
+        local = g.inverse().apply_vector(normal)
+        return g.apply_programme(self.offsets.programme(self.design, local[0], local[1],
+                                                        float(intensity)))
 
     def to_dict(self):
         return json.loads(json.dumps(_jsonable(self)))
@@ -101,6 +119,7 @@ class TableSpec:
         design['low_beams'] = tuple(design['low_beams'])
         design['high_beams'] = tuple(design['high_beams'])
         data['intensities'] = tuple(data['intensities'])
+        data['offsets'] = OffsetLookup.from_dict(data.get('offsets', {}))
         return cls(design=KickDesign(**design), **data)
 
     def digest(self, params_digest):
@@ -176,9 +195,23 @@ class LookupTable:
         """The kick design whose turned image ``action`` is."""
         return self.spec.design
 
-    def programme(self, action, intensity):
-        """The pulse programme of kick ``action`` at ``intensity`` (the design turned)."""
-        return Symmetry(int(action) % 4).apply_programme(self.spec.design.programme(intensity))
+    def programme(self, action, intensity, normal=LEVEL_NORMAL):
+        """The pulse programme of kick ``action`` at ``intensity`` from rest at ``normal``: the
+        design turned, with the table's voltage offset for that normal (§4.1's half-space
+        rule: the offset's beam follows the half the normal points into)."""
+        return self._spec.programme(action, intensity, normal)
+
+    def direction_errors_rad(self, intensity=1.0):
+        """|direction - nominal| (rad) of the reference kick at ``intensity`` from every node
+        of the simulated half inside the cone: how far the table's kicks stray from their
+        nominal direction, the offsets' measure (§4.1)."""
+        k = int(np.argmin(np.abs(self.intensities - intensity)))
+        spec, d = self._spec, self._spec.design.direction_rad
+        inside = [(i, j) for i, j, x, y in spec.nodes() if spec.side(x, y) >= 0.0
+                  and math.hypot(x, y) <= math.sin(spec.cone_half_angle_rad)]
+        return np.array([abs(math.remainder(math.atan2(self.displacement[i, j, k, 1],
+                                                       self.displacement[i, j, k, 0]) - d,
+                                            2.0 * math.pi)) for i, j in inside])
 
     # --- files -----------------------------------------------------------------------------
     def save(self, path):
@@ -268,6 +301,6 @@ class CombinedKickPlant:
     def design(self, action):
         return self._entries[action][0].spec.design
 
-    def programme(self, action, intensity):
+    def programme(self, action, intensity, normal=LEVEL_NORMAL):
         table, local = self._entries[action]
-        return table.programme(local, intensity)
+        return table.programme(local, intensity, normal)

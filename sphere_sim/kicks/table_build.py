@@ -25,7 +25,6 @@ from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.parameters import load_parameter_set
 from sphere_sim.model.rotations import angle_between
 from sphere_sim.model.scene import load_scene
-from sphere_sim.model.symmetry import Symmetry
 
 
 @dataclasses.dataclass(frozen=True)
@@ -96,7 +95,7 @@ def _run_kick_job(spec_data, params, job, x_rest):
     model = _model(params)
     normal = normal_from_xy(job.x_sn, job.y_sn)
     x_rest = _rest(params, job.x_sn, job.y_sn) if x_rest is None else x_rest
-    result, _ = simulate_kick(model, normal, spec.design.programme(job.intensity),
+    result, _ = simulate_kick(model, normal, spec.node_programme(job.x_sn, job.y_sn, job.intensity),
                               window_s=spec.window_s, rtol=spec.rtol, x_rest=x_rest)
     return {'key': list(job.key), 'dx': float(result.normal[0] - normal[0]),
             'dy': float(result.normal[1] - normal[1]), 'peak_rad': result.peak_deviation_rad,
@@ -258,7 +257,7 @@ def random_check_points(n_points, seed, cone_half_angle_rad, n_actions=4):
 def direct_kick(spec, params, normal, action, intensity):
     """The continuous model's outcome for the same kick the table interpolates."""
     model = _model(params)
-    programme = Symmetry(action % 4).apply_programme(spec.design.programme(intensity))
+    programme = spec.programme(action, intensity, normal)
     with threadpool_limits(limits=BLAS_THREADS_PER_KICK):
         x_rest = rest_state(model, cardan_of_normal(normal), relaxation=KICK_RELAXATION)
         result, _ = simulate_kick(model, normal, programme, window_s=spec.window_s,

@@ -13,10 +13,13 @@ from sphere_sim.kicks.characteristics import (
     voltage_offsets,
 )
 from sphere_sim.kicks.design import KickDesign
+from sphere_sim.kicks.lookup_table import TableSpec
 from sphere_twin.commands.optimize import DEFAULT_OUTPUT as DEFAULT_DESIGN
 from sphere_twin.commands.options import add_params_option, positive_float, positive_int
 
 RESULTS = Path('bench/results')
+# The shipped offsets of the shipped design (§4.1), which the default table is built with.
+DEFAULT_OFFSETS = RESULTS / 'voltage_offsets.json'
 
 
 def register(subparsers):
@@ -33,8 +36,8 @@ def register(subparsers):
     offsets = sub.add_parser('offsets', help='voltage offsets over the cone (Fig. 8)',
                              description='For each grid state, the offset on the compensating '
                                          'beam that puts the kick on its nominal direction.')
-    offsets.add_argument('--grid-step', type=positive_float, default=0.16,
-                         help='step in x_sn and y_sn')
+    offsets.add_argument('--grid-step', type=positive_float, default=TableSpec.grid_step,
+                         help="step in x_sn and y_sn (default the table's own)")
     offsets.add_argument('--workers', type=positive_int, default=2, help='local processes')
     for p in (width, offsets):
         add_params_option(p)
@@ -89,6 +92,7 @@ def run_offsets(args):
     png = plot_offsets(solutions, out / 'voltage_offsets.png')
     (out / 'voltage_offsets.json').write_text(json.dumps(
         {'parameter_set': args.params.name, 'design': design.to_dict(),
+         'grid_step': args.grid_step,
          'direction_tolerance_deg': math.degrees(OFFSET_DIRECTION_TOL_RAD),
          'states': [s.__dict__ for s in solutions]}, indent=2) + '\n')
     before = np.degrees([abs(s.direction_error_without_rad) for s in solutions])

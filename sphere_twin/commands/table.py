@@ -1,5 +1,6 @@
 """``sphere-twin table build|check``: the discrete kick model as a lookup table."""
 
+import dataclasses
 import math
 import time
 from pathlib import Path
@@ -9,6 +10,7 @@ from tqdm import tqdm
 
 from sphere_sim.kicks.design import KickDesign
 from sphere_sim.kicks.lookup_table import DEFAULT_TABLE_PATH, LookupTable, TableSpec
+from sphere_sim.kicks.offset_lookup import OffsetLookup
 from sphere_sim.kicks.table_build import build_table, check_table
 from sphere_twin.commands.optimize import DEFAULT_OUTPUT as DEFAULT_DESIGN
 from sphere_twin.commands.options import (
@@ -17,6 +19,7 @@ from sphere_twin.commands.options import (
     positive_int,
     unit_interval,
 )
+from sphere_twin.commands.primitives import DEFAULT_OFFSETS
 
 
 def register(subparsers):
@@ -36,6 +39,9 @@ def register(subparsers):
     build.add_argument('--window-s', type=positive_float, default=TableSpec.window_s)
     build.add_argument('--design', default=DEFAULT_DESIGN,
                        help='kick optimisation JSON whose design to use')
+    build.add_argument('--offsets', default=str(DEFAULT_OFFSETS),
+                       help="the design's voltage offsets (§4.1), a JSON of `sphere-twin "
+                            "primitives offsets`, or 'none'")
     build.add_argument('--workers', type=positive_int, default=2, help='local processes')
     build.add_argument('--scheduler', default=None,
                        help='Dask scheduler address, e.g. tcp://host:8786')
@@ -53,7 +59,10 @@ def run_build(args):
     spec = TableSpec(grid_step=args.grid_step, intensities=tuple(args.intensities),
                      window_s=args.window_s, parameter_set=args.params.name)
     if args.design:
-        spec = TableSpec(**{**spec.__dict__, 'design': KickDesign.load(args.design)})
+        spec = dataclasses.replace(spec, design=KickDesign.load(args.design))
+    if args.offsets != 'none':
+        spec = dataclasses.replace(spec, offsets=OffsetLookup.load(args.offsets, spec.design,
+                                                                   args.params.name))
     output = Path(args.output)
     partial = output.with_suffix('.partial.jsonl')
     started = time.perf_counter()
@@ -77,7 +86,16 @@ def run_build(args):
           f'parameters {args.params.name} (digest {table.meta["params_digest"]})')
     print(f'{simulated} kicks simulated in {wall_s:.1f} s with {engine} '
           f'({simulated / wall_s:.2f} kicks/s)')
+    print_direction_errors(table)
     return 0
+
+
+def print_direction_errors(table):
+    """How far the full kicks stray from their nominal direction over the cone (§4.1)."""
+    errors = np.degrees(table.direction_errors_rad(1.0))
+    offsets = 'with' if table.spec.offsets else 'without'
+    print(f'full kick direction error {offsets} voltage offsets: median {np.median(errors):.2f} '
+          f'deg, max {errors.max():.2f} deg over {errors.size} states')
 
 
 def run_check(args):
@@ -88,4 +106,5 @@ def run_check(args):
     print(f'median interpolation error: {math.degrees(float(np.median(errors))):.4f} deg; '
           f'95th percentile {math.degrees(float(np.percentile(errors, 95))):.4f} deg')
     print(f'max interpolation error: {math.degrees(worst):.4f} deg over {args.points} points')
+    print_direction_errors(table)
     return 0

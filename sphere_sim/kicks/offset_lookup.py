@@ -1,0 +1,162 @@
+"""The voltage offsets of §4.1 as a lookup over the resting normal: one design's kick, kept on its
+nominal direction from tilted states (Fig. 8).
+
+§4.1 adds an offset v_off to one low beam: V1 when the normal points into the upper-right
+half-space of the kick's axis, V2 in the lower-left one, read from a lookup table over a grid of
+initial states. The two halves are mirror images (Fig. 7), so the offsets are searched on the
+upper-right half only (``sphere-twin primitives offsets``) and the lower-left half takes the
+mirror image's offset on the mirror image's beam.
+
+The offset scales with the intensity u_K like the high pair's rise above ``low_v``: at u_K = 0
+every beam holds ``low_v`` and there is no kick, with or without an offset on the table. §4.1
+gives the offsets for the full kick only; docs/motion_primitives.md says why this reading.
+"""
+
+import dataclasses
+import functools
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from sphere_sim.model.symmetry import beam_position_angle_rad, kick_axis_mirror
+
+# A node on the kick's axis belongs to the upper-right half (side >= 0) within this distance.
+ON_AXIS_TOL = 1e-9
+
+
+def side_of_axis(direction_rad, x_sn, y_sn):
+    """Signed distance of (x_sn, y_sn) from the kick's axis: > 0 in the upper-right half-space,
+    the one left of the kick's direction (for the hind-left kick, y_sn > -x_sn)."""
+    return -math.sin(direction_rad) * x_sn + math.cos(direction_rad) * y_sn
+
+
+def compensating_beam(design, upper_right=True):
+    """The low beam that takes the offset in the upper-right half-space (or the other one).
+
+    The two low beams that the kick's axis mirror swaps are the candidates (§4.1's V1 and V2).
+    §4.1 puts the offset on V1, the beam on the right-hand side of the kick's direction, when
+    the normal points into the upper-right half, the side left of that direction: the beam on
+    the opposite side of the axis from the normal.
+    """
+    swap = kick_axis_mirror(design.direction_rad).beam_map()
+    pair = [b for b in design.low_beams if swap[b] != b and swap[b] in design.low_beams]
+    if len(pair) != 2:
+        raise ValueError(f'the design has no pair of low beams mirrored at its kick axis '
+                         f'(low beams {design.low_beams})')
+    right = min(pair, key=lambda b: side_of_axis(design.direction_rad,
+                                                 math.cos(beam_position_angle_rad(b)),
+                                                 math.sin(beam_position_angle_rad(b))))
+    return right if upper_right else swap[right]
+
+
+class OffsetError(ValueError):
+    """A voltage offsets file that cannot be read as one, or one for another kick."""
+
+
+@dataclasses.dataclass(frozen=True)
+class OffsetLookup:
+    """v_off (V) of the full kick over the upper-right half of the resting normals.
+
+    Attributes
+    ----------
+    grid_step : float
+        Step of the square grid in x_sn and y_sn the offsets were searched on (0: no offsets).
+    nodes : tuple of (x_sn, y_sn, offset_v)
+        The searched grid nodes, all in the upper-right half (or on the axis), in the frame of
+        the design's own kick direction.
+    """
+
+    grid_step: float = 0.0
+    nodes: tuple = ()
+
+    def __post_init__(self):
+        nodes = tuple((float(x), float(y), float(v)) for x, y, v in self.nodes)
+        object.__setattr__(self, 'nodes', nodes)
+        if nodes and not self.grid_step > 0.0:
+            raise ValueError('offsets need the grid step they were searched on')
+
+    def __bool__(self):
+        return bool(self.nodes)
+
+    @classmethod
+    def from_dict(cls, data):
+        return cls(float(data.get('grid_step', 0.0)), tuple(map(tuple, data.get('nodes', ()))))
+
+    @classmethod
+    def load(cls, path, design, parameter_set):
+        """The offsets saved by ``sphere-twin primitives offsets`` for ``design`` on the named
+        parameter set.
+
+        Raises
+        ------
+        OffsetError
+            For a file that is not such a JSON, or one searched for another design or set
+            (OSError for one that cannot be read).
+        """
+        try:
+            data = json.loads(Path(path).read_text())
+            searched = (data['design'], data['parameter_set'])
+            lookup = cls(float(data['grid_step']), tuple((s['x_sn'], s['y_sn'], s['offset_v'])
+                                                         for s in data['states']))
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+            raise OffsetError(f'{path} holds no voltage offsets saved by `sphere-twin '
+                              f'primitives offsets`: {type(exc).__name__}: {exc}') from exc
+        if searched != (json.loads(json.dumps(design.to_dict())), parameter_set):
+            raise OffsetError(f'{path} holds the offsets of another kick design or parameter '
+                              f'set (searched on {data["parameter_set"]!r}); search them with '
+                              f'`sphere-twin primitives offsets` for this design on '
+                              f'{parameter_set!r}')
+        return lookup
+
+    def offset_v(self, direction_rad, x_sn, y_sn):
+        """The full kick's offset at (x_sn, y_sn), bilinear over the grid.
+
+        A point of the lower-left half reads its mirror image's offset; grid nodes the search
+        left out (beyond the cone) take the nearest searched node's.
+        """
+        if not self.nodes:
+            return 0.0
+        grid, axis = _full_grid(self, round(direction_rad, 12))
+        point = np.array([x_sn, y_sn, 1.0])
+        if side_of_axis(direction_rad, x_sn, y_sn) < 0.0:
+            point = kick_axis_mirror(direction_rad).apply_vector(point)
+        u = np.clip((point[:2] - axis[0]) / self.grid_step, 0.0, axis.size - 1)
+        i, j = np.minimum(np.floor(u).astype(int), axis.size - 2)
+        fx, fy = u - (i, j)
+        return float((1 - fx) * (1 - fy) * grid[i, j] + fx * (1 - fy) * grid[i + 1, j]
+                     + (1 - fx) * fy * grid[i, j + 1] + fx * fy * grid[i + 1, j + 1])
+
+    def programme(self, design, x_sn, y_sn, intensity, upper_right=None):
+        """The design's programme at ``intensity`` with the offset for a rest at (x_sn, y_sn).
+
+        ``upper_right`` chooses the half whose beam takes the offset; by default the half the
+        point lies in (§4.1's rule). The table's nodes beyond the axis keep the upper-right
+        beam, so that its interpolation near the axis follows one programme.
+        """
+        if upper_right is None:
+            upper_right = side_of_axis(design.direction_rad, x_sn, y_sn) >= -ON_AXIS_TOL
+        offset = intensity * self.offset_v(design.direction_rad, x_sn, y_sn)
+        if offset == 0.0:
+            return design.programme(intensity)
+        return design.programme(intensity, offset, compensating_beam(design, upper_right))
+
+
+@functools.lru_cache(maxsize=8)
+def _full_grid(lookup, direction_rad):
+    """The offsets on the whole square grid: the searched half, its mirror image, and the
+    nearest searched node's offset beyond the cone."""
+    step = lookup.grid_step
+    half = max(round(max(abs(c) for n in lookup.nodes for c in n[:2]) / step), 1)
+    axis = step * np.arange(-half, half + 1)
+    grid = np.full((axis.size, axis.size), np.nan)
+    mirror = kick_axis_mirror(direction_rad)
+    for x, y, v in lookup.nodes:
+        for px, py, _ in (np.array([x, y, 1.0]), mirror.apply_vector([x, y, 1.0])):
+            grid[round(px / step) + half, round(py / step) + half] = v
+    known = np.argwhere(np.isfinite(grid))
+    for i, j in np.argwhere(~np.isfinite(grid)):
+        nearest = known[np.argmin(np.hypot(*(known - (i, j)).T))]
+        grid[i, j] = grid[tuple(nearest)]
+    return grid, axis
