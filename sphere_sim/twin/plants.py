@@ -28,9 +28,9 @@ LIVE_RTOL = 3e-4
 LIVE_ERROR_BOUND_RAD = 0.01 * 0.1 * PAPER_FULL_KICK_RAD
 # A decoded programme matches a kick of the design if its edges agree to this (a message
 # carries times in whole nanoseconds) and its voltages to this. A sender's voltage offset
-# (§4.1) follows the normal it measured, the plant's the normal it holds: with the offsets'
-# slope (up to about 60 V per unit of x_sn, bench/results/voltage_offsets.json) the tolerance
-# admits senders a few milliradians apart.
+# (§4.1) follows the normal it measured, the plant's the normal it holds: where the shipped
+# offsets are steepest (144 V per unit of x_sn between neighbouring nodes) the tolerance admits
+# senders 1.7 mrad apart, and more elsewhere.
 DECODE_TIME_TOL_S = 1e-8
 DECODE_VOLTAGE_TOL_V = 0.25
 # Times built from sums of periods differ from products in the last bits; events this close
@@ -147,8 +147,9 @@ def decode_kick(kick_plant, programme, normal):
     ``normal``, or PlantError.
 
     ``kick_plant`` offers ``design(action)``, ``programme(action, intensity, normal)`` and
-    ``directions_rad``. The intensity follows from the largest voltage; the action from which
-    kick has the same segments at that intensity.
+    ``directions_rad``. The intensity follows from the largest voltage (an offset never rises
+    above the high pair: its search stops at ``high_v - low_v``); the action from which kick has
+    the same segments at that intensity.
     """
     times, volts = programme.segments()
     for action in range(len(kick_plant.directions_rad)):
