@@ -17,12 +17,7 @@ from msg_defs.device import KICK_WINDOW_S
 from sphere_sim.kicks.design import KickDesign, cardan_of_normal, simulate_kick
 from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD, normal_from_cardan, normal_from_xy
 from sphere_sim.kicks.lookup_table import TableSpec
-from sphere_sim.kicks.offset_lookup import (
-    ON_AXIS_TOL,
-    OffsetLookup,
-    compensating_beam,
-    side_of_axis,
-)
+from sphere_sim.kicks.offset_lookup import ON_AXIS_TOL, compensating_beam, side_of_axis
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.scene import load_scene
@@ -226,11 +221,6 @@ def upper_right_nodes(design, grid_step, cone_half_angle_rad):
     left half is their mirror image (Fig. 7)."""
     return [(x, y) for x, y in offset_grid(grid_step, cone_half_angle_rad)
             if side_of_axis(design.direction_rad, x, y) >= -ON_AXIS_TOL]
-
-
-def offset_lookup(solutions, grid_step):
-    """The :class:`OffsetLookup` of :func:`voltage_offsets`' solutions."""
-    return OffsetLookup(grid_step, tuple((s.x_sn, s.y_sn, s.offset_v) for s in solutions))
 
 
 def voltage_offsets(design=None, grid_step=TableSpec.grid_step,
