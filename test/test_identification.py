@@ -199,10 +199,12 @@ def test_an_interrupted_identification_resumes_from_its_checkpoint(tmp_path, dam
     fitted = whole.parameters[0]
     assert fitted.status == 'fitted' and fitted.contains(6e-9)
     assert fitted.interval[1] / fitted.interval[0] < 1.2
-    # A checkpoint of another problem is not read back.
-    other = idf.identify(BASE, obs, idf.fit_parameters(BASE, ['beam.stiffness_z_n_per_m']),
-                         checkpoint=checkpoint)
-    assert other.resumed_evaluations == 0
+    # A checkpoint of another problem is not read back (an evaluator reads it when made).
+    other = idf.Evaluator(BASE, obs, idf.fit_parameters(BASE, ['beam.stiffness_z_n_per_m']),
+                          engine=None, checkpoint=checkpoint)
+    assert other.resumed == 0 and not other.cache
+    again = idf.Evaluator(BASE, obs, fits, engine=None, checkpoint=checkpoint)
+    assert again.resumed == whole.evaluations
 
 
 def test_identification_on_dask_gives_the_fit_of_one_process(damping_fit):
@@ -247,7 +249,7 @@ def test_a_synthetic_device_is_identified_from_its_bag(device_bag, tmp_path, mon
     out = tmp_path / 'fitted.yaml'
     status = cli.main(['identify', str(device_bag), '--fit', 'friction.coulomb',
                        'beam.damping_phi_nms_per_rad', 'beam.stiffness_phi_nm_per_rad',
-                       '--out', str(out)])
+                       '--out', str(out), '--workers', '2'])
     lines = capsys.readouterr().out.strip().splitlines()
     assert status == 0
     assert topics_read <= {'/beams/pulse_program', '/beams/voltage_command',
