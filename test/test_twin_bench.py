@@ -30,7 +30,10 @@ def test_the_status_accounts_for_the_run(runs, plant):
     # One sample per 10 ms of simulated time (the default 100 Hz), and the initial one.
     assert result.samples == pytest.approx(result.simulated_s / 0.01 + 1, abs=1)
     assert 0.0 < result.integrating_fraction < 1.0 and 0.0 < result.publishing_fraction < 1.0
-    assert 0.0 <= result.other_fraction < 1.0
+    assert 0.0 <= result.waiting_fraction < 1.0 and 0.0 <= result.other_fraction < 1.0
+    # Publishing runs on its own thread: the simulation thread's shares add up without it.
+    assert result.integrating_fraction + result.waiting_fraction + result.other_fraction == \
+        pytest.approx(1.0)
     assert 0.0 < result.latency_median_ms <= result.latency_max_ms
     assert farewell.startswith('simulator: simulated')
 

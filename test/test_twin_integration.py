@@ -68,5 +68,6 @@ def test_a_healthy_twin_reports_its_status_every_second(twin):
     status = twin.status()
     assert int(status['samples']) >= 1 and int(status['rejected']) == 0
     assert float(status['wall_time_s']) > 1.0
-    assert {'real_time_factor', 'integrating_fraction', 'publishing_fraction', 'late', 'cut',
+    assert {'real_time_factor', 'integrating_fraction', 'publishing_fraction',
+            'waiting_for_publishing_fraction', 'late', 'cut',
             'programme_latency_median_ms'} <= status.keys()

@@ -269,8 +269,9 @@ def _write_samples(t_eval, x_eval, i_eval, t_new, t_old, h_dense, y_old, Q):
 # estimate and the dense output are functions above (the per-step ones inlined by numba). The
 # Newton iteration was a function too: that cost 5-6 % of every kick (median over the three
 # work-precision scenes at three tolerances), because numba counts references to each array
-# handed to a call, and the iteration needs fifteen of them. It stays here.
-@numba.njit(cache=True)
+# handed to a call, and the iteration needs fifteen of them. It stays here. It releases the
+# GIL (nogil): the live twin publishes one sample on another thread while it integrates the next.
+@numba.njit(cache=True, nogil=True)
 def integrate(t_start, t_end, x_start, u, arrays, rtol, atol, jac_scale, t_eval,  # noqa: C901
               x_eval, i_eval, h_first, max_step, max_steps, onset_depth_m, jac_rate,
               jac_central, counters):

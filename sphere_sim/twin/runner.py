@@ -10,6 +10,7 @@ echo, so that a controller times its kicks by what the twin did.
 
 import collections
 import dataclasses
+import threading
 import time
 import typing
 
@@ -58,10 +59,12 @@ class CommandError(ValueError):
 
 @dataclasses.dataclass(frozen=True)
 class Sample:
-    """One published instant: the true snapshot and the measured (noisy) normal."""
+    """One published instant: the true snapshot, the measured (noisy) normal, and the
+    arrival times (wall s) of the programmes that this sample is the first to show."""
 
     snapshot: object
     measured_normal: np.ndarray
+    acted_arrivals_wall_s: tuple = ()
 
 
 @dataclasses.dataclass
@@ -78,24 +81,33 @@ class TwinCounters:
 class TwinTimings:
     """Where a run's wall time went, and how long programmes took to act (s).
 
-    ``integrating_s`` is the plant's own time (its ``advance``); the node adds what it spends
-    publishing. A programme's latency is from its arrival (``command_programme``) to the end
-    of the tick that first shows its effect, in wall time, and from the start it asked for to
-    the start it got, in simulated time.
+    ``integrating_s`` is the plant's own time (its ``advance``). A programme's latency is from
+    its arrival (``command_programme``) to the publication of the first sample that shows its
+    effect, in wall time, and from the start it asked for to the start it got, in simulated
+    time. Latencies are recorded by whichever thread publishes, so they are kept under a lock.
     """
 
     integrating_s: float = 0.0
-    publishing_s: float = 0.0
     latencies_wall_s: collections.deque = dataclasses.field(
         default_factory=lambda: collections.deque(maxlen=LATENCY_HISTORY))
     delays_sim_s: collections.deque = dataclasses.field(
         default_factory=lambda: collections.deque(maxlen=LATENCY_HISTORY))
+    _lock: threading.Lock = dataclasses.field(default_factory=threading.Lock, repr=False)
+
+    def record_published(self, sample, published_wall_s):
+        """Book the latencies of the programmes ``sample`` is the first to show, now that it
+        is out (``published_wall_s``, ``time.perf_counter()``)."""
+        with self._lock:
+            self.latencies_wall_s.extend(published_wall_s - arrival
+                                         for arrival in sample.acted_arrivals_wall_s)
 
     def latency_summary(self):
         """(median, largest) wall latency in s; NaNs before the first programme."""
-        if not self.latencies_wall_s:
+        with self._lock:
+            latencies = list(self.latencies_wall_s)
+        if not latencies:
             return float('nan'), float('nan')
-        return float(np.median(self.latencies_wall_s)), float(max(self.latencies_wall_s))
+        return float(np.median(latencies)), float(max(latencies))
 
     def delay_median_s(self):
         """Median simulated delay of a programme's start after the start it asked for (s)."""
@@ -319,14 +331,8 @@ class TwinRunner:
         if (self.lockstep and self.plant.time_s >= self.plant.busy_until_s - TIME_TOL_S
                 and not self._queued):
             self._idle_published = True
-        return Sample(snapshot, self.measure(snapshot.normal)), refused
-
-    def sample_out(self):
-        """Call once the tick's sample is published: the programmes applied in that tick have
-        now shown their effect, and their wall latency is recorded."""
-        now = time.perf_counter()
-        self.timings.latencies_wall_s.extend(now - arrival for arrival in self._acted)
-        self._acted.clear()
+        acted, self._acted = tuple(self._acted), []
+        return Sample(snapshot, self.measure(snapshot.normal), acted), refused
 
     def measure(self, normal):
         """The sensor's reading: the normal tilted by seeded Gaussian noise."""

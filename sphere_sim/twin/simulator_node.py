@@ -41,6 +41,7 @@ from msg_defs.topics import (
     SURFACE_NORMAL,
     VOLTAGE_COMMAND,
 )
+from node_runtime.outbox import Outbox
 from node_runtime.ros_env import (
     DISCOVERY_RANGE_VAR,
     StartupError,
@@ -106,6 +107,9 @@ class SimulatorNode(Node):
             topic.msg_type, topic.name, topic.qos.to_profile())
             for topic in (SURFACE_NORMAL, SPHERE_STATE, BEAM_STATE, BEAM_VOLTAGE, MARKERS,
                           CLOCK, DIAGNOSTICS, PROGRAMME_STATUS)}
+        # Every message leaves through one thread of its own, in the order it was made: the
+        # next sample integrates (the kernel releases the GIL) while this one is published.
+        self._outbox = Outbox(name='simulator publishing', on_error=self._publishing_failed)
         self.create_subscription(VOLTAGE_COMMAND.msg_type, VOLTAGE_COMMAND.name,
                                  self.on_voltage_command, VOLTAGE_COMMAND.qos.to_profile())
         self.create_subscription(PULSE_PROGRAM.msg_type, PULSE_PROGRAM.name,
@@ -202,9 +206,22 @@ class SimulatorNode(Node):
 
     def _publish_events(self):
         """Echo what happened to programmes since the last echo, oldest first."""
+        events = self.runner.take_events()
+        if events:
+            self._outbox.submit(self._send_events, events)
+
+    def _send_events(self, events):
         publisher = self._topic_publishers[PROGRAMME_STATUS.name]
-        for event in self.runner.take_events():
+        for event in events:
             publisher.publish(programme_event_to_msg(event))
+
+    def _publishing_failed(self, error):
+        # After a shutdown signal the context is gone and a publish fails: that is the
+        # shutdown. Before it, a failed publish is a bug, said once per kind.
+        if not self.context.ok():
+            return
+        self.get_logger().error(f'publishing failed: {type(error).__name__}: {error}',
+                                once=True)
 
     def _report_rejection(self, topic, reason):
         """Report a rejection (already counted)."""
@@ -233,7 +250,7 @@ class SimulatorNode(Node):
     def status_values(self):
         """The figures of the periodic status: counters, time, real-time factor, where the
         wall time went (fractions) and programme latency (ms)."""
-        c, t = self.runner.counters, self.runner.timings
+        c, t, out = self.runner.counters, self.runner.timings, self._outbox
         wall = max(time.perf_counter() - self._wall_start_s, 1e-9)
         median_ms, max_ms = (1e3 * v for v in t.latency_summary())
         return (
@@ -241,8 +258,11 @@ class SimulatorNode(Node):
             ('late', c.late), ('cut', c.cut), ('samples', c.samples),
             ('simulated_time_s', f'{self.runner.time_s:.6f}'), ('wall_time_s', f'{wall:.6f}'),
             ('real_time_factor', f'{self.runner.time_s / wall:.4f}'),
+            # The simulation thread's wall time: integrating, and waiting for the publishing
+            # thread to take a sample; the publishing thread's: building and sending messages.
             ('integrating_fraction', f'{t.integrating_s / wall:.4f}'),
-            ('publishing_fraction', f'{t.publishing_s / wall:.4f}'),
+            ('waiting_for_publishing_fraction', f'{out.waiting_s / wall:.4f}'),
+            ('publishing_fraction', f'{out.busy_s / wall:.4f}'),
             ('programme_latency_median_ms', f'{median_ms:.3f}'),
             ('programme_latency_max_ms', f'{max_ms:.3f}'),
             ('programme_delay_median_ms', f'{1e3 * t.delay_median_s():.3f}'))
@@ -253,7 +273,7 @@ class SimulatorNode(Node):
         status.values = [KeyValue(key=k, value=str(v)) for k, v in self.status_values()]
         array = DiagnosticArray(status=[status])
         array.header.stamp = time_from_ns(round(self.runner.time_s * NS_PER_S))
-        self._topic_publishers[DIAGNOSTICS.name].publish(array)
+        self._outbox.submit(self._topic_publishers[DIAGNOSTICS.name].publish, array)
 
     # --- time --------------------------------------------------------------------------
     def _waiting(self):
@@ -286,13 +306,15 @@ class SimulatorNode(Node):
             if self._last_sample is not None and \
                     now - self._last_repeat_wall_s > IDLE_REPEAT_PERIOD_S:
                 self._last_repeat_wall_s = now
-                self._publish(self._last_sample, markers=False)
+                self._outbox.submit(self._publish, self._last_sample, False)
             return
         self._last_sample = sample
-        started = time.perf_counter()
-        self._publish(sample, markers=self.runner.counters.samples % MARKER_EVERY_N_SAMPLES == 1)
-        self.runner.timings.publishing_s += time.perf_counter() - started
-        self.runner.sample_out()
+        self._outbox.submit(self._publish_sample, sample,
+                            self.runner.counters.samples % MARKER_EVERY_N_SAMPLES == 1)
+
+    def _publish_sample(self, sample, markers):
+        self._publish(sample, markers)
+        self.runner.timings.record_published(sample, time.perf_counter())
 
     def _publish(self, sample, markers):
         snap = sample.snapshot
@@ -313,13 +335,21 @@ class SimulatorNode(Node):
 
     def summary(self):
         """The final line: simulated time, samples, programmes, rejections, real-time factor,
-        and the share of wall time spent integrating and publishing."""
+        and where each thread's wall time went."""
+        self._outbox.flush()  # what was handed over counts as published
         v = dict(self.status_values())
         return (f'simulator: simulated {self.runner.time_s:.3f} s, {v["samples"]} samples, '
                 f'{v["programmes"]} programmes ({v["late"]} late), {v["rejected"]} rejected; '
-                f'real-time factor {float(v["real_time_factor"]):.3f}; integrating '
-                f'{float(v["integrating_fraction"]):.0%}, publishing '
-                f'{float(v["publishing_fraction"]):.0%} of wall time')
+                f'real-time factor {float(v["real_time_factor"]):.3f}; of wall time: '
+                f'integrating {float(v["integrating_fraction"]):.0%} and waiting for '
+                f'publishing {float(v["waiting_for_publishing_fraction"]):.0%} (simulation '
+                f'thread), publishing {float(v["publishing_fraction"]):.0%} (publishing thread)')
+
+    def destroy_node(self):
+        # The queued messages go out (or, after a shutdown signal, fail quietly) before the
+        # publishers they use are destroyed.
+        self._outbox.close()
+        super().destroy_node()
 
 
 def main(args=None):
