@@ -88,6 +88,10 @@ CASES = [
     _case(['report', 'nosuchdir', '--band-deg', 'nan'], 'must be a positive number'),
     _case(['calibrate', '--target', 'nosuch'], "invalid choice: 'nosuch'"),
     _case(['capacitance', '--fringe-angle-rad', '0'], 'must be a positive number'),
+    _case(['bench', 'throughput', '--workers', '0', '--out', 'out'],
+          'worker counts must be 2 or more'),
+    _case(['bench', 'throughput', '--workers', 'two', '--out', 'out'],
+          "not worker counts like 2,4,8: 'two'"),
 ]
 
 
@@ -110,7 +114,8 @@ def test_a_mistake_is_one_line_status_2_and_writes_nothing(argv, fragment, tmp_p
     captured = capsys.readouterr()
     assert status == 2
     lines = captured.err.strip().splitlines()
-    command = ' '.join(argv[:2] if argv[0] in ('table', 'bag', 'primitives') else argv[:1])
+    command = ' '.join(argv[:2] if argv[0] in ('table', 'bag', 'primitives', 'bench')
+                       else argv[:1])
     assert lines[-1].startswith(f'sphere-twin {command}: error: '), lines
     assert fragment in lines[-1]
     assert 'Traceback' not in captured.err

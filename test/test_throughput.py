@@ -4,6 +4,7 @@ never asserted)."""
 
 import dataclasses
 import io
+import json
 import math
 import re
 
@@ -253,7 +254,8 @@ def test_the_bench_writes_its_results_and_ends_with_the_summary_line(tiny_bench)
     assert sorted(p.name for p in out.iterdir()) == ['throughput_quick.json',
                                                      'throughput_quick.md']
     # The machine's own 1 -> 2 scaling is read before and after the runs, and printed.
-    assert len(summary.machine_scaling) == 2 and min(summary.machine_scaling) > 0.0
+    assert list(summary.machine_scaling) == [2]
+    assert len(summary.machine_scaling[2]) == 2 and min(summary.machine_scaling[2]) > 0.0
     assert 'the machine meanwhile: a CPU loop scaled' in printed
     last = printed.strip().splitlines()[-1]
     match = re.fullmatch(r'throughput vs bare integration: ([0-9.]+) table build, '
@@ -270,3 +272,42 @@ def test_deviations_are_angle_between_to_the_bit(kick_trajectory):
     final = normals[:, -1]
     np.testing.assert_array_equal(deviations_rad(normals, final),
                                   [angle_between(n, final) for n in normals.T])
+
+
+def test_each_worker_count_is_run_and_read_against_the_cpu_loops_scaling(tmp_path):
+    """``--workers 2,3``: the pool runs with 2 and with 3 workers, each scaling beside the CPU
+    loop's on as many processes, and the worst ratio of each count is printed."""
+    stream = io.StringIO()
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(tp.Plan, 'of', classmethod(lambda cls, quick: TINY))
+        summary = bench.run_throughput_bench(quick=True, out_dir=tmp_path, stream=stream,
+                                             engines=('serial', 'pool'),
+                                             workloads=('table',), worker_counts=(3, 2))
+    assert [(r.engine, r.workers) for r in summary.runs] == [('serial', 1), ('pool', 2),
+                                                              ('pool', 3)]
+    assert summary.worker_counts() == [2, 3] and sorted(summary.machine_scaling) == [2, 3]
+    for n in (2, 3):
+        many = summary.run('table', 'pool', n)
+        assert many.workers == n and many.kicks == len(TINY.table_spec.nodes())
+        loop = float(np.mean(summary.machine_scaling[n]))
+        assert summary.of_loop('table', 'pool', n) == pytest.approx(
+            summary.scaling('table', 'pool', n) / loop)
+    data = json.loads((tmp_path / 'throughput_quick.json').read_text())
+    assert set(data['scaling']['table']) == {'pool 2', 'pool 3'}
+    printed = stream.getvalue()
+    assert '1 -> 3 workers: 3-process pool' in printed
+    worst = re.search(r"scaling against the CPU loop's, worst over workloads and engines: "
+                      r'2 workers ([0-9.]+), 3 workers ([0-9.]+)', printed)
+    assert worst and float(worst.group(2)) == pytest.approx(
+        summary.of_loop('table', 'pool', 3), abs=0.005)
+
+
+def test_worker_counts_are_two_or_more_and_a_one_is_dropped():
+    import argparse
+
+    from sphere_twin.commands.options import worker_counts
+
+    assert worker_counts('1,2,4') == (2, 4) and worker_counts('8,2,2') == (2, 8)
+    for bad in ('0', '1', '2,x', ''):
+        with pytest.raises(argparse.ArgumentTypeError):
+            worker_counts(bad)

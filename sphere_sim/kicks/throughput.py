@@ -1,11 +1,14 @@
 """Kicks per second of the kick workloads against the bare integration of the same kicks.
 
 Three workloads run thousands of kicks: a table build, a kick optimisation and the calibration's
-kick observations. Each runs on one worker (this process) and on two (a process pool, and a
-Dask LocalCluster of two single-threaded workers). The *bare* rate is that of the same kicks'
-``simulate`` calls alone, timed in this process during the one-worker run (no set-up, no
-post-processing); a workload's rate is its kicks over its wall time and its workers (kicks/s
-per core), and their ratio says how much of a core the integration gets.
+kick observations. Each runs on one worker (this process) and on n for every count asked (a
+process pool, and a Dask LocalCluster of n single-threaded workers). The *bare* rate is that of
+the same kicks' ``simulate`` calls alone, timed in this process during the one-worker run (no
+set-up, no post-processing); a workload's rate is its kicks over its wall time and its workers
+(kicks/s per core), and their ratio says how much of a core the integration gets. A workload's
+1 -> n scaling is read against that of a pure CPU loop on n processes at the same time: the
+scaling the machine itself offers (n up to its cores on an idle machine, less beyond them or
+under other load).
 
 Computes and returns; the CLI (``sphere-twin bench throughput``) prints and writes. Lives with
 the kicks (not in ``studies``) because it drives the kick workloads, which sit in this room.
@@ -33,7 +36,8 @@ from sphere_sim.model.parameters import load_parameter_set
 from sphere_sim.model.scene import load_scene
 
 ENGINES = ('serial', 'pool', 'dask')
-ENGINE_WORKERS = {'serial': 1, 'pool': 2, 'dask': 2}
+# Worker counts of the pool and Dask runs unless asked otherwise (the serial run is 1).
+DEFAULT_WORKER_COUNTS = (2,)
 WORKLOADS = ('table', 'optimisation', 'calibration')
 # The bench's Dask workers without their statistical profiler (a sample of every thread each
 # 10 ms) and with the system monitor at 1 s: measured idle, the two workers then use 0.034
@@ -126,8 +130,9 @@ class _Engine:
     """A started engine of :mod:`sphere_sim.kicks.engine` for one run, with its start-up
     (processes, imports, the compiled kernels loaded by a warm-up kick) timed apart."""
 
-    def __init__(self, name):
+    def __init__(self, name, workers):
         self.name = name
+        self.workers = workers
         self.engine = None
         self.startup_s = 0.0
         self._cluster = None
@@ -139,12 +144,12 @@ class _Engine:
             from distributed import LocalCluster
 
             with dask.config.set(DASK_QUIET):
-                self._cluster = LocalCluster(n_workers=ENGINE_WORKERS['dask'],
+                self._cluster = LocalCluster(n_workers=self.workers,
                                              threads_per_worker=1, processes=True,
                                              host='127.0.0.1', dashboard_address=None)
             self.engine = DaskEngine(self._cluster.scheduler_address).start(_warm_worker)
         elif self.name == 'pool':
-            self.engine = PoolEngine(ENGINE_WORKERS['pool']).start(_warm_worker)
+            self.engine = PoolEngine(self.workers).start(_warm_worker)
         else:
             self.engine = SerialEngine()
         self.startup_s = time.perf_counter() - started
@@ -198,10 +203,11 @@ def _calibration(plan, params, engine):
 RUNNERS = {'table': _table, 'optimisation': _optimisation, 'calibration': _calibration}
 
 
-def run_workload(workload, engine_name, plan, params):
-    """Time one workload on a started engine; returns (Run, bare clock or None)."""
+def run_workload(workload, engine_name, plan, params, workers=1):
+    """Time one workload on an engine of ``workers`` (1 for 'serial'); returns (Run, bare
+    clock or None)."""
     clear_caches()
-    runner = _Engine(engine_name)
+    runner = _Engine(engine_name, 1 if engine_name == 'serial' else workers)
     with runner as engine, integration_clock() as clock:
         cpu_started = _cpu_s(engine)
         started = time.perf_counter()
@@ -220,9 +226,10 @@ def _cpu_s(engine):
     return own + engine.worker_cpu_s() if isinstance(engine, (PoolEngine, DaskEngine)) else own
 
 
-# A pure-Python loop of about 0.3 s: two of them, one after the other and then on a 2-process
-# pool, give the 1 -> 2 scaling the machine itself offers at that moment (2 on an idle machine
-# with two cores; less while other work shares them), against which the workloads' is read.
+# A pure-Python loop of about 0.3 s: n of them, one after the other and then on an n-process
+# pool, give the 1 -> n scaling the machine itself offers at that moment (n on an idle machine
+# with n cores or more; less while other work shares them), against which the workloads' is
+# read.
 PROBE_ITERATIONS = 3_000_000
 
 
@@ -233,16 +240,16 @@ def _probe(n):
     return total
 
 
-def machine_scaling():
-    """1 -> 2 process scaling of a pure CPU loop on this machine now."""
+def machine_scaling(workers=2):
+    """1 -> ``workers`` process scaling of a pure CPU loop on this machine now."""
     started = time.perf_counter()
-    _probe(PROBE_ITERATIONS)
-    _probe(PROBE_ITERATIONS)
+    for _ in range(workers):
+        _probe(PROBE_ITERATIONS)
     serial_s = time.perf_counter() - started
-    with PoolEngine(2) as pool:
+    with PoolEngine(workers) as pool:
         pool.start()
         started = time.perf_counter()
-        pool(_probe, [PROBE_ITERATIONS, PROBE_ITERATIONS])
+        pool(_probe, [PROBE_ITERATIONS] * workers)
         return serial_s / (time.perf_counter() - started)
 
 
@@ -251,39 +258,62 @@ class Summary:
     runs: list
     bare_kicks_per_s: dict  # workload -> kicks/s of the bare integration, one core
     quick: bool
-    machine_scaling: tuple = ()  # of a CPU loop on 2 processes, before and after the runs
+    # Worker count -> the CPU loop's 1 -> n scaling, before and after the runs.
+    machine_scaling: dict = dataclasses.field(default_factory=dict)
     load_average: tuple = ()  # the 1-minute load average, before and after the runs
 
-    def run(self, workload, engine):
-        return next(r for r in self.runs if r.workload == workload and r.engine == engine)
+    def run(self, workload, engine, workers=None):
+        """The run of ``workload`` on ``engine`` (with ``workers``, if given)."""
+        return next(r for r in self.runs if r.workload == workload and r.engine == engine
+                    and (workers is None or r.workers == workers))
 
-    def ratio(self, workload, engine='serial'):
+    def ratio(self, workload, engine='serial', workers=None):
         """Kicks/s per core of the workload over the bare integration rate of its kicks."""
-        return self.run(workload, engine).kicks_per_s_per_core / self.bare_kicks_per_s[workload]
+        return (self.run(workload, engine, workers).kicks_per_s_per_core
+                / self.bare_kicks_per_s[workload])
 
-    def cpu_efficiency(self, workload, engine):
+    def cpu_efficiency(self, workload, engine, workers=None):
         """CPU per kick on one worker over that on ``engine``: 1 when the workers do no more
-        work per kick than one process does (what the 1 -> 2 scaling is on an idle machine,
-        but for a worker waiting)."""
+        work per kick than one process does (what the 1 -> n scaling over n is on an idle
+        machine, but for a worker waiting)."""
         return (self.run(workload, 'serial').cpu_s_per_kick
-                / self.run(workload, engine).cpu_s_per_kick)
+                / self.run(workload, engine, workers).cpu_s_per_kick)
 
-    def scaling(self, workload, engine):
-        """Total kicks/s on ``engine``'s two workers over that on one."""
-        one, two = self.run(workload, 'serial'), self.run(workload, engine)
-        return (two.kicks / two.wall_s) / (one.kicks / one.wall_s)
+    def scaling(self, workload, engine, workers=None):
+        """Total kicks/s on ``engine``'s workers over that on one."""
+        one, many = self.run(workload, 'serial'), self.run(workload, engine, workers)
+        return (many.kicks / many.wall_s) / (one.kicks / one.wall_s)
+
+    def loop_scaling(self, workers):
+        """The CPU loop's 1 -> ``workers`` scaling, the mean of before and after the runs."""
+        return float(np.mean(self.machine_scaling[workers]))
+
+    def of_loop(self, workload, engine, workers):
+        """The workload's 1 -> n scaling over the CPU loop's on as many processes: 1 when
+        it scales as well as the machine lets any work scale."""
+        return self.scaling(workload, engine, workers) / self.loop_scaling(workers)
+
+    def worker_counts(self):
+        return sorted({r.workers for r in self.runs if r.engine != 'serial'})
+
+    def parallel_runs(self):
+        return [r for r in self.runs if r.engine != 'serial']
 
     def to_dict(self):
         return {'quick': self.quick, 'bare_kicks_per_s': self.bare_kicks_per_s,
-                'machine_scaling': list(self.machine_scaling),
+                'machine_scaling': {str(n): list(v) for n, v in self.machine_scaling.items()},
                 'load_average': list(self.load_average),
                 'runs': [{**dataclasses.asdict(r),
                           'kicks_per_s_per_core': r.kicks_per_s_per_core,
-                          'ratio_to_bare': self.ratio(r.workload, r.engine),
-                          'cpu_efficiency': self.cpu_efficiency(r.workload, r.engine)}
+                          'ratio_to_bare': self.ratio(r.workload, r.engine, r.workers),
+                          'cpu_efficiency': self.cpu_efficiency(r.workload, r.engine,
+                                                                r.workers)}
                          for r in self.runs],
-                'scaling': {w: {e: self.scaling(w, e) for e in self.engines() if e != 'serial'}
-                            for w in self.workloads()}}
+                'scaling': {w: {f'{r.engine} {r.workers}': {
+                    'scaling': self.scaling(w, r.engine, r.workers),
+                    'of_loop': self.of_loop(w, r.engine, r.workers)}
+                    for r in self.parallel_runs() if r.workload == w}
+                    for w in self.workloads()}}
 
     def engines(self):
         return list(dict.fromkeys(r.engine for r in self.runs))
@@ -292,30 +322,38 @@ class Summary:
         return list(self.bare_kicks_per_s)
 
 
-def throughput(quick=False, workloads=WORKLOADS, engines=ENGINES, progress=None):
-    """Every workload on every engine; returns a :class:`Summary`.
+def throughput(quick=False, workloads=WORKLOADS, engines=ENGINES,
+               worker_counts=DEFAULT_WORKER_COUNTS, progress=None):
+    """Every workload on one worker and on every other engine with each of ``worker_counts``;
+    returns a :class:`Summary`.
 
-    ``progress`` is called with (workload, engine, runs done so far) before each run.
+    ``progress`` is called with (workload, engine label, runs done so far) before each run.
     ``engines`` starts with 'serial': it times the bare integration of each workload's kicks.
     """
     if engines[0] != 'serial':
         raise ValueError("the engines must start with 'serial'")
+    counts = sorted({int(n) for n in worker_counts})
+    if not counts or counts[0] < 2:
+        raise ValueError(f'worker counts must be 2 or more (one worker always runs), got '
+                         f'{list(worker_counts)}')
     plan = Plan.of(quick)
     params = load_parameter_set(plan.table_spec.parameter_set)
     warm_up()
-    probes, loads = [machine_scaling()], [_load_average()]
+    probes = {n: [machine_scaling(n)] for n in counts}
+    loads = [_load_average()]
     runs, bare = [], {}
     for workload in workloads:
-        for engine in engines:
+        for engine, workers in [('serial', 1)] + [(e, n) for n in counts for e in engines[1:]]:
             if progress is not None:
-                progress(workload, engine, len(runs))
-            run, clock = run_workload(workload, engine, plan, params)
+                progress(workload, f'{engine} {workers}', len(runs))
+            run, clock = run_workload(workload, engine, plan, params, workers)
             runs.append(run)
             if clock is not None:
                 bare[workload] = clock.kicks / clock.seconds
-    probes.append(machine_scaling())
+    for n in counts:
+        probes[n].append(machine_scaling(n))
     loads.append(_load_average())
-    return Summary(runs, bare, quick, tuple(probes), tuple(loads))
+    return Summary(runs, bare, quick, {n: tuple(v) for n, v in probes.items()}, tuple(loads))
 
 
 def _load_average():

@@ -13,14 +13,16 @@ method, odeint included; the real-time factor of the 80 V all-beams scene).
 viscous onset ramp and epsilon of eq. 51) and writes ``bench/results/regularisation.{csv,md}``.
 
 ``bench throughput`` runs the kick workloads (table build, kick optimisation, calibration) on
-one worker, a two-process pool and a two-worker Dask cluster, against the bare integration rate
-of their kicks, and writes ``bench/results/throughput.{json,md}``. Its last line is
+one worker, and on a process pool and a Dask cluster of each worker count asked (``--workers
+2,4``; 2 by default), against the bare integration rate of their kicks and a CPU loop's scaling
+on as many processes, and writes ``bench/results/throughput.{json,md}``. Its last line is
 ``throughput vs bare integration: <a> table build, <b> optimisation``.
 """
 
 import csv
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -43,6 +45,7 @@ from sphere_sim.studies.work_precision import (
 )
 from sphere_twin.commands import bench_levers, bench_twin
 from sphere_twin.commands.bench_scenes import optimised_design, scenes_of_this_tree
+from sphere_twin.commands.options import worker_counts
 
 RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
 def run_work_precision_bench(quick=False, out_dir=RESULTS_DIR, stream=sys.stdout):
@@ -228,9 +231,15 @@ def register(subparsers):
     thr = sub.add_parser('throughput', help='kicks/s of the kick workloads against bare '
                                             'integration',
                          description='Table build, kick optimisation and calibration on one '
-                                     'worker, a 2-process pool and a 2-worker Dask cluster; '
-                                     'writes bench/results/throughput.{json,md}.')
+                                     'worker, and on a process pool and a Dask cluster of n '
+                                     'workers for each n of --workers; each 1 -> n scaling '
+                                     'beside that of a pure CPU loop on n processes. Writes '
+                                     'bench/results/throughput.{json,md}.')
     thr.add_argument('--quick', action='store_true', help='tiny workloads (< 1 min)')
+    thr.add_argument('--workers', type=worker_counts, default=tp.DEFAULT_WORKER_COUNTS,
+                     metavar='N[,N...]',
+                     help='worker counts of the pool and Dask runs, e.g. 2,4,8 (one worker '
+                          'always runs; default %(default)s)')
     thr.add_argument('--out', type=Path, default=RESULTS_DIR, help='output directory')
     thr.set_defaults(func=run_throughput)
     bench_twin.register(sub)
@@ -250,17 +259,23 @@ def run_regularisation(args):
 # --- throughput of the kick workloads ------------------------------------------------------
 WORKLOAD_LABELS = {'table': 'table build', 'optimisation': 'optimisation',
                    'calibration': 'calibration'}
-ENGINE_LABELS = {'serial': '1 worker', 'pool': '2-process pool', 'dask': '2 Dask workers'}
+
+
+def engine_label(engine, workers):
+    return {'serial': '1 worker', 'pool': f'{workers}-process pool',
+            'dask': f'{workers} Dask workers'}[engine]
 
 
 def run_throughput(args):
-    run_throughput_bench(quick=args.quick, out_dir=args.out)
+    run_throughput_bench(quick=args.quick, out_dir=args.out, worker_counts=args.workers)
     return 0
 
 
 def run_throughput_bench(quick=False, out_dir=RESULTS_DIR, stream=sys.stdout, **kwargs):
     """The throughput study with a progress bar; writes throughput{,_quick}.{json,md}."""
-    n_runs = len(kwargs.get('workloads', tp.WORKLOADS)) * len(kwargs.get('engines', tp.ENGINES))
+    engines = kwargs.get('engines', tp.ENGINES)
+    counts = kwargs.get('worker_counts', tp.DEFAULT_WORKER_COUNTS)
+    n_runs = len(kwargs.get('workloads', tp.WORKLOADS)) * (1 + (len(engines) - 1) * len(counts))
     with tqdm(total=n_runs, desc='throughput', unit='run', file=sys.stderr) as bar:
         def progress(workload, engine, done):
             bar.set_postfix_str(f'{workload} on {engine}')
@@ -284,23 +299,39 @@ def throughput_lines(summary):
              f"{'start-up (s)':>12} {'kicks/s/core':>12} {'vs bare':>7} {'CPU s/kick':>10} "
              f"{'CPU eff.':>8}"]
     for r in summary.runs:
-        lines.append(f'{r.workload:<13} {ENGINE_LABELS[r.engine]:<15} {r.kicks:>5} '
+        lines.append(f'{r.workload:<13} {engine_label(r.engine, r.workers):<15} {r.kicks:>5} '
                      f'{r.wall_s:>8.2f} {r.startup_s:>12.2f} {r.kicks_per_s_per_core:>12.2f} '
-                     f'{summary.ratio(r.workload, r.engine):>7.2f} {r.cpu_s_per_kick:>10.3f} '
-                     f'{summary.cpu_efficiency(r.workload, r.engine):>8.2f}')
+                     f'{summary.ratio(r.workload, r.engine, r.workers):>7.2f} '
+                     f'{r.cpu_s_per_kick:>10.3f} '
+                     f'{summary.cpu_efficiency(r.workload, r.engine, r.workers):>8.2f}')
     for workload in summary.workloads():
-        scaling = ', '.join(f'{ENGINE_LABELS[e]} {summary.scaling(workload, e):.2f}x'
-                            for e in summary.engines() if e != 'serial')
-        lines.append(f'{workload}: bare integration {summary.bare_kicks_per_s[workload]:.2f} '
-                     f'kicks/s; 1 -> 2 workers: {scaling}')
-    lines.append('the machine meanwhile: a CPU loop scaled '
-                 + ' and '.join(f'{x:.2f}x' for x in summary.machine_scaling)
-                 + ' from 1 to 2 processes (before and after the runs; 2 on an idle machine); '
-                 + 'load average ' + ' and '.join(f'{x:.2f}' for x in summary.load_average))
+        for n in summary.worker_counts():
+            scaling = ', '.join(
+                f'{engine_label(e, n)} {summary.scaling(workload, e, n):.2f}x '
+                f'({summary.of_loop(workload, e, n):.2f} of the loop)'
+                for e in summary.engines() if e != 'serial')
+            lines.append(f'{workload}: bare integration '
+                         f'{summary.bare_kicks_per_s[workload]:.2f} kicks/s; 1 -> {n} workers: '
+                         f'{scaling}')
+    for n in summary.worker_counts():
+        lines.append('the machine meanwhile: a CPU loop scaled '
+                     + ' and '.join(f'{x:.2f}x' for x in summary.machine_scaling[n])
+                     + f' from 1 to {n} processes (before and after the runs; {n} on an idle '
+                       f'machine with {n} cores)')
+    lines.append(f'{os.cpu_count()} cores; load average '
+                 + ' and '.join(f'{x:.2f}' for x in summary.load_average))
+    lines.append('scaling against the CPU loop\'s, worst over workloads and engines: '
+                 + ', '.join(f'{n} workers {_worst_of_loop(summary, n):.2f}'
+                             for n in summary.worker_counts()))
     lines.append('throughput vs bare integration: '
                  + ', '.join(f"{_ratio_text(summary, w)} {WORKLOAD_LABELS[w]}"
                              for w in ('table', 'optimisation')))
     return lines
+
+
+def _worst_of_loop(summary, workers):
+    return min(summary.of_loop(r.workload, r.engine, workers)
+               for r in summary.parallel_runs() if r.workers == workers)
 
 
 def _ratio_text(summary, workload):

@@ -36,6 +36,19 @@ unit_interval = _checked_number(float, 'a number', lambda v: 0.0 <= v <= 1.0,
                                 'must lie in [0, 1]')  # an intensity u_K
 
 
+def worker_counts(text):
+    """argparse type: comma-separated worker counts of 2 or more (``2,4,8``); a 1 is dropped,
+    since one worker always runs beside them."""
+    try:
+        counts = sorted({int(part) for part in text.split(',') if part.strip()})
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'not worker counts like 2,4,8: {text!r}') from None
+    counts = [n for n in counts if n != 1]
+    if not counts or counts[0] < 2:
+        raise argparse.ArgumentTypeError(f'worker counts must be 2 or more, got {text}')
+    return tuple(counts)
+
+
 def parameter_set(text):
     """argparse type: a parameter set's name or YAML file, loaded and checked once, here."""
     try:
