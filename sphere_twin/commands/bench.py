@@ -342,6 +342,8 @@ def throughput_markdown(summary, lines):
     return '\n'.join([
         '# Throughput of the kick workloads', '',
         'Written by `sphere-twin bench throughput' + (' --quick' if summary.quick else '')
+        + ('' if tuple(summary.worker_counts()) == tp.DEFAULT_WORKER_COUNTS
+           else ' --workers ' + ','.join(map(str, summary.worker_counts())))
         + '`. kicks/s/core is a workload\'s kicks over its wall time and workers; "vs bare" '
         'divides it by the rate of the same kicks\' `simulate` calls alone, timed in the '
         'one-worker run. Engine start-up (processes, cluster, a warm-up kick in each worker) is '
