@@ -60,9 +60,12 @@ class LoopSettings:
     cone_policy : ConePolicy
     cone_half_angle_rad : float
     preview : bool
-        Reference preview (beyond the paper): decide towards where the reference will be one
-        kick period later, when the kick has settled, instead of towards the current sample.
-        The errors are still measured against the current sample.
+        Reference preview: decide towards where the reference will be one kick period later,
+        when the kick has settled, by its motion at the decision (a jump ahead is not
+        foreseen), instead of towards the current sample (the default; the
+        paper aims at the current sample, docs/control.md). The errors are measured against
+        the current sample either way; :attr:`LoopHistory.squared_xy_aim_errors` measures
+        them against what was aimed at.
     """
 
     max_steps: int = 400
@@ -72,7 +75,7 @@ class LoopSettings:
     stall_progress_rad: float = 1e-6
     cone_policy: ConePolicy = ConePolicy.CLAMP
     cone_half_angle_rad: float = CONE_HALF_ANGLE_RAD
-    preview: bool = False
+    preview: bool = True
 
 
 @dataclasses.dataclass(frozen=True)
@@ -88,6 +91,9 @@ class LoopHistory:
         Normals the controller acted on (measured or estimated).
     references : ndarray, shape (n + 1, 3)
         Reference normals (after clamping).
+    aims : ndarray, shape (n, 3)
+        The reference normal each step's decision aimed at: its own sample, or with preview
+        the sample one kick period on.
     actions : ndarray of int, shape (n,)
         Action per step, NO_ACTION when resting.
     intensities : ndarray, shape (n,)
@@ -101,6 +107,7 @@ class LoopHistory:
     normals: np.ndarray
     used_normals: np.ndarray
     references: np.ndarray
+    aims: np.ndarray
     actions: np.ndarray
     intensities: np.ndarray
     clamped: np.ndarray
@@ -117,6 +124,12 @@ class LoopHistory:
     def squared_xy_errors(self):
         """Quadratic x-y deviation from the reference (Fig. 15b), shape (n + 1,)."""
         return np.sum((self.normals[:, :2] - self.references[:, :2]) ** 2, axis=1)
+
+    @property
+    def squared_xy_aim_errors(self):
+        """Quadratic x-y deviation of each step's outcome from what its decision aimed at,
+        shape (n,): entry k scores state k + 1 (a step at rest aimed too)."""
+        return np.sum((self.normals[1:, :2] - self.aims[:, :2]) ** 2, axis=1)
 
     @property
     def kicks(self):
@@ -181,11 +194,12 @@ def run_closed_loop(controller, plant, start_normal, reference, settings=LoopSet
         outcome = _stop(settings, reference, sample, stall, true_normal)
         if outcome is not None or step == settings.max_steps:
             break
-        cycle.on_reference(_target(settings, reference, sample, time_s).normal)
+        aim = _target(settings, reference, sample, time_s).normal
+        cycle.on_reference(aim)
         command = cycle.decide().command
         if command is None:
             rest_streak += 1
-            trace.action(NO_ACTION, 0.0)
+            trace.action(NO_ACTION, 0.0, aim)
             if reference.is_constant and rest_streak >= settings.settle_rest_steps:
                 outcome, settle_step = Outcome.SETTLED, step + 1 - rest_streak
                 # the state is the last one recorded; close the history there
@@ -202,7 +216,7 @@ def run_closed_loop(controller, plant, start_normal, reference, settings=LoopSet
         if estimator is not None:
             estimator.predict(controller.expected_displacement_xy(seen, command))
         true_normal = result.normal
-        trace.action(command.action, command.intensity)
+        trace.action(command.action, command.intensity, aim)
         stall.kicked()
     if outcome is None:
         outcome = Outcome.NOT_SETTLED if reference.is_constant else Outcome.COMPLETED
@@ -210,11 +224,12 @@ def run_closed_loop(controller, plant, start_normal, reference, settings=LoopSet
 
 
 def _target(settings, reference, sample, time_s):
-    """What the controller aims at: the current sample, or with preview the reference one
-    kick period on, when the kick about to be decided has settled."""
+    """What the controller aims at: the current sample, or with preview where the reference
+    will be one kick period on, when the kick about to be decided has settled, by its motion
+    now (:func:`~sphere_control.reference.preview`, as the controller node estimates it)."""
     if not settings.preview or reference.is_constant:
         return sample
-    return ref.sample(reference, time_s + settings.kick_period_s, settings.cone_half_angle_rad)
+    return ref.preview(reference, time_s, settings.kick_period_s, settings.cone_half_angle_rad)
 
 
 def _stop(settings, reference, sample, stall, true_normal):
@@ -231,7 +246,7 @@ class _Trace:
 
     def __init__(self):
         self.times, self.normals, self.used, self.refs, self.clamped = [], [], [], [], []
-        self.actions, self.intensities = [], []
+        self.actions, self.intensities, self.aims = [], [], []
 
     def state(self, time_s, true_normal, seen, sample):
         self.times.append(time_s)
@@ -240,14 +255,16 @@ class _Trace:
         self.refs.append(sample.normal)
         self.clamped.append(sample.clamped)
 
-    def action(self, action, intensity):
+    def action(self, action, intensity, aim):
         self.actions.append(action)
         self.intensities.append(intensity)
+        self.aims.append(np.array(aim, dtype=float))
 
     def history(self, outcome, settle_step):
         keep = len(self.actions) + 1  # a run that stopped mid-step has one state too many
         return LoopHistory(np.array(self.times[:keep]), np.array(self.normals[:keep]),
                            np.array(self.used[:keep]), np.array(self.refs[:keep]),
+                           np.array(self.aims).reshape(-1, 3),
                            np.array(self.actions, dtype=int), np.array(self.intensities),
                            np.array(self.clamped[:keep]), outcome, settle_step)
 

@@ -50,6 +50,7 @@ class ControllerNode(Node):
     def __init__(self, **node_kwargs):
         # Physics and tables load here rather than at import, so main() installs its signal
         # handlers first and a SIGINT during start-up is a clean shutdown.
+        from sphere_control.intensity_calibration import calibrated
         from sphere_sim.kicks.discrete import kick_period_s
         from sphere_sim.twin.plant_setup import load_kick_model
 
@@ -69,14 +70,16 @@ class ControllerNode(Node):
                  'kick_period_s': (0.0, parameter_descriptor(
                      'Time from a kick\'s reported start until it is over and the next is '
                      'decided (s); 0: the settle time of the tables\' full kick, rounded up to '
-                     '10 ms (50 ms for the shipped table), as in the offline loop.',
+                     '10 ms (40 ms for the shipped table), as in the offline loop.',
                      (0.0, 10.0))),
-                 'preview': (False, parameter_descriptor(
+                 'preview': (True, parameter_descriptor(
                      'Aim where the reference will be when the kick has settled, estimated '
                      'from its recent samples (a jump is not extrapolated), not at its newest '
-                     'sample (beyond the paper).')),
+                     'sample (the paper; docs/control.md).')),
              })
-        table = load_kick_model([t for t in p['tables'] if t])
+        # The controller's intensities are calibrated on the tables' own level-state width
+        # curves, as in the offline studies (sphere_control.intensity_calibration).
+        table = calibrated(load_kick_model([t for t in p['tables'] if t]))
         self.kicks = table
         self.controller_kind = p['controller']
         self.kick_period_s = p['kick_period_s'] or kick_period_s(table)

@@ -4,18 +4,24 @@ Everything runs on a discrete KickPlant, normally the shipped lookup table: the 
 stably between kicks, as the paper's discrete model assumes (the contacts' friction holds it,
 docs/parameters.md).
 
-Kick size. The paper's full kick turns the normal by 0.54 deg; a plant may kick more or less
-(the calibrated table: 0.508 deg, nothing fitted to it; other parameter sets or analytic plants
-differ). Distances in the setpoint scenario are used as the paper gives them (the reference is
-1.28 deg away); the resting band Phi_min is reported both as the paper's value and scaled by
-the kick-size ratio, since what decides whether the basic controller oscillates is Phi_min
-relative to the kick width. The frequency of eq. (64) is scaled by the same ratio, so that the
-reference advances the same fraction of a kick per kick as it would for the paper's plant at
-the same kick period.
+Intensity. The controllers speak in calibrated intensities: u_K is defined through the nominal
+plant's level-state width curve (:mod:`sphere_control.intensity_calibration`), made once from
+the plant under test, and every plant the studies drive takes it.
+
+Set-ups, side by side (:class:`SetUp`, :data:`SET_UPS`). The paper's full kick turns the normal
+by 0.54 deg; a plant may kick more or less (the calibrated table: 0.508 deg, nothing fitted to
+it). The paper's set-up runs §5 as given: f1 = 0.02 Hz, Phi_min of 0.05 and 0.25 deg (the basic
+controller's best of the two in Fig. 15), the kick period the full kick's settle time; sigma_a
+learns from kicks of at least a fifth of the full width, and a second set-up learning it from
+every kick, as the paper does, stands beside it (:data:`PAPER_SETUP` says why). Ours scales f1
+and Phi_min by the kick-size ratio (what decides whether the basic controller oscillates is
+Phi_min against the kick width, and the reference then advances the same fraction of a kick per
+kick) and searches the basic band over a few kick widths. Distances in the setpoint scenario are
+the paper's in all (the reference is 1.28 deg away). All aim with reference preview unless told
+not to.
 """
 
 import dataclasses
-import enum
 import itertools
 import math
 import time
@@ -36,6 +42,7 @@ from sphere_control.extended import (
     DIRECTION_LEARNING_MIN_FRACTION,
     prelearn,
 )
+from sphere_control.intensity_calibration import IntensityCalibration
 from sphere_control.kick_plants import EightDirectionPlant
 from sphere_control.perturbations import Mismatch, NoisySensor, PerturbedPlant
 from sphere_control.reachable import (
@@ -80,9 +87,59 @@ CATCH_UP_WIDTHS = 2.0
 NOISE_LEARNING_SIGMAS = 3.0
 
 
-class PhiMinScaling(enum.Enum):
-    PAPER = 'paper'  # the paper's Phi_min in degrees as given
-    KICK_SCALED = 'kick-scaled'  # times (our full kick / the paper's 0.54 deg)
+@dataclasses.dataclass(frozen=True)
+class SetUp:
+    """Whose settings a study runs with (module docstring).
+
+    Attributes
+    ----------
+    name : str
+    scaled : bool
+        f1 and Phi_min times the kick scale, and the basic band searched over
+        ``EvaluationConfig.basic_phi_min_widths``; otherwise the paper's f1 and Phi_min, and
+        the basic controller's best of the paper's two bands.
+    sigma_from_every_kick : bool
+        sigma_a learns from every kick that moved the sphere (the paper), or only from kicks of
+        at least DIRECTION_LEARNING_MIN_FRACTION of the full width.
+    """
+
+    name: str
+    scaled: bool
+    sigma_from_every_kick: bool
+
+    def phi_min_rad(self, paper_phi_min_rad, put):
+        """A Phi_min of the paper (rad) in this set-up: as given, or times the kick scale."""
+        return paper_phi_min_rad * (put.kick_scale if self.scaled else 1.0)
+
+    def trajectory(self, put):
+        """Eq. (64): the paper's f1, or f1 times the kick scale."""
+        if not self.scaled:
+            return PAPER_TRAJECTORY
+        return CircleTrajectory(PAPER_TRAJECTORY.amplitude,
+                                PAPER_TRAJECTORY.frequency_hz * put.kick_scale)
+
+    def basic_bands_rad(self, config, put):
+        """The Phi_min the basic controller tries in Fig. 15, the best one kept (rad)."""
+        if not self.scaled:
+            return PAPER_PHI_MIN_RAD
+        return tuple(f * put.full_width_rad for f in config.basic_phi_min_widths)
+
+    def direction_learning_min_rad(self, put):
+        """The shortest kick that teaches sigma_a (rad)."""
+        if self.sigma_from_every_kick:
+            return 0.0
+        return DIRECTION_LEARNING_MIN_FRACTION * put.full_width_rad
+
+
+# The paper's §5 as given, but for sigma_a, which learns from kicks of a fifth of the full width
+# and more: below the pull-in a programme slips a tilted sphere by up to 0.1 deg towards level
+# (the ratchet, docs/parameters.md), and eq. (61) at alpha_sigma = 0.9 would adopt that
+# direction. The set-up that learns from every kick stands beside it.
+PAPER_SETUP = SetUp('paper', scaled=False, sigma_from_every_kick=False)
+EVERY_KICK_SETUP = SetUp('paper, sigma from every kick', scaled=False,
+                         sigma_from_every_kick=True)
+OUR_SETUP = SetUp('ours', scaled=True, sigma_from_every_kick=False)
+SET_UPS = (PAPER_SETUP, EVERY_KICK_SETUP, OUR_SETUP)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -99,11 +156,12 @@ class EvaluationConfig:
     trajectory_periods : float
         Length of the trajectory runs in periods 1/f1 of eq. (64) (one period: two laps).
     basic_phi_min_widths : tuple of float
-        Phi_min of the basic controller in the trajectory runs, in full kick widths; the best
-        (lowest tracking error) is compared, as in Fig. 15 ("the best result of the basic
-        controller").
+        Phi_min of the basic controller in our set-up's trajectory runs, in full kick widths;
+        the best (lowest tracking error) is compared, as in Fig. 15 ("the best result of the
+        basic controller").
     extended_phi_min_rad : float
-        Phi_min of the extended controller in the trajectory runs, before kick scaling.
+        Phi_min of the extended controller in the trajectory runs, as the paper gives it
+        (scaled by the kick scale in our set-up).
     setpoint_max_steps : int
     prelearn_kicks : int
     noise_std_widths : tuple of float
@@ -146,18 +204,31 @@ class EvaluationConfig:
 
 @dataclasses.dataclass(frozen=True)
 class PlantUnderTest:
-    """A KickPlant with its full kick width and settle time measured from the level state."""
+    """A KickPlant in calibrated intensities, with its full kick width and settle time measured
+    from the level state.
+
+    ``calibration`` is the plant's own (:class:`IntensityCalibration`); the studies lay it on
+    every other plant they drive in its place (the continuous model, the twin).
+    """
 
     label: str
     plant: object
     full_width_rad: float
     settle_time_s: float = 0.0
+    calibration: IntensityCalibration | None = None
 
     @classmethod
     def measure(cls, label, plant):
-        full = plant.kick(LEVEL_NORMAL, 0, 1.0)
-        return cls(label, plant, angle_between(LEVEL_NORMAL, full.normal),
-                   float(full.settle_time_s))
+        """``plant`` calibrated from its own level-state width curve, and measured."""
+        calibration = IntensityCalibration.of(plant)
+        calibrated = calibration.applied_to(plant)
+        full = calibrated.kick(LEVEL_NORMAL, 0, 1.0)
+        return cls(label, calibrated, angle_between(LEVEL_NORMAL, full.normal),
+                   float(full.settle_time_s), calibration)
+
+    def calibrated(self, plant):
+        """Another plant of the same actions, driven in this plant's calibrated intensities."""
+        return plant if self.calibration is None else self.calibration.applied_to(plant)
 
     @property
     def kick_period_s(self):
@@ -170,10 +241,6 @@ class PlantUnderTest:
     def kick_scale(self):
         """Our full kick over the paper's 0.54 deg."""
         return self.full_width_rad / PAPER_FULL_KICK_RAD
-
-
-def phi_min_rad(paper_phi_min_rad, scaling, put):
-    return paper_phi_min_rad * (put.kick_scale if scaling is PhiMinScaling.KICK_SCALED else 1.0)
 
 
 def study_controller(kind, phi_min, put, plant, config, directions_rad=None,
@@ -198,7 +265,14 @@ def oscillates(history, full_width_rad):
     return bool(np.all(recent <= OSCILLATION_BAND_WIDTHS * full_width_rad))
 
 
-def setpoint_summary(history, full_width_rad):
+def reversed_kicks(history, n_actions):
+    """Kicks that undo the kick before them (the opposite action, half the actions on): the
+    basic controller's oscillation about a reference, counted even when it ends."""
+    kicks = history.actions[history.actions != NO_ACTION]
+    return int(np.count_nonzero(kicks[1:] == (kicks[:-1] + n_actions // 2) % n_actions))
+
+
+def setpoint_summary(history, full_width_rad, n_actions=4):
     """JSON-able figures of one setpoint run (angles in degrees)."""
     return {
         'outcome': history.outcome.value,
@@ -206,36 +280,32 @@ def setpoint_summary(history, full_width_rad):
         'kicks_to_settle': history.kicks_to_settle,
         'final_error_deg': math.degrees(history.final_error_rad),
         'oscillates': oscillates(history, full_width_rad),
+        'reversed_kicks': reversed_kicks(history, n_actions),
     }
 
 
 def setpoint_study(put, plant, reference_normal, phi_min, config, kinds=tuple(ControllerKind),
-                   directions_rad=None):
+                   directions_rad=None, setup=PAPER_SETUP):
     """One setpoint scenario for several controllers; dict kind -> LoopHistory."""
     settings = LoopSettings(max_steps=config.setpoint_max_steps, kick_period_s=KICK_WINDOW_S)
     reference = Setpoint.from_normal(reference_normal)
     return {kind: run_closed_loop(study_controller(kind, phi_min, put, plant, config,
-                                                  directions_rad),
+                                                  directions_rad,
+                                                  setup.direction_learning_min_rad(put)),
                                   plant, LEVEL_NORMAL, reference, settings)
             for kind in kinds}
 
 
-def scaled_trajectory(put):
-    """Eq. (64) with f1 scaled by the kick-size ratio (module docstring)."""
-    return CircleTrajectory(PAPER_TRAJECTORY.amplitude,
-                            PAPER_TRAJECTORY.frequency_hz * put.kick_scale)
-
-
-def speed_study(put, plant, config):
+def speed_study(put, plant, config, setup=PAPER_SETUP):
     """Where on eq. (64) the reference outruns the plant (:mod:`sphere_control.reachable`).
 
-    Over one period of the scaled trajectory, one kick period at a time: the reference's step
+    Over one period of the set-up's trajectory, one kick period at a time: the reference's step
     against the furthest the plant can move along it per kick, by the kicks the true ``plant``
     makes at the reference's normal, and by the controllers' nominal model (``put``'s width
     along the nominal directions). Angles in degrees, tilts from the vertical.
     """
     period = config.for_plant(put).kick_period_s
-    trajectory = scaled_trajectory(put)
+    trajectory = setup.trajectory(put)
     times = np.arange(0.0, 1.0 / trajectory.frequency_hz, period)
     cone = CONE_HALF_ANGLE_RAD
     normals = [ref.sample(trajectory, t, cone).normal for t in times]
@@ -287,6 +357,9 @@ class TrackingResult:
         Mean squared x-y error over the tracking phase.
     mse_basic_all, mse_extended_all : float
         The same over the whole run, the approach from the level state included.
+    mse_basic_aimed, mse_extended_aimed : float
+        Over the tracking phase, each outcome against the reference its kick aimed at
+        (:attr:`LoopHistory.squared_xy_aim_errors`) instead of the reference at its time.
     """
 
     basic: object
@@ -297,10 +370,31 @@ class TrackingResult:
     mse_extended: float
     mse_basic_all: float
     mse_extended_all: float
+    mse_basic_aimed: float
+    mse_extended_aimed: float
+
+    @classmethod
+    def of(cls, basic, extended, basic_phi_min_rad, catch_up_step):
+        def mse(errors):
+            return float(np.mean(errors))
+
+        start = catch_up_step
+        return cls(basic, extended, basic_phi_min_rad, start,
+                   mse(basic.squared_xy_errors[start:]), mse(extended.squared_xy_errors[start:]),
+                   mse(basic.squared_xy_errors), mse(extended.squared_xy_errors),
+                   # aim error k scores state k + 1: the same states as above
+                   mse(basic.squared_xy_aim_errors[max(start - 1, 0):]),
+                   mse(extended.squared_xy_aim_errors[max(start - 1, 0):]))
 
     @property
     def ratio(self):
+        """MSE extended/basic, each outcome scored against the reference at its time."""
         return self.mse_extended / self.mse_basic
+
+    @property
+    def ratio_aimed(self):
+        """MSE extended/basic, each outcome scored against the reference its kick aimed at."""
+        return self.mse_extended_aimed / self.mse_basic_aimed
 
     def summary(self):
         return {'basic_phi_min_deg': math.degrees(self.basic_phi_min_rad),
@@ -308,30 +402,35 @@ class TrackingResult:
                 'mse_basic': self.mse_basic, 'mse_extended': self.mse_extended,
                 'mse_ratio': self.ratio, 'mse_basic_whole_run': self.mse_basic_all,
                 'mse_extended_whole_run': self.mse_extended_all,
-                'mse_ratio_whole_run': self.mse_extended_all / self.mse_basic_all}
+                'mse_ratio_whole_run': self.mse_extended_all / self.mse_basic_all,
+                'mse_basic_aimed': self.mse_basic_aimed,
+                'mse_extended_aimed': self.mse_extended_aimed,
+                'mse_ratio_aimed': self.ratio_aimed}
 
 
 def tracking_study(put, plant, config, kick_period_s=None, directions_rad=None, noise=None,
-                   basic_phi_min_widths=None, preview=False):
-    """Fig. 15: the scaled eq. (64) trajectory, best basic against extended.
+                   basic_bands_rad=None, preview=True, setup=PAPER_SETUP):
+    """Fig. 15: the set-up's eq. (64) trajectory, the best basic against the extended.
 
     Parameters
     ----------
     noise : tuple (std_rad, use_kalman) or None
         Measurement noise, seeded from ``config.seed``, with or without the Kalman filter.
-    basic_phi_min_widths : tuple of float, optional
-        Overrides ``config.basic_phi_min_widths``.
+    basic_bands_rad : tuple of float, optional
+        The basic controller's Phi_min to try (rad); by default the set-up's.
     preview : bool
         Both controllers aim where the reference will be when the kick has settled
         (:class:`LoopSettings`), not at the current sample.
+    setup : SetUp
     """
     period = config.for_plant(put).kick_period_s if kick_period_s is None else kick_period_s
-    trajectory = scaled_trajectory(put)
+    trajectory = setup.trajectory(put)
     steps = round(config.trajectory_periods / trajectory.frequency_hz / period)
     settings = LoopSettings(max_steps=steps, kick_period_s=period, preview=preview)
     W = put.full_width_rad
-    learning_min = None if noise is None else max(
-        DIRECTION_LEARNING_MIN_FRACTION * W, NOISE_LEARNING_SIGMAS * math.sqrt(2.0) * noise[0])
+    learning_min = setup.direction_learning_min_rad(put)
+    if noise is not None:
+        learning_min = max(learning_min, NOISE_LEARNING_SIGMAS * math.sqrt(2.0) * noise[0])
 
     def run(controller):
         sensor = estimator = None
@@ -344,26 +443,22 @@ def tracking_study(put, plant, config, kick_period_s=None, directions_rad=None, 
                                sensor, estimator)
 
     extended = run(study_controller(ControllerKind.EXTENDED,
-                                   config.extended_phi_min_rad * put.kick_scale, put, plant,
-                                   config, directions_rad, learning_min))
-    widths = config.basic_phi_min_widths if basic_phi_min_widths is None else \
-        basic_phi_min_widths
-    basics = [(f * W, run(study_controller(ControllerKind.BASIC, f * W, put, plant, config,
-                                          directions_rad)))
-              for f in widths]
+                                   setup.phi_min_rad(config.extended_phi_min_rad, put), put,
+                                   plant, config, directions_rad, learning_min))
+    bands = setup.basic_bands_rad(config, put) if basic_bands_rad is None else basic_bands_rad
+    basics = [(phi, run(study_controller(ControllerKind.BASIC, phi, put, plant, config,
+                                        directions_rad)))
+              for phi in bands]
     start = catch_up_step([extended] + [h for _, h in basics], W)
     phi, basic = min(basics, key=lambda p: float(np.mean(p[1].squared_xy_errors[start:])))
-    return TrackingResult(basic, extended, phi, start,
-                          float(np.mean(basic.squared_xy_errors[start:])),
-                          float(np.mean(extended.squared_xy_errors[start:])),
-                          float(np.mean(basic.squared_xy_errors)),
-                          float(np.mean(extended.squared_xy_errors)))
+    return TrackingResult.of(basic, extended, phi, start)
 
 
 def continuous_study(table, put, config, continuous_plant=None):
     """§5 setpoint scenario for a few kicks on the continuous model and on the table.
 
-    The extended controller (fresh, kick-scaled Phi_min = 0.05 deg) runs on both plants. The
+    The extended controller (fresh, the paper's set-up at Phi_min = 0.05 deg) runs on both
+    plants, in ``put``'s calibrated intensities. The
     table's one-step prediction along the continuous run tells how well the discrete model
     stands for the continuous one; the continuous kicks also show the transient overshoot the
     discrete model hides.
@@ -375,14 +470,19 @@ def continuous_study(table, put, config, continuous_plant=None):
 
         continuous_plant = ContinuousKickPlant(table.spec, table.parameters())
     recorder = _RecordingPlant(continuous_plant)
-    phi = PAPER_PHI_MIN_RAD[0] * put.kick_scale
+    continuous = put.calibrated(recorder)
+    table = put.calibrated(table)
+    phi = PAPER_PHI_MIN_RAD[0]
+    learning_min = PAPER_SETUP.direction_learning_min_rad(put)
     settings = LoopSettings(max_steps=config.continuous_kicks, kick_period_s=KICK_WINDOW_S)
     reference = Setpoint.from_normal(PAPER_SETPOINT_NORMAL)
     started = time.perf_counter()
-    cont = run_closed_loop(study_controller(ControllerKind.EXTENDED, phi, put, table, config),
-                           recorder, LEVEL_NORMAL, reference, settings)
+    cont = run_closed_loop(study_controller(ControllerKind.EXTENDED, phi, put, table, config,
+                                            direction_learning_min_rad=learning_min),
+                           continuous, LEVEL_NORMAL, reference, settings)
     wall_s = time.perf_counter() - started
-    disc = run_closed_loop(study_controller(ControllerKind.EXTENDED, phi, put, table, config),
+    disc = run_closed_loop(study_controller(ControllerKind.EXTENDED, phi, put, table, config,
+                                            direction_learning_min_rad=learning_min),
                            table, LEVEL_NORMAL, reference, settings)
     one_step = []
     for k, action in enumerate(cont.actions):
@@ -415,8 +515,8 @@ def twin_study(table, put, config, basic_phi_min_rad):
 
     The 33 deg mismatch of Fig. 15 cannot be laid on a physical plant's kicks; it is laid on the
     controllers' belief instead: they take the kicks' directions to be 33 deg short of what
-    they are, on both plants. The basic controller runs at ``basic_phi_min_rad``, the best on
-    the table.
+    they are, on both plants. The runs are the paper's set-up in ``put``'s calibrated
+    intensities; the basic controller runs at ``basic_phi_min_rad``, the best on the table.
     """
     from sphere_control.kick_plants import TwinKickPlant
     from sphere_sim.model.assembly import assemble
@@ -428,31 +528,37 @@ def twin_study(table, put, config, basic_phi_min_rad):
     period = config.kick_period_s
     model = assemble(load_scene('rest'), table.parameters())
     x_level = rest_state(model)
+    setup = PAPER_SETUP
+    learning_min = setup.direction_learning_min_rad(put)
+    nominal = put.calibrated(table)
 
     def fresh_twin():
-        return TwinKickPlant(table, ContinuousPlant(model, x_level.copy()), period)
+        return put.calibrated(TwinKickPlant(table, ContinuousPlant(model, x_level.copy()),
+                                            period))
 
     setpoint = Setpoint.from_normal(PAPER_SETPOINT_NORMAL)
     settings = LoopSettings(max_steps=config.setpoint_max_steps, kick_period_s=period)
     out = {'kick_period_s': period, 'setpoint': {}, 'trajectory': {}}
     for kind in (ControllerKind.BASIC, ControllerKind.EXTENDED):
-        runs = {name: run_closed_loop(study_controller(kind, PAPER_PHI_MIN_RAD[0], put, table,
-                                                       config), plant, LEVEL_NORMAL,
-                                      setpoint, settings)
-                for name, plant in (('twin', fresh_twin()), ('table', table))}
+        runs = {name: run_closed_loop(study_controller(kind, PAPER_PHI_MIN_RAD[0], put, nominal,
+                                                       config,
+                                                       direction_learning_min_rad=learning_min),
+                                      plant, LEVEL_NORMAL, setpoint, settings)
+                for name, plant in (('twin', fresh_twin()), ('table', nominal))}
         out['setpoint'][kind.value] = {k: setpoint_summary(h, put.full_width_rad)
                                        for k, h in runs.items()}
-    trajectory = scaled_trajectory(put)
+    trajectory = setup.trajectory(put)
     steps = round(config.twin_trajectory_periods / trajectory.frequency_hz / period)
     believed = tuple(d - PAPER_TRAJECTORY_MISMATCH_RAD for d in table.directions_rad)
     for preview, kind in itertools.product((False, True),
                                            (ControllerKind.BASIC, ControllerKind.EXTENDED)):
         phi = (basic_phi_min_rad if kind is ControllerKind.BASIC
-               else config.extended_phi_min_rad * put.kick_scale)
+               else setup.phi_min_rad(config.extended_phi_min_rad, put))
         settings = LoopSettings(max_steps=steps, kick_period_s=period, preview=preview)
-        runs = {name: run_closed_loop(study_controller(kind, phi, put, table, config, believed),
+        runs = {name: run_closed_loop(study_controller(kind, phi, put, nominal, config, believed,
+                                                       learning_min),
                                       plant, LEVEL_NORMAL, trajectory, settings)
-                for name, plant in (('twin', fresh_twin()), ('table', table))}
+                for name, plant in (('twin', fresh_twin()), ('table', nominal))}
         start = catch_up_step(list(runs.values()), put.full_width_rad)
         key = kind.value + (' with preview' if preview else '')
         out['trajectory'][key] = {
@@ -480,13 +586,17 @@ class _RecordingPlant:
 
 @dataclasses.dataclass
 class EvaluationReport:
-    """Figures (JSON-able), comparison rows and the histories behind the plots."""
+    """Figures (JSON-able), comparison rows and the histories behind the plots.
+
+    ``final_ratio`` is Fig. 15's MSE extended/basic in the paper's set-up with preview,
+    ``no_preview_ratio`` the same without preview.
+    """
 
     figures: dict
     rows: list
     histories: dict
     final_ratio: float
-    preview_ratio: float
+    no_preview_ratio: float
 
 
 def _row(scenario, quantity, paper, ours):
@@ -497,7 +607,8 @@ def _fmt_setpoint(s):
     settle = f'{s["kicks_to_settle"]} kicks' if s['kicks_to_settle'] is not None else \
         f'no ({s["outcome"]} after {s["kicks"]})'
     osc = ', oscillates' if s['oscillates'] else ''
-    return f'settles: {settle}; error {s["final_error_deg"]:.4f} deg{osc}'
+    back = f', {s["reversed_kicks"]} kicks reversed the one before' if s['reversed_kicks'] else ''
+    return f'settles: {settle}; error {s["final_error_deg"]:.4f} deg{osc}{back}'
 
 
 def evaluate(put, config=EvaluationConfig(), table=None, progress=print, continuous_plant=None,
@@ -505,7 +616,8 @@ def evaluate(put, config=EvaluationConfig(), table=None, progress=print, continu
     """All studies on the plant ``put``; ``table`` (a LookupTable) enables the continuous one.
 
     ``eight_plant`` offers eight directions (e.g. the diagonal and the axis-parallel tables
-    combined); without it the four-direction plant's kicks turned by 45 deg stand in.
+    combined; calibrated here from its own level-state curves); without it the four-direction
+    plant's kicks turned by 45 deg stand in.
 
     Returns
     -------
@@ -516,15 +628,18 @@ def evaluate(put, config=EvaluationConfig(), table=None, progress=print, continu
                'paper_full_kick_deg': math.degrees(PAPER_FULL_KICK_RAD),
                'kick_scale': put.kick_scale, 'kick_period_s': config.kick_period_s}
     rows, histories = [], {}
+    if eight_plant is not None:
+        eight_plant = IntensityCalibration.of(eight_plant).applied_to(eight_plant)
     _setpoint_figures(put, config, figures, rows, histories, progress)
-    main, previewed = _trajectory_figures(put, config, figures, rows, histories, progress)
+    tracking = _trajectory_figures(put, config, figures, rows, histories, progress)
     _direction_figures(put, config, eight_plant, figures, rows, progress)
-    _noise_figures(put, config, main, figures, rows, histories, progress)
+    _noise_figures(put, config, tracking, figures, rows, histories, progress)
     if table is not None and config.continuous_kicks > 0:
         _continuous_figures(put, config, table, continuous_plant, figures, rows, progress)
+    paper, paper_no_preview = tracking[PAPER_SETUP, True], tracking[PAPER_SETUP, False]
     if table is not None and config.twin_trajectory_periods > 0:
-        _twin_figures(put, config, table, main.basic_phi_min_rad, figures, rows, progress)
-    return EvaluationReport(figures, rows, histories, main.ratio, previewed.ratio)
+        _twin_figures(put, config, table, paper.basic_phi_min_rad, figures, rows, progress)
+    return EvaluationReport(figures, rows, histories, paper.ratio, paper_no_preview.ratio)
 
 
 def trajectory_plant(put):
@@ -538,137 +653,154 @@ def _setpoint_figures(put, config, figures, rows, histories, progress):
     for fig, mismatch in (('fig13', 0.0), ('fig14', PAPER_SETPOINT_MISMATCH_RAD)):
         plant = PerturbedPlant(put.plant, Mismatch(mismatch))
         figures[fig] = []
-        for scaling in PhiMinScaling:
+        for setup in SET_UPS:
             for index, paper_phi in enumerate(PAPER_PHI_MIN_RAD):
-                phi = phi_min_rad(paper_phi, scaling, put)
-                runs = setpoint_study(put, plant, PAPER_SETPOINT_NORMAL, phi, config)
+                phi = setup.phi_min_rad(paper_phi, put)
+                runs = setpoint_study(put, plant, PAPER_SETPOINT_NORMAL, phi, config,
+                                      setup=setup)
                 figures[fig].append({
-                    'phi_min_scaling': scaling.value, 'paper_phi_min_index': index,
+                    'set_up': setup.name, 'paper_phi_min_index': index,
                     'paper_phi_min_deg': math.degrees(paper_phi), 'phi_min_deg': math.degrees(phi),
                     'results': {k.value: setpoint_summary(h, W) for k, h in runs.items()}})
-                histories[(fig, scaling, index)] = runs
+                histories[(fig, setup, index)] = runs
         progress(f'{fig}: setpoint runs done')
     _setpoint_rows(rows, figures)
 
 
+def _setup_title(setup, put, config):
+    """What a set-up's Fig. 15 runs with, for a scenario's heading."""
+    f1 = setup.trajectory(put).frequency_hz
+    bands = ', '.join(f'{math.degrees(b):.4g}' for b in setup.basic_bands_rad(config, put))
+    learning = ('every kick' if setup.sigma_from_every_kick else
+                f'kicks of {DIRECTION_LEARNING_MIN_FRACTION:g} W and more')
+    return (f'Fig. 15 trajectory, 33 deg mismatch, set-up "{setup.name}" (f1 {f1:.4g} Hz, '
+            f'basic best of Phi_min {bands} deg, sigma from {learning})')
+
+
 def _trajectory_figures(put, config, figures, rows, histories, progress):
-    """Fig. 15: trajectory under a 33 deg mismatch, and its dependence on the kick
-    period, each without and with reference preview; returns the main tracking study and
-    the same with preview."""
+    """Fig. 15: trajectory under a 33 deg mismatch in every set-up, with and without
+    reference preview, and its dependence on the kick period; returns the tracking studies
+    by (set-up, preview)."""
     plant33 = trajectory_plant(put)
-    main = tracking_study(put, plant33, config)
-    histories['fig15'] = main
-    figures['fig15'] = {'kick_period_s': config.kick_period_s,
-                        'frequency_hz': scaled_trajectory(put).frequency_hz, **main.summary()}
-    figures['fig15']['reachable'] = speed_study(put, plant33, config)
-    previewed = tracking_study(put, plant33, config, preview=True)
-    histories['fig15_preview'] = previewed
-    figures['fig15']['preview'] = previewed.summary()
-    sweep, sweep_preview = {}, {}
-    for period in config.kick_period_sweep_s:
-        sweep[period] = tracking_study(put, plant33, config, kick_period_s=period).summary()
-        sweep_preview[period] = tracking_study(put, plant33, config, kick_period_s=period,
-                                               preview=True).summary()
-    figures['fig15_kick_period_sweep'] = {str(k): v for k, v in sweep.items()}
-    figures['fig15_kick_period_sweep_preview'] = {str(k): v for k, v in sweep_preview.items()}
+    tracking = {}
+    figures['fig15'] = {'kick_period_s': config.kick_period_s}
+    for setup in SET_UPS:
+        entry = {'frequency_hz': setup.trajectory(put).frequency_hz}
+        for preview in (True, False):
+            result = tracking_study(put, plant33, config, preview=preview, setup=setup)
+            tracking[setup, preview] = result
+            histories[('fig15', setup, preview)] = result
+            entry['preview' if preview else 'no_preview'] = result.summary()
+        entry['reachable'] = speed_study(put, plant33, config, setup)
+        entry['kick_period_sweep'] = {
+            str(period): {('preview' if preview else 'no_preview'): tracking_study(
+                put, plant33, config, kick_period_s=period, preview=preview,
+                setup=setup).summary() for preview in (True, False)}
+            for period in config.kick_period_sweep_s}
+        figures['fig15'][setup.name] = entry
+        _trajectory_rows(rows, _setup_title(setup, put, config), config, tracking, setup, entry)
     progress('fig15: trajectory runs done')
-    rows.append(_row('Fig. 15 trajectory, 33 deg mismatch',
-                     f'MSE extended/basic (tracking phase, {config.kick_period_s * 1e3:.0f} ms '
-                     'per kick)', f'~{PAPER_MSE_RATIO}', f'{main.ratio:.3f}'))
-    rows.append(_row('Fig. 15 trajectory, 33 deg mismatch', 'MSE extended/basic (whole run, '
-                     'approach from level included)', '-',
-                     f'{main.summary()["mse_ratio_whole_run"]:.3f}'))
-    rows.append(_row('Fig. 15 trajectory, 33 deg mismatch',
-                     'MSE extended/basic with reference preview (tracking phase)', '-',
-                     f'{previewed.ratio:.3f}'))
-    reach = figures['fig15']['reachable']['plant']
+    return tracking
+
+
+def _trajectory_rows(rows, scenario, config, tracking, setup, entry):
+    previewed, plain = tracking[setup, True], tracking[setup, False]
+    paper = f'~{PAPER_MSE_RATIO}' if setup is PAPER_SETUP else '-'
+    period_ms = f'{config.kick_period_s * 1e3:.0f} ms per kick'
+    rows.append(_row(scenario, f'MSE extended/basic with preview (tracking phase, {period_ms})',
+                     paper, f'{previewed.ratio:.3f} (against the aimed reference '
+                            f'{previewed.ratio_aimed:.3f})'))
+    rows.append(_row(scenario, 'MSE extended/basic without preview', '-',
+                     f'{plain.ratio:.3f} (against the aimed reference {plain.ratio_aimed:.3f})'))
+    rows.append(_row(scenario, 'MSE extended/basic with preview (whole run, approach from '
+                     'level included)', '-', f'{previewed.summary()["mse_ratio_whole_run"]:.3f}'))
+    rows.append(_row(scenario, 'best basic Phi_min with / without preview (deg)', '-',
+                     f'{math.degrees(previewed.basic_phi_min_rad):.4f} / '
+                     f'{math.degrees(plain.basic_phi_min_rad):.4f}'))
+    reach = entry['reachable']['plant']
     band = ('nowhere' if reach['tilt_deg_outrun'] is None else
             f'{100 * reach["fraction_outrun"]:.0f} % of the time, at tilts '
             f'{reach["tilt_deg_outrun"][0]:.1f}-{reach["tilt_deg_outrun"][1]:.1f} deg')
-    rows.append(_row('Fig. 15 trajectory, 33 deg mismatch',
-                     'reference faster than the plant can follow (true kicks)', '-',
+    rows.append(_row(scenario, 'reference faster than the plant can follow (true kicks)', '-',
                      f'{band}; needed/reachable up to {reach["max_ratio"]:.2f}'))
     single = ('nowhere' if reach['single_tilt_deg_outrun'] is None else
               f'{100 * reach["single_fraction_outrun"]:.0f} % of the time, at tilts '
               f'{reach["single_tilt_deg_outrun"][0]:.1f}-'
               f'{reach["single_tilt_deg_outrun"][1]:.1f} deg')
-    rows.append(_row('Fig. 15 trajectory, 33 deg mismatch',
-                     'reference faster than any single kick along it (true kicks)', '-',
-                     f'{single}; up to {reach["single_max_ratio"]:.2f}'))
-    for period, s in sweep.items():
-        rows.append(_row('Fig. 15 trajectory, 33 deg mismatch',
-                         f'MSE extended/basic at {period * 1e3:.0f} ms per kick, without / '
-                         'with preview', '-',
-                         f'{s["mse_ratio"]:.3f} / {sweep_preview[period]["mse_ratio"]:.3f}'))
-    return main, previewed
+    rows.append(_row(scenario, 'reference faster than any single kick along it (true kicks)',
+                     '-', f'{single}; up to {reach["single_max_ratio"]:.2f}'))
+    for period, s in entry['kick_period_sweep'].items():
+        rows.append(_row(scenario, f'MSE extended/basic at {float(period) * 1e3:.0f} ms per '
+                         'kick, with / without preview', '-',
+                         f'{s["preview"]["mse_ratio"]:.3f} / {s["no_preview"]["mse_ratio"]:.3f}'))
 
 
 def _direction_figures(put, config, eight_plant, figures, rows, progress):
-    """Beyond the paper: eight directions against four (no mismatch)."""
+    """Beyond the paper: eight directions against four (no mismatch), in every set-up."""
     W = put.full_width_rad
     eight = EightDirectionPlant(put.plant) if eight_plant is None else eight_plant
     figures['directions'] = {}
-    for label, plant in (('4', put.plant), ('8', eight)):
-        entry = {}
-        for name, target in (('paper setpoint', PAPER_SETPOINT_NORMAL),
-                             ('axis setpoint', AXIS_SETPOINT_NORMAL)):
-            runs = setpoint_study(put, plant, target, PAPER_PHI_MIN_RAD[0] * put.kick_scale,
-                                  config, kinds=(ControllerKind.EXTENDED,))
-            basic = setpoint_study(put, plant, target, PAPER_PHI_MIN_RAD[1] * put.kick_scale,
-                                   config, kinds=(ControllerKind.BASIC,))
-            entry[name] = {'extended': setpoint_summary(runs[ControllerKind.EXTENDED], W),
-                           'basic': setpoint_summary(basic[ControllerKind.BASIC], W)}
-        entry['trajectory'] = tracking_study(put, plant, config).summary()
-        entry['trajectory_preview'] = tracking_study(put, plant, config, preview=True).summary()
-        figures['directions'][label] = entry
-    progress('directions: runs done')
-    for name in ('paper setpoint', 'axis setpoint'):
+    for setup in SET_UPS:
+        figures['directions'][setup.name] = by_count = {}
+        for label, plant in (('4', put.plant), ('8', eight)):
+            entry = {}
+            for name, target in (('paper setpoint', PAPER_SETPOINT_NORMAL),
+                                 ('axis setpoint', AXIS_SETPOINT_NORMAL)):
+                runs = setpoint_study(put, plant, target,
+                                      setup.phi_min_rad(PAPER_PHI_MIN_RAD[0], put), config,
+                                      kinds=(ControllerKind.EXTENDED,), setup=setup)
+                basic = setpoint_study(put, plant, target,
+                                       setup.phi_min_rad(PAPER_PHI_MIN_RAD[1], put), config,
+                                       kinds=(ControllerKind.BASIC,), setup=setup)
+                n = len(plant.directions_rad)
+                entry[name] = {'extended': setpoint_summary(runs[ControllerKind.EXTENDED], W, n),
+                               'basic': setpoint_summary(basic[ControllerKind.BASIC], W, n)}
+            entry['trajectory'] = tracking_study(put, plant, config, setup=setup).summary()
+            by_count[label] = entry
+        scenario = f'8 vs 4 directions, set-up "{setup.name}"'
+        for name in ('paper setpoint', 'axis setpoint'):
+            for kind in ('extended', 'basic'):
+                four, eig = (by_count[n][name][kind] for n in ('4', '8'))
+                rows.append(_row(f'{scenario}, {name}', f'{kind}: kicks to settle (8 vs 4)', '-',
+                                 f'{eig["kicks_to_settle"]} vs {four["kicks_to_settle"]}'))
         for kind in ('extended', 'basic'):
-            four, eig = (figures['directions'][n][name][kind] for n in ('4', '8'))
-            rows.append(_row(f'8 vs 4 directions, {name}',
-                             f'{kind}: kicks to settle (8 vs 4)', '-',
-                             f'{eig["kicks_to_settle"]} vs {four["kicks_to_settle"]}'))
-    for kind in ('extended', 'basic'):
-        four, eig = (figures['directions'][n]['trajectory'][f'mse_{kind}'] for n in ('4', '8'))
-        rows.append(_row('8 vs 4 directions, trajectory (no mismatch)',
-                         f'{kind}: tracking MSE (8 vs 4)', '-', f'{eig:.3g} vs {four:.3g}'))
-        four, eig = (figures['directions'][n]['trajectory_preview'][f'mse_{kind}']
-                     for n in ('4', '8'))
-        rows.append(_row('8 vs 4 directions, trajectory (no mismatch)',
-                         f'{kind}: tracking MSE with preview (8 vs 4)', '-',
-                         f'{eig:.3g} vs {four:.3g}'))
+            four, eig = (by_count[n]['trajectory'][f'mse_{kind}'] for n in ('4', '8'))
+            rows.append(_row(f'{scenario}, trajectory (no mismatch, preview)',
+                             f'{kind}: tracking MSE (8 vs 4)', '-', f'{eig:.3g} vs {four:.3g}'))
+    progress('directions: runs done')
 
 
-def _noise_figures(put, config, main, figures, rows, histories, progress):
-    """Beyond the paper: noisy measurements, with and without a Kalman filter; the
-    basic controller keeps the Phi_min that was best without noise."""
+def _noise_figures(put, config, tracking, figures, rows, histories, progress):
+    """Beyond the paper: noisy measurements, with and without a Kalman filter, in every
+    set-up; the basic controller keeps the Phi_min that was best without noise."""
     W = put.full_width_rad
     plant33 = trajectory_plant(put)
     figures['kalman'] = {}
-    best_basic = (main.basic_phi_min_rad / W,)
-    for fraction in config.noise_std_widths:
-        std = fraction * W
-        entry = {'noise_std_deg': math.degrees(std), 'noise_std_widths': fraction}
-        for use_kalman in (False, True):
-            result = tracking_study(put, plant33, config, noise=(std, use_kalman),
-                                    basic_phi_min_widths=best_basic)
-            entry['with filter' if use_kalman else 'raw'] = result.summary()
-            histories[('kalman', fraction, use_kalman)] = result
-        entry['with filter and preview'] = tracking_study(
-            put, plant33, config, noise=(std, True), basic_phi_min_widths=best_basic,
-            preview=True).summary()
-        figures['kalman'][str(fraction)] = entry
-        for kind in ('extended', 'basic'):
-            rows.append(_row(f'noise std {math.degrees(std):.4f} deg ({fraction} kick), '
-                             'trajectory 33 deg mismatch',
-                             f'{kind}: tracking MSE with vs without Kalman', '-',
-                             f'{entry["with filter"][f"mse_{kind}"]:.3g} vs '
-                             f'{entry["raw"][f"mse_{kind}"]:.3g}'))
-            rows.append(_row(f'noise std {math.degrees(std):.4f} deg ({fraction} kick), '
-                             'trajectory 33 deg mismatch',
-                             f'{kind}: tracking MSE with Kalman, with vs without preview', '-',
-                             f'{entry["with filter and preview"][f"mse_{kind}"]:.3g} vs '
-                             f'{entry["with filter"][f"mse_{kind}"]:.3g}'))
+    for setup in SET_UPS:
+        figures['kalman'][setup.name] = by_noise = {}
+        best_basic = (tracking[setup, True].basic_phi_min_rad,)
+        for fraction in config.noise_std_widths:
+            std = fraction * W
+            entry = {'noise_std_deg': math.degrees(std), 'noise_std_widths': fraction}
+            for use_kalman in (False, True):
+                result = tracking_study(put, plant33, config, noise=(std, use_kalman),
+                                        basic_bands_rad=best_basic, setup=setup)
+                entry['with filter' if use_kalman else 'raw'] = result.summary()
+                histories[('kalman', setup, fraction, use_kalman)] = result
+            entry['with filter, without preview'] = tracking_study(
+                put, plant33, config, noise=(std, True), basic_bands_rad=best_basic,
+                preview=False, setup=setup).summary()
+            by_noise[str(fraction)] = entry
+            scenario = (f'noise std {math.degrees(std):.4f} deg ({fraction} kick), trajectory '
+                        f'33 deg mismatch, set-up "{setup.name}"')
+            for kind in ('extended', 'basic'):
+                filtered, raw, plain = (entry[k][f'mse_{kind}'] for k in (
+                    'with filter', 'raw', 'with filter, without preview'))
+                rows.append(_row(scenario, f'{kind}: tracking MSE with vs without Kalman', '-',
+                                 f'{filtered:.3g} vs {raw:.3g}'))
+                rows.append(_row(scenario,
+                                 f'{kind}: tracking MSE with Kalman, with vs without preview',
+                                 '-', f'{filtered:.3g} vs {plain:.3g}'))
     progress('kalman: runs done')
 
 
@@ -725,7 +857,7 @@ def _setpoint_rows(rows, figures):
                               ('fig14', PAPER_FIG14, 'Fig. 14 setpoint, 12 deg mismatch')):
         for entry in figures[fig]:
             scenario = (f'{title}, Phi_min {entry["phi_min_deg"]:.4f} deg '
-                        f'({entry["phi_min_scaling"]})')
+                        f'(set-up "{entry["set_up"]}")')
             for i, (kind, s) in enumerate(entry['results'].items()):
                 finding = paper[entry['paper_phi_min_index']] if i == 0 else ''
                 rows.append(_row(scenario, kind, finding, _fmt_setpoint(s)))

@@ -55,7 +55,8 @@ class ExtendedParams:
     rates : LearningRates
     direction_learning_min_rad : float or None
         Kicks shorter than this (rad) do not update sigma_a; by default
-        DIRECTION_LEARNING_MIN_FRACTION of the full width.
+        DIRECTION_LEARNING_MIN_FRACTION of the full width; 0 learns from every kick that
+        moved the sphere (the paper).
     """
 
     phi_min_rad: float
@@ -106,7 +107,8 @@ class ExtendedController:
         d = displacement_xy(normal_before, normal_after)
         rates = self.params.rates
         rotation = angle_between(normal_before, normal_after)
-        if rotation >= self.params.direction_threshold_rad:
+        # A kick that did not move the sphere has no direction, whatever the threshold.
+        if rotation > 0.0 and rotation >= self.params.direction_threshold_rad:
             achieved = math.atan2(d[1], d[0])
             gap = wrap_angle_rad(self.directions_rad[a] - achieved)
             self.directions_rad[a] = wrap_angle_rad(self.directions_rad[a] - rates.direction * gap)

@@ -239,12 +239,12 @@ class KickCycle:
             return Decision(Phase.NO_REFERENCE)
         phi = error_angle_rad(normal, self.reference)
         theta = error_direction_rad(normal, self.reference) if phi > 0.0 else 0.0
-        command = self.controller.decide(normal, self.target())
-        if command is None:
-            return Decision(Phase.RESTING, None, phi, theta)
         lead_s = (LEAD_BEFORE_PERIOD_KNOWN_S if self.period_s is None
                   else self.period_s) * self.lead_periods
         start_s = round((time_s + lead_s) * NS_PER_S) / NS_PER_S
+        command = self.controller.decide(normal, self.target(start_s + self.kick_period_s))
+        if command is None:
+            return Decision(Phase.RESTING, None, phi, theta)
         sent_wall_s = self.last_sample_wall_s if wall_s is None else wall_s
         self.pending = PendingKick(start_s, normal, command, sent_wall_s or 0.0)
         self.counts.kicks += 1
@@ -261,12 +261,20 @@ class KickCycle:
         return True
 
     # --- aims --------------------------------------------------------------------------
-    def target(self):
-        """What the controller aims at: the reference, or with preview where it will be."""
-        if self.preview:
-            ahead = self.reference_motion.ahead(self.kick_period_s)
-            if ahead is not None:
-                return ahead
+    def target(self, landing_s):
+        """What the controller aims at: the reference, or with preview where it will be at
+        ``landing_s`` (simulated s), when the kick about to be decided is over.
+
+        The newest reference sample may be a reference period old (100 ms at the reference
+        node's 10 Hz, more than two kick periods), so the preview runs from its stamp, not
+        from the deciding sample. It is capped at a kick period and the motion estimate's
+        history, so that a reference stamped on another clock is not carried far.
+        """
+        motion = self.reference_motion
+        if self.preview and motion.times_s:
+            horizon_s = min(max(landing_s - motion.times_s[-1], 0.0),
+                            self.kick_period_s + motion.history_s)
+            return motion.ahead(horizon_s)
         return self.reference
 
     def speed_ratio(self):

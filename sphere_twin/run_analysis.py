@@ -34,6 +34,7 @@ from msg_defs.topics import (
     VOLTAGE_COMMAND,
 )
 from msg_defs.voltage_rules import check_segments, check_voltages
+from sphere_control.reference_motion import JUMP_TOLERANCE
 from sphere_sim.model.rotations import angle_between
 from sphere_sim.twin.plants import TIME_TOL_S
 from sphere_twin.bag.reader import BagError, deserialize, read_messages
@@ -169,15 +170,56 @@ def _reported_starts(programmes, reports, unreported_start_s):
     return kicks
 
 
+# Two reference samples further apart than this (s) are not interpolated between: the
+# reference node publishes at 10 Hz, and a longer gap is a pause or a lost stretch.
+REFERENCE_INTERPOLATION_MAX_GAP_S = 0.25
+
+
 def reference_at(run, times_s):
-    """The reference in force at each time (NaN before the first), shape (len(times_s), 3)."""
+    """The reference at each time (NaN before the first sample), shape (len(times_s), 3).
+
+    A moving reference is scored where it is at the sample's time, as the paper's Fig. 15b and
+    the offline loop score it, not where its last sample was (at 10 Hz that sample can be a
+    tenth of a second old, a few kick periods of eq. (64)). Between two samples received close
+    together that continue the step before them (within the controller's jump tolerance,
+    :data:`~sphere_control.reference_motion.JUMP_TOLERANCE`) the reference is interpolated;
+    after the last sample, across a longer gap, and from a jump until the next sample, the
+    newest one holds, so a jump is never spread back in time.
+    """
+    times_s = np.asarray(times_s, dtype=float)
     out = np.full((len(times_s), 3), np.nan)
-    if run.reference_t_s.size == 0:
+    t_ref, refs = run.reference_t_s, run.references
+    if t_ref.size == 0:
         return out
-    index = np.searchsorted(run.reference_t_s, times_s, side='right') - 1
+    index = np.searchsorted(t_ref, times_s, side='right') - 1
     valid = index >= 0
-    out[valid] = run.references[index[valid]]
+    out[valid] = refs[index[valid]]
+    smooth = _continuing_intervals(t_ref, refs)
+    between = valid & (index < t_ref.size - 1)
+    between[between] = smooth[index[between]]
+    if between.any():
+        i = index[between]
+        w = ((times_s[between] - t_ref[i]) / (t_ref[i + 1] - t_ref[i]))[:, None]
+        mixed = (1.0 - w) * refs[i] + w * refs[i + 1]
+        out[between] = mixed / np.linalg.norm(mixed, axis=1)[:, None]
     return out
+
+
+def _continuing_intervals(t_ref, refs):
+    """Per interval (i, i + 1) of the reference samples, shape (n - 1,): True where the step
+    continues the one before it (no jump) and the gap is short."""
+    n = t_ref.size
+    smooth = np.zeros(max(n - 1, 0), dtype=bool)
+    if n < 3:
+        return smooth
+    dt = np.diff(t_ref)
+    step = np.diff(refs[:, :2], axis=0)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        expected = step[:-1] * (dt[1:] / dt[:-1])[:, None]
+    off = np.hypot(*(step[1:] - expected).T)
+    smooth[1:] = ((dt[1:] > 0.0) & (dt[:-1] > 0.0) & (off <= JUMP_TOLERANCE)
+                  & (dt[1:] <= REFERENCE_INTERPOLATION_MAX_GAP_S))
+    return smooth
 
 
 @dataclasses.dataclass(frozen=True)
@@ -205,7 +247,7 @@ class RunStatistics:
 
 
 def errors_rad(run):
-    """(times_s, error_rad) of the samples that have a reference."""
+    """(times_s, error_rad) of the samples that have a reference (:func:`reference_at`)."""
     refs = reference_at(run, run.normal_t_s)
     valid = ~np.isnan(refs[:, 0])
     errors = np.array([angle_between(n, r) for n, r in zip(run.normals[valid], refs[valid],

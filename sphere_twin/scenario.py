@@ -82,15 +82,18 @@ def offline_loop(setpoint_s, duration_s, plant='continuous'):
     """
     from sphere_control.closed_loop import LoopSettings, run_closed_loop
     from sphere_control.controllers import controller_for
+    from sphere_control.intensity_calibration import IntensityCalibration
     from sphere_control.kick_plants import TwinKickPlant
     from sphere_sim.kicks.discrete import kick_period_s
     from sphere_sim.twin.plant_setup import build_plant, load_kick_model
 
     kicks = load_kick_model()
+    calibration = IntensityCalibration.of(kicks)
     period_s = kick_period_s(kicks)
     twin = build_plant(plant)
     start = twin.snapshot().normal
-    kick_plant = TwinKickPlant(kicks, twin, period_s) if plant == 'continuous' else kicks
+    kick_plant = calibration.applied_to(TwinKickPlant(kicks, twin, period_s)
+                                        if plant == 'continuous' else kicks)
     settings = LoopSettings(max_steps=round(duration_s / period_s), kick_period_s=period_s)
-    return run_closed_loop(controller_for(CONTROLLER, kicks), kick_plant, start,
-                           scenario_reference(setpoint_s), settings)
+    return run_closed_loop(controller_for(CONTROLLER, calibration.applied_to(kicks)), kick_plant,
+                           start, scenario_reference(setpoint_s), settings)

@@ -2,17 +2,21 @@
 
 import math
 
+import numpy as np
 import pytest
 
 from sphere_control.closed_loop import Outcome
 from sphere_control.controllers import ControllerKind
 from sphere_control.evaluation import (
+    EVERY_KICK_SETUP,
+    OUR_SETUP,
     PAPER_PHI_MIN_RAD,
     PAPER_SETPOINT_NORMAL,
+    PAPER_SETUP,
     EvaluationConfig,
     PlantUnderTest,
     oscillates,
-    scaled_trajectory,
+    reversed_kicks,
     setpoint_study,
     tracking_study,
 )
@@ -31,7 +35,26 @@ def test_measured_full_kick_and_scale(put):
     # the plant moves the x-y point by 0.54 deg; the rotation angle is a little larger
     assert math.degrees(put.full_width_rad) == pytest.approx(0.54, rel=1e-4)
     assert put.kick_scale == pytest.approx(1.0, rel=1e-4)
-    assert scaled_trajectory(put).frequency_hz == pytest.approx(0.02, rel=1e-4)
+    assert OUR_SETUP.trajectory(put).frequency_hz == pytest.approx(0.02, rel=1e-4)
+
+
+def test_the_paper_set_up_keeps_the_paper_numbers_whatever_the_kick():
+    """f1, Phi_min and the basic bands are the paper's in its set-up; ours scales them by the
+    kick-size ratio and searches the band in kick widths."""
+    small = PlantUnderTest.measure('small', AnalyticKickPlant(0.5 * PAPER_FULL_KICK_RAD))
+    config = EvaluationConfig()
+    assert small.kick_scale == pytest.approx(0.5, rel=1e-4)
+    assert PAPER_SETUP.trajectory(small).frequency_hz == 0.02
+    assert OUR_SETUP.trajectory(small).frequency_hz == pytest.approx(0.01, rel=1e-4)
+    assert PAPER_SETUP.phi_min_rad(PAPER_PHI_MIN_RAD[0], small) == PAPER_PHI_MIN_RAD[0]
+    assert OUR_SETUP.phi_min_rad(PAPER_PHI_MIN_RAD[0], small) == pytest.approx(
+        0.5 * PAPER_PHI_MIN_RAD[0], rel=1e-4)
+    assert PAPER_SETUP.basic_bands_rad(config, small) == PAPER_PHI_MIN_RAD
+    assert OUR_SETUP.basic_bands_rad(config, small) == pytest.approx(
+        [f * small.full_width_rad for f in config.basic_phi_min_widths])
+    assert EVERY_KICK_SETUP.direction_learning_min_rad(small) == 0.0
+    assert PAPER_SETUP.direction_learning_min_rad(small) == pytest.approx(
+        0.2 * small.full_width_rad)
 
 
 @pytest.mark.parametrize('mismatch_deg', [0.0, 12.0])
@@ -42,6 +65,7 @@ def test_fig13_14_small_band_basic_oscillates_extended_settle(put, mismatch_deg)
     basic = runs[ControllerKind.BASIC]
     assert basic.outcome is not Outcome.SETTLED
     assert oscillates(basic, put.full_width_rad)
+    assert reversed_kicks(basic, 4) > 0.5 * basic.kicks
     for kind in (ControllerKind.EXTENDED, ControllerKind.PRELEARNED):
         h = runs[kind]
         assert h.outcome is Outcome.SETTLED
@@ -64,7 +88,8 @@ def test_fig15_extended_tracks_better_than_the_best_basic(put):
     """A short run (a quarter period) at a fast kick rate, where the paper's factor shows."""
     plant = PerturbedPlant(put.plant, Mismatch(math.radians(33.0)))
     config = EvaluationConfig(trajectory_periods=0.25, basic_phi_min_widths=(0.5, 1.0))
-    result = tracking_study(put, plant, config, kick_period_s=0.03)
+    result = tracking_study(put, plant, config, kick_period_s=0.03, preview=False,
+                            setup=OUR_SETUP)
     assert result.basic.outcome is Outcome.COMPLETED
     assert 0 < result.catch_up_step < len(result.basic.actions) // 2
     assert result.ratio < 0.5
@@ -76,11 +101,30 @@ def test_reference_preview_removes_the_step_behind_on_an_ideal_plant(put):
     takes most of that lag away, for both controllers."""
     plant = PerturbedPlant(put.plant, Mismatch(math.radians(33.0)))
     config = EvaluationConfig(trajectory_periods=0.25, basic_phi_min_widths=(0.5, 1.0))
-    plain = tracking_study(put, plant, config, kick_period_s=0.06)
-    ahead = tracking_study(put, plant, config, kick_period_s=0.06, preview=True)
+    plain = tracking_study(put, plant, config, kick_period_s=0.06, preview=False,
+                           setup=OUR_SETUP)
+    ahead = tracking_study(put, plant, config, kick_period_s=0.06, setup=OUR_SETUP)
     assert ahead.mse_extended < 0.7 * plain.mse_extended
     assert ahead.mse_basic < plain.mse_basic
     assert ahead.ratio < plain.ratio
+
+
+def test_both_scorings_agree_with_preview_and_part_without(put):
+    """Scored against the reference of its own time, a kick aimed at the current sample is a
+    reference step behind; scored against what it aimed at, it is not. With preview the aim is
+    the reference of the time the kick is scored at, so both scorings agree."""
+    plant = PerturbedPlant(put.plant, Mismatch(math.radians(33.0)))
+    config = EvaluationConfig(trajectory_periods=0.25)
+    plain = tracking_study(put, plant, config, kick_period_s=0.06, preview=False)
+    ahead = tracking_study(put, plant, config, kick_period_s=0.06)
+    # the preview follows the tangent, which leaves the circle by a hair over a kick period
+    assert ahead.mse_extended_aimed == pytest.approx(ahead.mse_extended, rel=0.02)
+    assert ahead.mse_basic_aimed == pytest.approx(ahead.mse_basic, rel=0.02)
+    assert plain.mse_extended_aimed < 0.7 * plain.mse_extended
+    # the aim of a step is its own reference sample without preview
+    h = plain.extended
+    assert np.array_equal(h.aims, h.references[:-1])
+    assert len(h.squared_xy_aim_errors) == len(h.actions)
 
 
 def test_preview_changes_nothing_on_a_setpoint(put):

@@ -65,6 +65,29 @@ def test_interrupted_build_resumes_without_redoing_entries(tmp_path, serial_buil
     np.testing.assert_array_equal(resumed.displacement, first.displacement)
 
 
+def test_a_table_at_more_intensities_reuses_the_kicks_it_shares(serial_table):
+    """Only the new intensity is simulated; the shared entries are the old table's and equal
+    what a fresh build gives (one kick is fixed by its node, intensity and the spec)."""
+    wider = dataclasses.replace(SMALL, intensities=(0.9, 1.0))
+    seen = []
+    table = build_table(wider, workers=1, reuse=serial_table,
+                        progress=lambda done, total: seen.append((done, total)))
+    nodes = len(SMALL.nodes())
+    assert seen[0] == (nodes, 2 * nodes)  # the reused half was there before any simulation
+    np.testing.assert_array_equal(table.displacement[:, :, 1], serial_table.displacement[:, :, 0])
+    fresh = build_table(dataclasses.replace(SMALL, intensities=(0.9,)), workers=1)
+    np.testing.assert_array_equal(table.displacement[:, :, 0], fresh.displacement[:, :, 0])
+
+
+def test_a_table_of_another_kick_is_not_reused(serial_table):
+    from sphere_sim.kicks.table_build import ReuseError
+
+    other = dataclasses.replace(SMALL, window_s=6e-3)
+    with pytest.raises(ReuseError, match='only its intensities may differ'):
+        build_table(other, workers=1, reuse=serial_table)
+    assert issubclass(ReuseError, TableError)  # one line in the CLI
+
+
 def test_table_round_trips_and_refuses_other_parameters(tmp_path, serial_table):
     from sphere_sim.model.parameters import load_parameter_set
 

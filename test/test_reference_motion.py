@@ -69,8 +69,23 @@ def test_the_cycle_aims_ahead_only_with_preview():
     for c in (plain, ahead):
         for t in np.arange(0.0, 1.0, 0.1):
             c.on_reference(normal_from_xy(*(v * t)), t)
-    np.testing.assert_array_equal(plain.target(), plain.reference)
-    np.testing.assert_allclose(ahead.target()[:2], v * (0.9 + 0.05), atol=1e-12)
+    np.testing.assert_array_equal(plain.target(0.95), plain.reference)
+    np.testing.assert_allclose(ahead.target(0.95)[:2], v * 0.95, atol=1e-12)
+
+
+def test_the_preview_runs_from_the_reference_stamp_to_the_landing():
+    """The reference arrives at 10 Hz, the normal at 100 Hz: a kick decided 80 ms after the
+    newest reference sample lands a kick period later, 130 ms after it. A landing time before
+    the sample aims at the sample; one far beyond it (a reference on another clock) is
+    capped."""
+    v = np.array([0.02, 0.0])
+    c = cycle(True)
+    for t in np.arange(0.0, 1.0, 0.1):
+        c.on_reference(normal_from_xy(*(v * t)), t)
+    np.testing.assert_allclose(c.target(0.9 + 0.08 + 0.05)[:2], v * 1.03, atol=1e-12)
+    np.testing.assert_allclose(c.target(0.5)[:2], v * 0.9, atol=1e-12)
+    cap = 0.05 + c.reference_motion.history_s
+    np.testing.assert_allclose(c.target(1e6)[:2], v * (0.9 + cap), atol=1e-12)
 
 
 @pytest.mark.parametrize(('speed', 'outrun'), [(0.02, False), (0.5, True)])
@@ -82,3 +97,26 @@ def test_the_cycle_reports_a_reference_faster_than_its_kicks(speed, outrun):
     expected = speed * 0.05 / (math.radians(0.54) / math.sqrt(2.0))
     assert c.speed_ratio() == pytest.approx(expected, rel=1e-9)
     assert (c.speed_ratio() > 1.0) is outrun
+
+
+@pytest.mark.parametrize('time_s', [0.0, 3.3, 12.5, 31.0])
+def test_the_trajectory_velocity_is_the_derivative_of_its_points(time_s):
+    trajectory = CircleTrajectory()
+    h = 1e-5
+    numeric = (trajectory.xy_at(time_s + h) - trajectory.xy_at(time_s - h)) / (2 * h)
+    np.testing.assert_allclose(trajectory.velocity_xy(time_s), numeric, atol=1e-9)
+
+
+def test_the_offline_preview_follows_the_motion_and_does_not_foresee_a_switch():
+    """As the node's estimate, the offline preview extrapolates the motion at the decision:
+    a setpoint about to give way to the trajectory is aimed at as it is."""
+    from sphere_control.reference import ScheduledReference, Setpoint, preview
+
+    schedule = ScheduledReference(Setpoint((0.01, 0.02)), CircleTrajectory(), switch_s=3.0,
+                                  offset_s=12.5)
+    before = preview(schedule, 2.98, 0.04)
+    np.testing.assert_allclose(before.normal[:2], [0.01, 0.02], atol=1e-15)
+    during = preview(schedule, 3.2, 0.04)
+    exact = schedule.xy_at(3.24)
+    assert np.hypot(*(during.normal[:2] - exact)) < 1.2e-5  # half the acceleration T^2
+    assert np.hypot(*(schedule.xy_at(3.2) - exact)) > 1e-3

@@ -48,9 +48,13 @@ class TableSpec:
     grid_step: float = 0.08
     # Denser towards full intensity, where the optimised kicks' width rises steeply and smoothly
     # (0.12 deg at u_K = 0.9, 0.73 deg at 1; docs/motion_primitives.md): a uniform 0.1 step
-    # left 0.14 deg of interpolation error there, 0.01 steps leave about 1e-3 deg.
-    intensities: tuple = (0.0, 0.2, 0.4, 0.5, 0.6, 0.65, 0.7, 0.75, 0.8, 0.84, 0.87, 0.9, 0.92,
-                          0.94, 0.95, 0.96, 0.97, 0.98, 0.99, 1.0)
+    # left 0.14 deg of interpolation error there, 0.01 steps leave about 1e-3 deg. Dense too
+    # across the high pair's pull-in, where the width jumps (from the level state 0.044 deg at
+    # 0.54, 0.242 deg at 0.56): the calibrated intensities of small kicks fall there
+    # (sphere_control.intensity_calibration), and 0.5 and 0.6 alone interpolated across it.
+    intensities: tuple = (0.0, 0.2, 0.4, 0.5, 0.52, 0.54, 0.55, 0.56, 0.57, 0.58, 0.6, 0.65,
+                          0.7, 0.75, 0.8, 0.84, 0.87, 0.9, 0.92, 0.94, 0.95, 0.96, 0.97, 0.98,
+                          0.99, 1.0)
     window_s: float = KICK_WINDOW_S
     rtol: float = 1e-6
     parameter_set: str = DEFAULT_PARAMETER_SET

@@ -19,7 +19,7 @@ from threadpoolctl import threadpool_limits
 from sphere_sim.kicks.design import KICK_RELAXATION, cardan_of_normal, simulate_kick
 from sphere_sim.kicks.discrete import normal_from_xy
 from sphere_sim.kicks.engine import DaskEngine, PoolEngine, engine_for
-from sphere_sim.kicks.lookup_table import TABLE_FORMAT_VERSION, LookupTable, TableSpec
+from sphere_sim.kicks.lookup_table import TABLE_FORMAT_VERSION, LookupTable, TableError, TableSpec
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.parameters import load_parameter_set
@@ -173,8 +173,43 @@ def _dask_map(groups, spec_data, params, client):
         yield future.result()
 
 
+class ReuseError(TableError):
+    """A table whose entries cannot stand for the ones a spec asks for."""
+
+
+def reusable_entries(spec, params_digest, table):
+    """The entries of ``table`` that ``spec`` asks for too, keyed as its jobs.
+
+    ``table`` must have been built for the same kick, grid, window, tolerance, offsets and
+    parameters as ``spec``, which may differ only in its intensities: an entry is one kick,
+    fixed by those and its node and intensity, so it is the same whichever table holds it.
+
+    Raises
+    ------
+    ReuseError
+        For a table built for something else.
+    """
+    same = dataclasses.replace(table.spec, intensities=spec.intensities)
+    if same.digest(params_digest) != spec.digest(params_digest):
+        raise ReuseError('the table to reuse was built for another kick, grid, window or '
+                         'offsets; only its intensities may differ')
+    if table.meta['params_digest'] != params_digest:
+        raise ReuseError('the table to reuse was built for other parameter values')
+    old = {round(float(u), 12): k for k, u in enumerate(table.intensities)}
+    entries = {}
+    for job in jobs_of(spec):
+        k = old.get(round(job.intensity, 12))
+        if k is None or np.isnan(table.displacement[job.i, job.j, k, 0]):
+            continue
+        dx, dy = table.displacement[job.i, job.j, k]
+        entries[job.key] = {'key': list(job.key), 'dx': float(dx), 'dy': float(dy),
+                            'peak_rad': float(table.peak_rad[job.i, job.j, k]),
+                            'settle_s': float(table.settle_s[job.i, job.j, k])}
+    return entries
+
+
 def build_table(spec, params=None, workers=1, scheduler=None, partial_path=None,
-                progress=None):
+                progress=None, reuse=None):
     """Simulate every entry of ``spec`` (resuming from ``partial_path``) into a LookupTable.
 
     Parameters
@@ -191,19 +226,26 @@ def build_table(spec, params=None, workers=1, scheduler=None, partial_path=None,
         File of finished entries, appended as they arrive.
     progress : callable, optional
         Called with the number of entries finished so far and the total.
+    reuse : LookupTable, optional
+        A table of the same kick at other intensities: its entries are taken, not simulated
+        again (:func:`reusable_entries`).
     """
     params = load_parameter_set(spec.parameter_set) if params is None else params
     digest = spec.digest(params.digest())
     spec_data = spec_to_dict(spec)
     jobs = jobs_of(spec)
     done = _read_partial(partial_path, digest)
-    todo = [job for job in jobs if job.key not in done]
+    reused = {} if reuse is None else reusable_entries(spec, params.digest(), reuse)
+    reused = {key: entry for key, entry in reused.items() if key not in done}
+    todo = [job for job in jobs if job.key not in done and job.key not in reused]
     stream = None
     if partial_path is not None:
         fresh = not done
         stream = open(partial_path, 'w' if fresh else 'a')  # noqa: SIM115 - closed below
         if fresh:
             stream.write(json.dumps({'digest': digest}) + '\n')
+    for entry in reused.values():
+        _record(entry, done, stream)
     try:
         if progress is not None:
             progress(len(done), len(jobs))

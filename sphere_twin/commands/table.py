@@ -43,6 +43,9 @@ def register(subparsers):
                        help="the design's voltage offsets (§4.1), a JSON of `sphere-twin "
                             "primitives offsets`, or 'none'")
     build.add_argument('--workers', type=positive_int, default=2, help='local processes')
+    build.add_argument('--reuse', type=Path, default=None,
+                       help='a table of the same kick at other intensities: its kicks are '
+                            'taken instead of simulated again')
     build.add_argument('--scheduler', default=None,
                        help='Dask scheduler address, e.g. tcp://host:8786')
     build.set_defaults(func=run_build)
@@ -63,6 +66,9 @@ def run_build(args):
     if args.offsets != 'none':
         spec = dataclasses.replace(spec, offsets=OffsetLookup.load(args.offsets, spec.design,
                                                                    args.params.name))
+    reuse = None
+    if args.reuse is not None:
+        reuse = LookupTable.load(args.reuse)
     output = Path(args.output)
     partial = output.with_suffix('.partial.jsonl')
     started = time.perf_counter()
@@ -76,7 +82,7 @@ def run_build(args):
             bar.refresh()
 
         table = build_table(spec, args.params, workers=args.workers, scheduler=args.scheduler,
-                            partial_path=partial, progress=progress)
+                            partial_path=partial, progress=progress, reuse=reuse)
     wall_s = time.perf_counter() - started
     table.save(output)
     partial.unlink(missing_ok=True)
