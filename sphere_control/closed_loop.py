@@ -93,7 +93,7 @@ class LoopHistory:
         Reference normals (after clamping).
     aims : ndarray, shape (n, 3)
         The reference normal each step's decision aimed at: its own sample, or with preview
-        the sample one kick period on.
+        where the reference's motion at the decision carries it in one kick period.
     actions : ndarray of int, shape (n,)
         Action per step, NO_ACTION when resting.
     intensities : ndarray, shape (n,)
