@@ -28,8 +28,8 @@ from sphere_sim.kicks.discrete import LEVEL_NORMAL, KickResult
 from sphere_sim.model.rotations import angle_between
 
 # Design intensities at which the level-state curve is sampled, 0.005 apart: every knot of the
-# shipped tables (0.01 apart at their finest) is a sample, so the calibration follows a table's
-# own interpolation exactly, in 0.3 s.
+# shipped tables (0.01 apart at their finest) is a sample, so the calibration meets a table at
+# its knots and follows its interpolation between them, in 0.3 s.
 CURVE_SAMPLES = 201
 
 
