@@ -4,7 +4,9 @@ The drivers are unipolar and limited (§4.1), a programme's segments start at 0 
 increase, and its last segment switches every beam off (it holds for ever). Whoever lets a
 command in applies these: a sender before it goes on the wire (:mod:`msg_defs.conversions`),
 the twin where a command enters it (:class:`~sphere_sim.twin.runner.TwinRunner`, through
-:meth:`~sphere_sim.model.programme.PulseProgramme.from_segments`). No ROS here.
+:meth:`~sphere_sim.model.programme.PulseProgramme.from_segments`), and every pulse programme
+the model is given (:class:`~sphere_sim.model.programme.PulseProgramme` checks what each beam
+holds between its edges). No ROS here.
 """
 
 import math

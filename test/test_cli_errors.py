@@ -28,6 +28,9 @@ INPUTS = {
     'over_limit.yaml': SCENE + ('duration_s: 0.01\nvoltage_programme:\n  pulses:\n'
                                 '    - {beam: 1, amplitude_v: 95.0, start_s: 0.0, '
                                 'width_s: 0.001}\n'),
+    'negative_volts.yaml': SCENE + ('duration_s: 0.01\nvoltage_programme:\n  pulses:\n'
+                                    '    - {beam: 1, amplitude_v: -50.0, start_s: 0.0, '
+                                    'width_s: 0.001}\n'),
     'params_malformed.yaml': 'base: calibrated\noverrides: {beam.length_m: [\n',
     'params_unknown.yaml': 'base: calibrated\noverrides:\n  beam.wingspan_m: 1.0\n',
     'params_nobase.yaml': 'base: nosuch\n',
@@ -65,6 +68,8 @@ CASES = [
     _case(['kick', 'negative_duration.yaml'], 'duration_s'),
     _case(['kick', 'unknown_key.yaml'], 'wind_speed'),
     _case(['kick', 'over_limit.yaml'], 'exceeds the limit'),
+    # the drivers are unipolar: the programme keeps the wire's rule (-50 V is not +50 V)
+    _case(['kick', 'negative_volts.yaml'], 'must be >= 0 V'),
     _case(['kick', 'rest', '--params', 'params_malformed.yaml'], 'params_malformed.yaml'),
     _case(['kick', 'rest', '--params', 'params_unknown.yaml'], 'beam.wingspan_m'),
     _case(['validate', '--params', 'params_nobase.yaml'], 'nosuch'),
