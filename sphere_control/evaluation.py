@@ -42,7 +42,7 @@ from sphere_control.extended import (
     DIRECTION_LEARNING_MIN_FRACTION,
     prelearn,
 )
-from sphere_control.intensity_calibration import IntensityCalibration
+from sphere_control.intensity_calibration import IntensityCalibration, calibrated
 from sphere_control.kick_plants import EightDirectionPlant
 from sphere_control.perturbations import Mismatch, NoisySensor, PerturbedPlant
 from sphere_control.reachable import (
@@ -225,11 +225,10 @@ class PlantUnderTest:
     @classmethod
     def measure(cls, label, plant):
         """``plant`` calibrated from its own level-state width curve, and measured."""
-        calibration = IntensityCalibration.of(plant)
-        calibrated = calibration.applied_to(plant)
-        full = calibrated.kick(LEVEL_NORMAL, 0, 1.0)
-        return cls(label, calibrated, angle_between(LEVEL_NORMAL, full.normal),
-                   float(full.settle_time_s), calibration)
+        kicks = calibrated(plant)
+        full = kicks.kick(LEVEL_NORMAL, 0, 1.0)
+        return cls(label, kicks, angle_between(LEVEL_NORMAL, full.normal),
+                   float(full.settle_time_s), kicks.calibration)
 
     def calibrated(self, plant):
         """Another plant of the same actions, driven in this plant's calibrated intensities."""
@@ -634,7 +633,7 @@ def evaluate(put, config=EvaluationConfig(), table=None, progress=print, continu
                'kick_scale': put.kick_scale, 'kick_period_s': config.kick_period_s}
     rows, histories = [], {}
     if eight_plant is not None:
-        eight_plant = IntensityCalibration.of(eight_plant).applied_to(eight_plant)
+        eight_plant = calibrated(eight_plant)
     _setpoint_figures(put, config, figures, rows, histories, progress)
     tracking = _trajectory_figures(put, config, figures, rows, histories, progress)
     _direction_figures(put, config, eight_plant, figures, rows, progress)
