@@ -30,12 +30,12 @@ setup(
     entry_points={
         'console_scripts': [
             'sphere-twin = sphere_twin.cli:main',
-            'simulator = sphere_sim.twin.simulator_node:main',
-            'monitor = sphere_twin.monitor_node:main',
-            'recorder = sphere_twin.recorder_node:main',
-            'player = sphere_twin.player_node:main',
-            'controller = sphere_control.controller_node:main',
-            'reference = sphere_control.reference_node:main',
+            'simulator = sphere_twin.nodes.simulator_node:main',
+            'monitor = sphere_twin.nodes.monitor_node:main',
+            'recorder = sphere_twin.nodes.recorder_node:main',
+            'player = sphere_twin.nodes.player_node:main',
+            'controller = sphere_twin.nodes.controller_node:main',
+            'reference = sphere_twin.nodes.reference_node:main',
         ],
     },
 )

@@ -523,10 +523,10 @@ def twin_study(table, put, config, basic_phi_min_rad):
     intensities; the basic controller runs at ``basic_phi_min_rad``, the best on the table.
     """
     from sphere_control.kick_plants import TwinKickPlant
+    from sphere_sim.kicks.plants import ContinuousPlant
     from sphere_sim.model.assembly import assemble
     from sphere_sim.model.initial_state import rest_state
     from sphere_sim.model.scene import load_scene
-    from sphere_sim.twin.plants import ContinuousPlant
 
     config = config.for_plant(put)
     period = config.kick_period_s

@@ -131,7 +131,7 @@ class TwinKickPlant:
     """The simulator node's continuous plant as a KickPlant: the state carries over.
 
     Unlike :class:`ContinuousKickPlant`, which starts every kick from rest, each call sends the
-    kick's programme to the twin's :class:`~sphere_sim.twin.plants.ContinuousPlant` and lets
+    kick's programme to the twin's :class:`~sphere_sim.kicks.plants.ContinuousPlant` and lets
     simulated time run on by one kick period, whatever the sphere, the beams and the friction
     bristles were doing: the closed loop runs on the same plant as the running twin. The
     ``normal`` passed in must be the plant's own (the closed loop passes back what the last
@@ -142,7 +142,7 @@ class TwinKickPlant:
     kick_model : LookupTable or CombinedKickPlant
         The kicks' programmes (``programme(action, intensity, normal)``, with the voltage
         offset for the normal) and nominal directions.
-    plant : sphere_sim.twin.plants.ContinuousPlant
+    plant : sphere_sim.kicks.plants.ContinuousPlant
     period_s : float
         Simulated time per kick (s), at least the longest programme.
     """

@@ -1,6 +1,6 @@
 """The monitor's final line, written by the monitor node and read by the demo and the tests.
 
-Kept apart from :mod:`sphere_twin.monitor_node` so that readers need no rclpy.
+Kept apart from :mod:`sphere_twin.nodes.monitor_node` so that readers need no rclpy.
 """
 
 import re

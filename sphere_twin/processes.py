@@ -32,7 +32,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from node_runtime.ros_env import DOMAIN_ID_VAR, ensure_localhost_discovery
+from sphere_twin.node_runtime.ros_env import DOMAIN_ID_VAR, ensure_localhost_discovery
 
 # Fresh domains come from 1..101. Fast DDS derives UDP ports from the domain id and stays
 # below the Linux ephemeral port range up to 101; 0 is everybody's default domain, so

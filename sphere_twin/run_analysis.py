@@ -35,8 +35,8 @@ from msg_defs.topics import (
 )
 from msg_defs.voltage_rules import check_segments, check_voltages
 from sphere_control.reference_motion import JUMP_TOLERANCE
+from sphere_sim.kicks.plants import TIME_TOL_S
 from sphere_sim.model.rotations import angle_between
-from sphere_sim.twin.plants import TIME_TOL_S
 from sphere_twin.bag.reader import BagError, deserialize, read_messages
 
 DEFAULT_BAND_RAD = math.radians(0.05)  # Fig. 13's tighter resting band
@@ -362,8 +362,8 @@ def replay(run, plant, start_index=0):
     see :func:`replay_start_index` for a bag whose recording began mid-kick); each programme
     starts at its stamp, each voltage command at its mapped receive time.
     """
+    from sphere_sim.kicks.plants import PlantError
     from sphere_sim.model.programme import PulseProgramme
-    from sphere_sim.twin.plants import PlantError
 
     t0 = run.normal_t_s[start_index]
     events = sorted([(t, 0, ('programme', times, volts)) for t, times, volts in run.kicks

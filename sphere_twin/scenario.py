@@ -85,7 +85,8 @@ def offline_loop(setpoint_s, duration_s, plant='continuous'):
     from sphere_control.intensity_calibration import IntensityCalibration
     from sphere_control.kick_plants import TwinKickPlant
     from sphere_sim.kicks.discrete import kick_period_s
-    from sphere_sim.twin.plant_setup import build_plant, load_kick_model
+    from sphere_sim.kicks.lookup_table import load_kick_model
+    from sphere_sim.twin.plant_setup import build_plant
 
     kicks = load_kick_model()
     calibration = IntensityCalibration.of(kicks)

@@ -74,11 +74,11 @@ def record_device(bag_dir, params, n_kicks=20, seed=0, noise_std_rad=NOISE_STUDY
     )
     from msg_defs.device import NS_PER_S
     from msg_defs.topics import PULSE_PROGRAM, SPHERE_STATE, SURFACE_NORMAL
+    from sphere_sim.kicks.lookup_table import load_kick_model
+    from sphere_sim.kicks.plants import ContinuousPlant
     from sphere_sim.model.assembly import assemble
     from sphere_sim.model.initial_state import rest_state
     from sphere_sim.model.scene import load_scene
-    from sphere_sim.twin.plant_setup import load_kick_model
-    from sphere_sim.twin.plants import ContinuousPlant
     from sphere_sim.twin.runner import TwinRunner
     from sphere_twin.bag.writer import BagWriter
 

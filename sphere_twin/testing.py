@@ -29,7 +29,7 @@ import contextlib
 import time
 
 from msg_defs.device import NS_PER_S
-from node_runtime.ros_env import ensure_localhost_discovery
+from sphere_twin.node_runtime.ros_env import ensure_localhost_discovery
 from sphere_twin.processes import fresh_domain_id, parameter_args, running_nodes
 
 DEFAULT_TIMEOUT_S = 30.0
@@ -246,7 +246,7 @@ def lockstep_twin(plant='discrete', scene='rest', seed=0, noise_std_rad=0.0,
         More simulator parameters.
     """
     from sphere_sim.kicks.discrete import kick_period_s
-    from sphere_sim.twin.plant_setup import load_kick_model
+    from sphere_sim.kicks.lookup_table import load_kick_model
 
     ensure_localhost_discovery()
     domain_id = fresh_domain_id() if domain_id is None else domain_id

@@ -60,7 +60,7 @@ def context(monkeypatch):
     built and driven inside the test's process."""
     import rclpy
 
-    from node_runtime.ros_env import DISCOVERY_RANGE_VAR
+    from sphere_twin.node_runtime.ros_env import DISCOVERY_RANGE_VAR
 
     monkeypatch.setenv(DISCOVERY_RANGE_VAR, 'LOCALHOST')
     context = rclpy.Context()

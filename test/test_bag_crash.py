@@ -22,7 +22,6 @@ from rosbags.typesys import Stores, get_typestore
 from sensor_msgs.msg import JointState
 
 from msg_defs.topics import BEAM_VOLTAGE, SURFACE_NORMAL
-from node_runtime.ros_env import DISCOVERY_RANGE_VAR
 from sphere_twin import cli
 from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.reader import (
@@ -34,6 +33,7 @@ from sphere_twin.bag.reader import (
 )
 from sphere_twin.bag.repair import repair_bag
 from sphere_twin.bag.writer import BagWriter
+from sphere_twin.node_runtime.ros_env import DISCOVERY_RANGE_VAR
 from sphere_twin.processes import parameter_args, stop
 
 JAZZY = get_typestore(Stores.ROS2_JAZZY)

@@ -77,7 +77,7 @@ def test_an_installed_bag_is_found_by_name_and_reports_into_the_working_director
 def test_the_player_plays_a_bag_given_by_its_mcap_file(context, example_count):
     from rclpy.parameter import Parameter
 
-    from sphere_twin.player_node import PlayerNode
+    from sphere_twin.nodes.player_node import PlayerNode
 
     node = PlayerNode(context=context, parameter_overrides=[Parameter('bag',
                                                                       value=str(EXAMPLE_MCAP))])

@@ -56,7 +56,7 @@ def _integrating_fraction(probe):
 @pytest.mark.parametrize('signum', SIGNALS, ids=SIGNAL_IDS)
 def test_the_simulator_stops_cleanly_in_the_middle_of_integrating(ros_nodes, signum, delay_s):
     from msg_defs.conversions import programme_to_msg
-    from sphere_sim.twin.plant_setup import load_kick_model
+    from sphere_sim.kicks.lookup_table import load_kick_model
 
     simulator = ros_nodes.start('simulator', parameter_args(plant='continuous',
                                                            real_time_factor=0.0))

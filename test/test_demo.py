@@ -6,9 +6,9 @@ import re
 import pytest
 
 from msg_defs.topics import ALL_TOPICS, CLOCK
-from sphere_sim.twin.simulator_node import CATCH_UP_SPEEDUP
 from sphere_twin.cli import build_parser
 from sphere_twin.commands.demo import DEFAULT_REAL_TIME_FACTOR, demo_nodes, run_demo
+from sphere_twin.nodes.simulator_node import CATCH_UP_SPEEDUP
 
 pytestmark = pytest.mark.ros
 

@@ -8,8 +8,8 @@ import subprocess
 
 import pytest
 
-from node_runtime.ros_env import DISCOVERY_RANGE_VAR, DOMAIN_ID_VAR
 from sphere_twin.commands import doctor
+from sphere_twin.node_runtime.ros_env import DISCOVERY_RANGE_VAR, DOMAIN_ID_VAR
 from sphere_twin.processes import fresh_domain_id, resolve_executable
 
 CLI_TIMEOUT_S = 120.0

@@ -153,7 +153,7 @@ def test_selection_holds_a_parameter_the_kicks_cannot_tell_from_another():
 def _kick_observations(params, n, seed=0, noise=0.0):
     """Noiseless (or noisy) kick observations of the continuous model itself."""
     from sphere_sim.kicks.discrete import normal_from_xy
-    from sphere_sim.twin.plant_setup import load_kick_model
+    from sphere_sim.kicks.lookup_table import load_kick_model
 
     rng = np.random.default_rng(seed)
     kicks = load_kick_model()
@@ -505,7 +505,7 @@ def test_the_misfit_is_smooth_where_the_interval_is_measured(device_bag):
     """Within a standard error or two of the truth the misfit must be the smooth parabola the
     intervals assume: at the live twin's tolerance the integrator's step-size jumps make dips
     and bumps as deep as the rise an interval is read from; at the fit's they are gone."""
-    from sphere_sim.twin.plants import LIVE_RTOL
+    from sphere_sim.kicks.plants import LIVE_RTOL
 
     offsets = np.linspace(-0.02, 0.02, 9)
     chis, departure = _parabola_misfit_along(device_bag, idf.FIT_RTOL, offsets)

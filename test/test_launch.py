@@ -46,11 +46,11 @@ def _declared(executable, ros_context, tmp_path):
     """Parameter names the node declares, built in this process on ``ros_context``."""
     from rclpy.parameter import Parameter
 
-    from sphere_control.controller_node import ControllerNode
-    from sphere_control.reference_node import ReferenceNode
-    from sphere_sim.twin.simulator_node import SimulatorNode
-    from sphere_twin.player_node import PlayerNode
-    from sphere_twin.recorder_node import RecorderNode
+    from sphere_twin.nodes.controller_node import ControllerNode
+    from sphere_twin.nodes.player_node import PlayerNode
+    from sphere_twin.nodes.recorder_node import RecorderNode
+    from sphere_twin.nodes.reference_node import ReferenceNode
+    from sphere_twin.nodes.simulator_node import SimulatorNode
 
     classes = {'simulator': (SimulatorNode, []), 'controller': (ControllerNode, []),
                'reference': (ReferenceNode, []),

@@ -1,12 +1,14 @@
 """The import rules of ARCHITECTURE.md, read from the source (ast; nothing is imported).
 
-* Packages depend one way: ``msg_defs`` and ``node_runtime`` ← ``sphere_sim`` ←
-  ``sphere_control`` ← ``sphere_twin``.
+* Packages depend one way: ``msg_defs`` ← ``sphere_sim`` ← ``sphere_control`` ← ``sphere_twin``.
+  ``sphere_sim`` and ``sphere_control`` are pure libraries: no rclpy, no message types.
 * Inside ``sphere_sim`` the rooms do too: ``model`` ← ``integrate`` ← ``studies`` ← ``kicks`` ←
   ``twin``.
 * No two modules import each other, directly or round a circle, counting the imports inside
   functions (a circle hidden in a function is still a circle).
-* rclpy only in the node modules and the few places that say why.
+* rclpy only in the nodes (``sphere_twin.nodes``), their runtime and the few places that say why.
+* Inside ``sphere_twin`` the nodes sit on top: nothing but the nodes imports them, and the
+  runtime (``sphere_twin.node_runtime``) imports no other part of the project.
 """
 
 import ast
@@ -17,12 +19,13 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 # Rank of each top-level package: a module may import its own rank and below.
-PACKAGE_RANK = {'msg_defs': 0, 'node_runtime': 0, 'sphere_sim': 1, 'sphere_control': 2,
-                'sphere_twin': 3}
+PACKAGE_RANK = {'msg_defs': 0, 'sphere_sim': 1, 'sphere_control': 2, 'sphere_twin': 3}
 ROOM_RANK = {'model': 0, 'integrate': 1, 'studies': 2, 'kicks': 3, 'twin': 4}
-# Modules other than ``*_node.py`` that may import rclpy, and why.
+NODES = 'sphere_twin.nodes'
+NODE_RUNTIME = 'sphere_twin.node_runtime'
+# Modules outside the nodes that may import rclpy, and why.
 RCLPY_ALLOWED = {
-    'node_runtime.ros_env': 'the shared main() of every node',
+    'sphere_twin.node_runtime.ros_env': 'the shared main() of every node',
     'msg_defs.topics': 'turns its QoS specs into rclpy profiles, inside that one method',
     'sphere_twin.testing': "the tests' probe node that watches a running twin",
     'sphere_twin.bag.reader': "rclpy's CDR deserialiser reads recorded messages; no graph",
@@ -127,14 +130,22 @@ def circles():
     return found
 
 
+def in_package(name, package):
+    return name == package or name.startswith(package + '.')
+
+
 def test_the_source_tree_is_what_the_rules_read():
     # The rules below hold only if they see the code: every package and room is found.
     assert {'sphere_sim.model.dynamics', 'sphere_sim.integrate.radau_compiled',
             'sphere_sim.studies.pullin', 'sphere_sim.kicks.lookup_table',
-            'sphere_sim.twin.simulator_node', 'sphere_control.controller_node',
-            'sphere_twin.cli', 'msg_defs.topics', 'node_runtime.ros_env'} <= set(MODULES)
+            'sphere_twin.nodes.simulator_node', 'sphere_twin.nodes.controller_node',
+            'sphere_twin.cli', 'msg_defs.topics',
+            'sphere_twin.node_runtime.ros_env'} <= set(MODULES)
     rooms = {name.split('.')[1] for name in MODULES if name.startswith('sphere_sim.')}
     assert rooms == set(ROOM_RANK), 'a module of sphere_sim sits outside the rooms'
+    # Every node an executable starts lives in the nodes' room.
+    nodes = {name for name in MODULES if name.endswith('_node')}
+    assert len(nodes) == 6 and all(in_package(name, NODES) for name in nodes)
 
 
 def test_no_package_or_room_imports_upward():
@@ -145,23 +156,33 @@ def test_no_modules_import_each_other_in_a_circle():
     assert circles() == []
 
 
-def test_rclpy_only_in_node_modules():
+def test_rclpy_only_in_the_nodes():
     bad = [name for name, targets in IMPORTS.items()
            if any(t == 'rclpy' or t.startswith('rclpy.') for t in targets)
-           and not name.endswith('_node') and name not in RCLPY_ALLOWED]
+           and not in_package(name, NODES) and name not in RCLPY_ALLOWED]
     assert bad == []
 
 
-def test_message_packages_only_in_the_contract_and_the_ros_side():
-    """The cores (sphere_sim but its twin room, sphere_control but its nodes) use no ROS types."""
+def test_the_libraries_use_no_ros():
+    """sphere_sim and sphere_control: no rclpy, no message types, no node runtime."""
     ros_packages = ('rclpy', 'std_msgs', 'geometry_msgs', 'sensor_msgs', 'nav_msgs',
                     'trajectory_msgs', 'visualization_msgs', 'diagnostic_msgs', 'rosgraph_msgs',
-                    'rcl_interfaces', 'builtin_interfaces')
-    cores = [name for name in MODULES
-             if (name.startswith('sphere_sim.') and not name.startswith('sphere_sim.twin'))
-             or (name.startswith('sphere_control.') and not name.endswith('_node'))]
-    bad = [name for name in cores
-           if any(t.split('.')[0] in ros_packages for t in IMPORTS[name])]
+                    'rcl_interfaces', 'builtin_interfaces', 'action_msgs', 'actionlib_msgs')
+    libraries = [name for name in MODULES
+                 if in_package(name, 'sphere_sim') or in_package(name, 'sphere_control')]
+    bad = [f'{name} -> {target}' for name in libraries for target in sorted(IMPORTS[name])
+           if target.split('.')[0] in ros_packages or in_package(target, NODE_RUNTIME)
+           or target in ('msg_defs.topics', 'msg_defs.conversions', 'msg_defs.markers')]
+    assert bad == []
+
+
+def test_only_nodes_import_nodes_and_the_runtime_imports_no_project_module():
+    bad = [f'{name} -> {target}' for name, targets in IMPORTS.items()
+           for target in filter(None, map(project_target, targets))
+           if (in_package(target, NODES) and not in_package(name, NODES)
+               and target != NODES)
+           or (in_package(name, NODE_RUNTIME) and not in_package(target, NODE_RUNTIME)
+               and target != 'sphere_twin')]
     assert bad == []
 
 
@@ -170,8 +191,8 @@ def test_message_packages_only_in_the_contract_and_the_ros_side():
      ['sphere_sim.model.fake -> sphere_twin.cli (package above)']),
     ('from sphere_sim.kicks import design\n',
      ['sphere_sim.model.fake -> sphere_sim.kicks.design (room above)']),
-    ('def f():\n    from sphere_sim.twin.plants import ContinuousPlant\n',
-     ['sphere_sim.model.fake -> sphere_sim.twin.plants (room above)']),
+    ('def f():\n    from sphere_sim.twin.runner import TwinRunner\n',
+     ['sphere_sim.model.fake -> sphere_sim.twin.runner (room above)']),
     ('from sphere_sim.model.parameters import ParameterSet\nimport msg_defs.device\n', []),
 ])
 def test_the_rules_catch_an_upward_import(tmp_path, monkeypatch, source, expected):
@@ -186,3 +207,12 @@ def test_the_rules_catch_a_circle(monkeypatch):
                         IMPORTS['sphere_sim.model.parameters'] | {'sphere_sim.model.scene'})
     assert any('sphere_sim.model.parameters' in c and 'sphere_sim.model.scene' in c
                for c in circles())
+
+
+def test_an_install_puts_only_the_four_packages_into_site_packages():
+    """setup.py installs what find_packages finds: no generic top-level name beside ours."""
+    from setuptools import find_packages
+
+    packages = find_packages(str(ROOT), exclude=['test', 'test.*'])
+    assert {name.split('.')[0] for name in packages} == set(PACKAGE_RANK)
+    assert {'sphere_twin.nodes', 'sphere_twin.node_runtime'} <= set(packages)

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from node_runtime import ros_env
+from sphere_twin.node_runtime import ros_env
 
 
 class FakeNode:

@@ -4,8 +4,8 @@ parameters (an integer where a float is declared) are accepted."""
 import pytest
 
 from msg_defs.topics import SURFACE_NORMAL
-from node_runtime.ros_env import startup_error_line
 from sphere_twin.monitor_summary import parse_summaries
+from sphere_twin.node_runtime.ros_env import startup_error_line
 from sphere_twin.processes import parameter_args
 
 pytestmark = pytest.mark.ros

@@ -10,9 +10,9 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from msg_defs.conversions import programme_to_msg, surface_normal_to_msg, voltages_to_msg
-from sphere_sim.twin.plants import PlantSnapshot
-from sphere_sim.twin.simulator_node import SimulatorNode
-from sphere_twin.monitor_node import MonitorNode
+from sphere_sim.kicks.plants import PlantSnapshot
+from sphere_twin.nodes.monitor_node import MonitorNode
+from sphere_twin.nodes.simulator_node import SimulatorNode
 
 pytestmark = pytest.mark.ros
 

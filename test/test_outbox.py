@@ -1,11 +1,11 @@
-"""The publishing thread of a node (``node_runtime.outbox``): order, overlap, a bounded queue,
-errors that do not stop it, and a clean close. No ROS."""
+"""The publishing thread of a node (``sphere_twin.node_runtime.outbox``): order, overlap, a
+bounded queue, errors that do not stop it, and a clean close. No ROS."""
 
 import threading
 
 import pytest
 
-from node_runtime.outbox import Outbox
+from sphere_twin.node_runtime.outbox import Outbox
 
 # Generous: a call that should run at once runs within this (s); only a hang reaches it.
 HANG_S = 10.0

@@ -10,10 +10,7 @@ from msg_defs.programme_events import ProgrammeState
 from sphere_sim.kicks.design import simulate_kick
 from sphere_sim.kicks.discrete import normal_from_xy
 from sphere_sim.kicks.lookup_table import LookupTable
-from sphere_sim.model.programme import Pulse, PulseProgramme, VoltageSchedule
-from sphere_sim.model.rotations import angle_between
-from sphere_sim.twin.plant_setup import build_plant
-from sphere_sim.twin.plants import (
+from sphere_sim.kicks.plants import (
     LIVE_ERROR_BOUND_RAD,
     LIVE_RTOL,
     ContinuousPlant,
@@ -21,6 +18,9 @@ from sphere_sim.twin.plants import (
     PlantError,
     decode_kick,
 )
+from sphere_sim.model.programme import Pulse, PulseProgramme, VoltageSchedule
+from sphere_sim.model.rotations import angle_between
+from sphere_sim.twin.plant_setup import build_plant
 from sphere_sim.twin.runner import MAX_START_AHEAD_S, CommandError, TwinRunner
 
 

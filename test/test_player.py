@@ -33,17 +33,17 @@ from msg_defs.topics import (
     SPHERE_STATE,
     SURFACE_NORMAL,
 )
-from node_runtime.ros_env import DISCOVERY_RANGE_VAR
 from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.reader import RecordedMessage, deserialize, read_messages
-from sphere_twin.player_node import (
+from sphere_twin.node_runtime.ros_env import DISCOVERY_RANGE_VAR
+from sphere_twin.nodes.player_node import (
     CLOCK_GAP_TICK_S,
     playback_plan,
     played_line,
     recorded_qos,
 )
+from sphere_twin.nodes.recorder_node import summary_line
 from sphere_twin.processes import parameter_args, stop
-from sphere_twin.recorder_node import summary_line
 
 T0_NS = 1_700_000_000_000_000_000
 

@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from node_runtime.ros_env import DISCOVERY_RANGE_VAR, DOMAIN_ID_VAR
+from sphere_twin.node_runtime.ros_env import DISCOVERY_RANGE_VAR, DOMAIN_ID_VAR
 from sphere_twin.processes import (
     MAX_DOMAIN_ID,
     MIN_DOMAIN_ID,

@@ -45,17 +45,17 @@ from msg_defs.topics import (
     SPHERE_STATE,
     SURFACE_NORMAL,
 )
-from node_runtime.ros_env import DISCOVERY_RANGE_VAR
 from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.reader import deserialize, read_messages, read_metadata
 from sphere_twin.bag.writer import BagWriter
-from sphere_twin.processes import parameter_args, stop
-from sphere_twin.recorder_node import (
+from sphere_twin.node_runtime.ros_env import DISCOVERY_RANGE_VAR
+from sphere_twin.nodes.recorder_node import (
     RecorderNode,
     StopRequest,
     default_output_dir,
     summary_line,
 )
+from sphere_twin.processes import parameter_args, stop
 
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
 DELIMITER = '=' * 80

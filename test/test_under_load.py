@@ -76,7 +76,7 @@ def _burst_messages(kick):
 
 
 def test_a_burst_of_commands_leaves_the_twin_publishing_within_limits_and_bounded(ros_nodes):
-    from sphere_sim.twin.plant_setup import load_kick_model
+    from sphere_sim.kicks.lookup_table import load_kick_model
 
     simulator = ros_nodes.start('simulator', parameter_args(plant='continuous'))
     simulator.wait_for_output('publishing /sphere/surface_normal', READY_TIMEOUT_S)

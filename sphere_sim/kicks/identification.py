@@ -55,7 +55,7 @@ from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.programme import PulseProgramme
 from sphere_sim.model.scene import load_scene
 
-# The fit's tolerance, a tenth of the live twin's (sphere_sim.twin.plants.LIVE_RTOL). At the
+# The fit's tolerance, a tenth of the live twin's (sphere_sim.kicks.plants.LIVE_RTOL). At the
 # live 3e-4 a kick ends within a few 1e-6 rad of the exact one, but that error jumps with the
 # step-size sequence as a parameter moves, and over 40 kicks the jumps moved the whitened misfit
 # by 2 to 4 within a standard error of the optimum (device_a): local dips deeper than the

@@ -308,3 +308,18 @@ class CombinedKickPlant:
     def programme(self, action, intensity, normal=LEVEL_NORMAL):
         table, local = self._entries[action]
         return table.programme(local, intensity, normal)
+
+
+def load_kick_model(table_paths=(), params=None):
+    """The discrete kick model: one table, or several combined into one action set.
+
+    Parameters
+    ----------
+    table_paths : sequence of path
+        Empty for the shipped default (the four diagonal kicks).
+    params : ParameterSet, optional
+        Refuse tables built for other parameters.
+    """
+    paths = list(table_paths) or [DEFAULT_TABLE_PATH]
+    tables = [LookupTable.load(path, params=params) for path in paths]
+    return tables[0] if len(tables) == 1 else CombinedKickPlant(tables)

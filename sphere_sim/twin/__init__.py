@@ -1,5 +1,6 @@
-"""The twin behind the device's topics: the plants, their clock and command queue, the node.
+"""What the simulator node runs, in plain Python: the plant chosen by name, its clock and
+command queue (:mod:`~sphere_sim.twin.runner`), and the limit on its reports.
 
-Only :mod:`~sphere_sim.twin.simulator_node` imports rclpy; the rest is plain Python that the
-tests drive directly. May import every other room of :mod:`sphere_sim` and :mod:`msg_defs`.
+The node itself is :mod:`sphere_twin.nodes.simulator_node`. May import every other room of
+:mod:`sphere_sim` and :mod:`msg_defs`.
 """

@@ -6,23 +6,6 @@
 PLANT_KINDS = ('discrete', 'continuous')
 
 
-def load_kick_model(table_paths=(), params=None):
-    """The discrete kick model: one table, or several combined into one action set.
-
-    Parameters
-    ----------
-    table_paths : sequence of path
-        Empty for the shipped default (the four diagonal kicks).
-    params : ParameterSet, optional
-        Refuse tables built for other parameters.
-    """
-    from sphere_sim.kicks.lookup_table import DEFAULT_TABLE_PATH, CombinedKickPlant, LookupTable
-
-    paths = list(table_paths) or [DEFAULT_TABLE_PATH]
-    tables = [LookupTable.load(path, params=params) for path in paths]
-    return tables[0] if len(tables) == 1 else CombinedKickPlant(tables)
-
-
 def build_plant(kind, scene_name='rest', table_paths=(), params_name=''):
     """The plant of ``kind`` for the scene's parameters and initial tilt.
 
@@ -38,10 +21,11 @@ def build_plant(kind, scene_name='rest', table_paths=(), params_name=''):
         For an unknown kind.
     """
     from sphere_sim.kicks.discrete import kick_period_s, normal_from_cardan
+    from sphere_sim.kicks.lookup_table import load_kick_model
+    from sphere_sim.kicks.plants import ContinuousPlant, PlantError
     from sphere_sim.model.assembly import assemble
     from sphere_sim.model.parameters import load_parameter_set
     from sphere_sim.model.scene import load_scene
-    from sphere_sim.twin.plants import ContinuousPlant, PlantError
 
     if kind not in PLANT_KINDS:
         raise PlantError(f'unknown plant {kind!r}; choose one of {", ".join(PLANT_KINDS)}')
@@ -60,7 +44,7 @@ def build_plant(kind, scene_name='rest', table_paths=(), params_name=''):
 def discrete_plant(kicks, normal0):
     """The discrete plant of the kick model ``kicks``, resting at ``normal0``."""
     from sphere_sim.kicks.discrete import kick_period_s
-    from sphere_sim.twin.plants import DiscretePlant
+    from sphere_sim.kicks.plants import DiscretePlant
 
     # A kick lands when it has settled (every kick of the shipped tables is within 0.005 deg
     # of its outcome by 45 ms), after the kick period the offline loop and the controller

@@ -19,8 +19,8 @@ import numpy as np
 from msg_defs.device import VOLTAGE_LIMIT_V
 from msg_defs.programme_events import ProgrammeEvent, ProgrammeState
 from msg_defs.voltage_rules import VoltageRuleError, check_voltages
+from sphere_sim.kicks.plants import TIME_TOL_S, PlantError
 from sphere_sim.model.programme import ProgrammeError, PulseProgramme
-from sphere_sim.twin.plants import TIME_TOL_S, PlantError
 
 # A programme may start at most this far after the simulated now. Stamps are simulated time;
 # one far ahead is a wall-clock stamp (`stamp: now` in `ros2 topic pub`), which would wait
@@ -119,7 +119,7 @@ class TwinRunner:
 
     Parameters
     ----------
-    plant : sphere_sim.twin.plants.TwinPlant
+    plant : sphere_sim.kicks.plants.TwinPlant
     period_s : float
         Simulated time between samples.
     noise_std_rad : float

@@ -3,7 +3,7 @@
 A bag is a directory holding ``metadata.yaml`` (rosbag2 metadata version 9, as ROS 2 Jazzy
 writes it) and one MCAP file ``<name>_0.mcap`` of CDR-serialized messages with ``ros2msg``
 schemas, in zstd-compressed chunks. ``ros2 bag info``/``play``, Foxglove and the ``rosbags``
-library read it. :mod:`sphere_twin.recorder_node` records one from the live topics.
+library read it. :mod:`sphere_twin.nodes.recorder_node` records one from the live topics.
 
 Modules
 -------

@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from node_runtime.ros_env import DISCOVERY_RANGE_VAR
 from sphere_sim.twin.plant_setup import PLANT_KINDS
 from sphere_twin.commands.options import positive_float
+from sphere_twin.node_runtime.ros_env import DISCOVERY_RANGE_VAR
 from sphere_twin.processes import NodeSpec, fresh_domain_id, parameter_args, running_nodes
 from sphere_twin.scenario import (
     SETPOINT_XY,

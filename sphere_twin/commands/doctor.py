@@ -13,7 +13,7 @@ import os
 import subprocess
 import sys
 
-from node_runtime.ros_env import (
+from sphere_twin.node_runtime.ros_env import (
     DEFAULT_DISCOVERY_RANGE,
     DEFAULT_DOMAIN_ID,
     DISCOVERY_RANGE_VAR,

@@ -41,9 +41,10 @@ def build_replay_plant(kind, normal0, time0_s, params, tables=()):
     """A plant of parameter set ``params`` resting at ``normal0`` at ``time0_s``."""
     from sphere_sim.kicks.design import cardan_of_normal
     from sphere_sim.kicks.discrete import kick_period_s
+    from sphere_sim.kicks.lookup_table import load_kick_model
+    from sphere_sim.kicks.plants import ContinuousPlant
     from sphere_sim.model.scene import load_scene
-    from sphere_sim.twin.plant_setup import discrete_plant, load_kick_model
-    from sphere_sim.twin.plants import ContinuousPlant
+    from sphere_sim.twin.plant_setup import discrete_plant
 
     if kind == 'discrete':
         plant = discrete_plant(load_kick_model(tables, params), normal0)

@@ -41,16 +41,16 @@ from msg_defs.topics import (
     SURFACE_NORMAL,
     VOLTAGE_COMMAND,
 )
-from node_runtime.outbox import Outbox
-from node_runtime.ros_env import (
+from sphere_sim.twin.plant_setup import PLANT_KINDS
+from sphere_sim.twin.report_limit import ReportLimit
+from sphere_twin.node_runtime.outbox import Outbox
+from sphere_twin.node_runtime.ros_env import (
     DISCOVERY_RANGE_VAR,
     StartupError,
     declare_node_parameters,
     parameter_descriptor,
     run_node,
 )
-from sphere_sim.twin.plant_setup import PLANT_KINDS
-from sphere_sim.twin.report_limit import ReportLimit
 
 # The physics (scipy, numba, the kick table) is imported when the node is built, not with this
 # module, so that main() installs its signal handlers first: a SIGINT during the seconds of
@@ -76,11 +76,12 @@ STATUS_PERIOD_S = 1.0
 
 
 class SimulatorNode(Node):
-    """Runs a plant (``sphere_sim.twin.plants``) through :class:`sphere_sim.twin.runner.TwinRunner`.
+    """Runs a plant (``sphere_sim.kicks.plants``) through
+    :class:`sphere_sim.twin.runner.TwinRunner`.
 
     Parameters
     ----------
-    plant : sphere_sim.twin.plants.TwinPlant, optional
+    plant : sphere_sim.kicks.plants.TwinPlant, optional
         Overrides the ``plant``/``scene``/``table`` parameters (for tests).
     **node_kwargs
         Passed to ``rclpy.node.Node`` (e.g. ``context``).

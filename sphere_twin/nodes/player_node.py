@@ -25,10 +25,10 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from msg_defs.device import NS_PER_S
 from msg_defs.topics import ALL_TOPICS, CLOCK
-from node_runtime.ros_env import declare_node_parameters, parameter_descriptor, run_node
 from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.locate import locate_bag
 from sphere_twin.bag.reader import BagError, message_class, read_messages, read_metadata
+from sphere_twin.node_runtime.ros_env import declare_node_parameters, parameter_descriptor, run_node
 
 MAX_RATE = 1000.0
 MIN_RATE = 0.001

@@ -15,8 +15,8 @@ from rclpy.task import Future
 
 from msg_defs.conversions import surface_normal_from_msg
 from msg_defs.topics import SURFACE_NORMAL
-from node_runtime.ros_env import run_node
 from sphere_twin.monitor_summary import summary_line
+from sphere_twin.node_runtime.ros_env import run_node
 
 REPORT_PERIOD_S = 1.0
 # ROS integer parameters are int64; this bound only keeps the descriptor's range finite.

@@ -28,13 +28,13 @@ from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
 from msg_defs.topics import ALL_TOPICS, topic_by_name
-from node_runtime.ros_env import (
+from sphere_twin.bag import format as bag_format
+from sphere_twin.bag.writer import COMPRESSIONS, DEFAULT_CHUNK_SIZE_BYTES, BagWriter
+from sphere_twin.node_runtime.ros_env import (
     declare_node_parameters,
     ensure_localhost_discovery,
     parameter_descriptor,
 )
-from sphere_twin.bag import format as bag_format
-from sphere_twin.bag.writer import COMPRESSIONS, DEFAULT_CHUNK_SIZE_BYTES, BagWriter
 
 DEFAULT_BAG_PARENT = 'bags'
 # Depth of the recorder's subscriptions. History does not affect QoS compatibility; a

@@ -12,9 +12,9 @@ from msg_defs.conversions import surface_normal_to_msg
 from msg_defs.device import NS_PER_S
 from msg_defs.markers import reference_markers
 from msg_defs.topics import CLOCK, MARKERS, SPHERE_REFERENCE
-from node_runtime.pace import PaceMeter
-from node_runtime.ros_env import declare_node_parameters, parameter_descriptor, run_node
 from sphere_control.reference import CircleTrajectory, ScheduledReference, Setpoint, sample
+from sphere_twin.node_runtime.pace import PaceMeter
+from sphere_twin.node_runtime.ros_env import declare_node_parameters, parameter_descriptor, run_node
 
 DEFAULT_PUBLISH_RATE_HZ = 10.0
 NEVER = -1.0

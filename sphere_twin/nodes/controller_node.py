@@ -35,10 +35,10 @@ from msg_defs.topics import (
     SURFACE_NORMAL,
     VOLTAGE_COMMAND,
 )
-from node_runtime.pace import PaceMeter
-from node_runtime.ros_env import declare_node_parameters, parameter_descriptor, run_node
 from sphere_control.controllers import CONTROLLER_KINDS, DEFAULT_PHI_MIN_RAD, controller_for
 from sphere_control.kick_cycle import KickCycle, Phase
+from sphere_twin.node_runtime.pace import PaceMeter
+from sphere_twin.node_runtime.ros_env import declare_node_parameters, parameter_descriptor, run_node
 
 STALE_CHECK_PERIOD_S = 0.25
 
@@ -52,7 +52,7 @@ class ControllerNode(Node):
         # handlers first and a SIGINT during start-up is a clean shutdown.
         from sphere_control.intensity_calibration import calibrated
         from sphere_sim.kicks.discrete import kick_period_s
-        from sphere_sim.twin.plant_setup import load_kick_model
+        from sphere_sim.kicks.lookup_table import load_kick_model
 
         super().__init__('controller', **node_kwargs)
         p = declare_node_parameters(self, {
