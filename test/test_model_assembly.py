@@ -80,3 +80,17 @@ def test_compiled_and_python_kernels_agree():
     x[fast.bristle_offset:] += rng.normal(0, 3e-10, 12)
     u = np.array([35.0, 35.0, 80.0, 80.0])
     np.testing.assert_allclose(fast.rhs(0, x, u), slow.rhs(0, x, u), rtol=1e-9, atol=1e-12)
+
+
+def test_a_scene_has_one_parameter_set_whichever_way_it_is_asked_for():
+    """``assemble(scene, base)`` runs on ``scene.parameters(base)``: the scene's perturbation
+    holds with a replacement set too, as with the set the scene names."""
+    from sphere_sim.model.parameters import load_parameter_set
+
+    scene = scene_with().replace(perturbation=(('beam.stiffness_phi_nm_per_rad', 2.5e-6),))
+    base = load_parameter_set('table_a1')
+    for replacement in (None, base):
+        model = assemble(scene, replacement, jit=False)
+        assert model.params == scene.parameters(replacement)
+        assert model.params.beam.stiffness_phi_nm_per_rad == 2.5e-6
+    assert assemble(scene, base, jit=False).params.name == base.name

@@ -373,11 +373,14 @@ def assemble(scene, params=None, jit=True):
     ----------
     scene : Scene
     params : ParameterSet, optional
-        Overrides the scene's parameter set (the perturbation is not re-applied).
+        Replaces the parameter set the scene names. Either way the model runs on
+        ``scene.parameters(params)``, the one spelling of a scene's parameter set: the scene's
+        perturbation is applied on top (it sets values, so a set that already carries it is
+        unchanged).
     jit : bool
         False runs the kernel as plain Python (slow; for tests that inspect which parts run).
     """
-    params = scene.parameters() if params is None else params
+    params = scene.parameters(params)
     fx = scene.effects
     has_sphere = bool(scene.sphere)
     flags = np.zeros(dyn.N_FLAGS, dtype=np.int64)
