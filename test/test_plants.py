@@ -21,7 +21,7 @@ from sphere_sim.kicks.plants import (
 from sphere_sim.model.programme import Pulse, PulseProgramme, VoltageSchedule
 from sphere_sim.model.rotations import angle_between
 from sphere_sim.twin.plant_setup import build_plant
-from sphere_sim.twin.runner import MAX_START_AHEAD_S, RejectedCommand, TwinRunner
+from sphere_sim.twin.runner import MAX_START_AHEAD_S, CommandRejectedError, TwinRunner
 
 
 @pytest.fixture(scope='module')
@@ -144,19 +144,19 @@ def test_lockstep_runner_answers_each_command_with_its_samples_then_idles(table)
 def test_rejected_programme_never_reaches_the_plant(table):
     plant = DiscretePlant(table)
     runner = TwinRunner(plant, period_s=0.02)
-    with pytest.raises(RejectedCommand, match='exceeds the limit'):
+    with pytest.raises(CommandRejectedError, match='exceeds the limit'):
         runner.command_programme([0.0, 1e-3], [[90.0, 0, 0, 0], [0] * 4])
-    with pytest.raises(RejectedCommand, match='>= 0 V'):
+    with pytest.raises(CommandRejectedError, match='>= 0 V'):
         runner.command_programme([0.0, 1e-3], [[-5.0, 0, 0, 0], [0] * 4])
-    with pytest.raises(RejectedCommand, match='finite'):
+    with pytest.raises(CommandRejectedError, match='finite'):
         runner.command_voltages([1.0, 2.0, float('nan'), 0.0])
-    with pytest.raises(RejectedCommand, match='exceeds the limit 80 V'):
+    with pytest.raises(CommandRejectedError, match='exceeds the limit 80 V'):
         runner.command_voltages([1.0, 2.0, 3.0, 80.5])
-    with pytest.raises(RejectedCommand, match='>= 0 V'):
+    with pytest.raises(CommandRejectedError, match='>= 0 V'):
         runner.command_voltages([1.0, 2.0, 3.0, -0.5])
-    with pytest.raises(RejectedCommand, match='last point must switch every beam off'):
+    with pytest.raises(CommandRejectedError, match='last point must switch every beam off'):
         runner.command_programme([0.0, 1e-3], [[5.0, 0, 0, 0], [5.0, 0, 0, 0]])
-    with pytest.raises(RejectedCommand, match='increase strictly'):
+    with pytest.raises(CommandRejectedError, match='increase strictly'):
         runner.command_programme([0.0, 0.0], [[5.0, 0, 0, 0], [0] * 4])
     runner.tick()
     runner.tick()
@@ -168,7 +168,7 @@ def test_a_wall_clock_stamp_is_refused_with_a_message_that_says_so(table):
     runner = TwinRunner(plant, period_s=0.02)
     runner.tick()
     wall_clock_s = 1.8e9
-    with pytest.raises(RejectedCommand, match=r'after the simulated now .*stamps are simulated'):
+    with pytest.raises(CommandRejectedError, match=r'after the simulated now .*stamps are simulated'):
         runner.command_programme(*table.programme(0, 1.0).segments(), start_s=wall_clock_s)
     runner.command_programme(*table.programme(0, 1.0).segments(),
                              start_s=MAX_START_AHEAD_S - 1.0)  # far, but simulated time
@@ -218,7 +218,7 @@ def test_refusals_and_cuts_are_reported_to_the_sender(table):
     plant = DiscretePlant(table, window_s=0.05)
     runner = TwinRunner(plant, period_s=0.01)
     runner.tick()
-    with pytest.raises(RejectedCommand):
+    with pytest.raises(CommandRejectedError):
         runner.command_programme([0.0, 1e-3], [[90.0, 0, 0, 0], [0] * 4], start_s=0.02)
     runner.command_programme(*table.programme(0, 1.0).segments(), start_s=0.02)
     runner.command_programme(*table.programme(1, 1.0).segments(), start_s=0.03)

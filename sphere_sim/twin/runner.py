@@ -53,7 +53,7 @@ class _Running(typing.NamedTuple):
     end_s: float
 
 
-class RejectedCommand(ValueError):
+class CommandRejectedError(ValueError):
     """A command that breaks the contract or the plant's limits; nothing was changed."""
 
 
@@ -173,13 +173,13 @@ class TwinRunner:
 
         Raises
         ------
-        RejectedCommand
+        CommandRejectedError
             For anything :func:`msg_defs.voltage_rules.check_voltages` refuses.
         """
         try:
             volts = check_voltages(voltages_v, self.voltage_limit_v)
         except VoltageRuleError as error:
-            raise RejectedCommand(str(error)) from None
+            raise CommandRejectedError(str(error)) from None
         cut = self._cut_by_hold()
         # The hold overrides everything queued: programmes (reported) and earlier holds due at
         # the same sample (only the latest would count; a burst never fills the queue).
@@ -226,14 +226,14 @@ class TwinRunner:
 
         Raises
         ------
-        RejectedCommand
+        CommandRejectedError
             For a programme that PulseProgramme refuses (see ``from_segments``).
         """
         self._received += 1
         try:
             programme = PulseProgramme.from_segments(times_s, voltages_v, self.voltage_limit_v)
             if start_s > self.time_s + MAX_START_AHEAD_S:
-                raise RejectedCommand(
+                raise CommandRejectedError(
                     f'starts at t = {start_s:.6g} s, {start_s - self.time_s:.6g} s after the '
                     f'simulated now (t = {self.time_s:.4f} s): stamps are simulated time '
                     '(/clock); stamp 0 starts a programme at once')
@@ -241,9 +241,9 @@ class TwinRunner:
                 self.counters.late += 1  # started now instead
             self._queue(max(start_s, self.time_s), 'programme', programme, start_s,
                         self._received)
-        except (ProgrammeError, RejectedCommand) as error:
+        except (ProgrammeError, CommandRejectedError) as error:
             self._event(ProgrammeState.REFUSED, start_s, self._received, str(error))
-            raise RejectedCommand(str(error)) from None
+            raise CommandRejectedError(str(error)) from None
 
     def refuse_programme(self, asked_s, reason):
         """Book a programme refused before it reached the runner (a message that breaks the
@@ -253,7 +253,7 @@ class TwinRunner:
 
     def _queue(self, start_s, kind, payload, asked_s, number=0):
         if len(self._queued) >= MAX_QUEUED_COMMANDS:
-            raise RejectedCommand(f'{MAX_QUEUED_COMMANDS} commands are already waiting for their '
+            raise CommandRejectedError(f'{MAX_QUEUED_COMMANDS} commands are already waiting for their '
                                'start; this one is refused')
         self._queued.append(_Queued(start_s, kind, payload, asked_s, time.perf_counter(),
                                     number))

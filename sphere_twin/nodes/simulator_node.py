@@ -173,7 +173,7 @@ class SimulatorNode(Node):
 
     # --- commands ----------------------------------------------------------------------
     def on_voltage_command(self, msg):
-        # ValueError covers both the contract (conversions) and the runner's RejectedCommand.
+        # ValueError covers both the contract (conversions) and the runner's CommandRejectedError.
         try:
             cut = self.runner.command_voltages(voltages_from_msg(msg))
             if cut is not None:
