@@ -168,7 +168,8 @@ def test_a_wall_clock_stamp_is_refused_with_a_message_that_says_so(table):
     runner = TwinRunner(plant, period_s=0.02)
     runner.tick()
     wall_clock_s = 1.8e9
-    with pytest.raises(CommandRejectedError, match=r'after the simulated now .*stamps are simulated'):
+    with pytest.raises(CommandRejectedError,
+                       match=r'after the simulated now .*stamps are simulated'):
         runner.command_programme(*table.programme(0, 1.0).segments(), start_s=wall_clock_s)
     runner.command_programme(*table.programme(0, 1.0).segments(),
                              start_s=MAX_START_AHEAD_S - 1.0)  # far, but simulated time

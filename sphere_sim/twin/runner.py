@@ -253,8 +253,8 @@ class TwinRunner:
 
     def _queue(self, start_s, kind, payload, asked_s, number=0):
         if len(self._queued) >= MAX_QUEUED_COMMANDS:
-            raise CommandRejectedError(f'{MAX_QUEUED_COMMANDS} commands are already waiting for their '
-                               'start; this one is refused')
+            raise CommandRejectedError(f'{MAX_QUEUED_COMMANDS} commands are already waiting '
+                                       'for their start; this one is refused')
         self._queued.append(_Queued(start_s, kind, payload, asked_s, time.perf_counter(),
                                     number))
         self._queued.sort(key=lambda item: item.start_s)
