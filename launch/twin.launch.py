@@ -12,25 +12,31 @@ Nothing outside ``generate_launch_description`` imports ``launch``, so the file 
 and checked where the launch packages are not installed.
 """
 
-# Launch arguments: name -> (default, description).
+# Launch arguments: name -> (default, description). An argument passed to a node as the
+# parameter of the same name has that parameter's default and description
+# (sphere_twin/nodes/parameters.py, or config/twin.yaml's value where it differs on purpose);
+# test/test_node_parameters.py checks that they agree.
 ARGUMENTS = {
-    'plant': ('continuous', 'Simulator plant: continuous (the model of §3) or discrete '
-                            '(the kick table).'),
-    'controller': ('extended', 'Control law: basic, extended or prelearned (§4.2).'),
-    'scene': ('rest', 'Scene of the simulator: a shipped name or a YAML path.'),
-    'params': ('', 'Parameter set instead of the scene\'s: a shipped name or a YAML file; '
-                   '"" keeps the scene\'s.'),
+    'plant': ('continuous', 'Plant to run: discrete or continuous (the lookup table of '
+                            'kicks).'),
+    'controller': ('extended', 'Control law: basic or extended (§4.2).'),
+    'scene': ('rest', 'Scene (shipped name or YAML path): parameters, beams, sphere and '
+                      'initial state.'),
+    'params': ('', 'Parameter set (shipped name or YAML file with base: and overrides:) '
+                   'instead of the scene\'s; "" keeps the scene\'s.'),
     'seed': ('0', 'Seed of the measurement noise.'),
-    'noise_std_rad': ('0.0', 'Measurement noise of the surface normal per tangential axis '
+    'noise_std_rad': ('0.0', 'Standard deviation of the measured normal per tangential axis '
                              '(rad).'),
-    'real_time_factor': ('1.0', 'Simulated seconds per wall second; 0 as fast as possible.'),
+    'real_time_factor': ('1.0', 'Simulated seconds per wall second; 0 runs as fast as '
+                                'possible.'),
     'use_sim_time': ('true', 'Reference, controller and RViz follow the simulator\'s /clock '
                              '(the simulator and the player publish it).'),
     'record': ('false', 'Also start the recorder (a bag under bags/).'),
-    'output_dir': ('', 'Bag directory of the recorder; "" for bags/run_<UTC time>.'),
+    'output_dir': ('', 'Bag directory to create (must not exist or be empty); "" for '
+                       'bags/run_<UTC time>.'),
     'play': ('false', 'Replay a bag with the player instead of simulating.'),
-    'bag': ('example', 'Bag the player replays: a directory, an .mcap file or an installed '
-                       'name.'),
+    'bag': ('example', 'Bag to play: its directory, one of its .mcap files, a bare .mcap '
+                       'file, or the name of a bag installed with the package (example).'),
     'rviz': ('false', 'Also start RViz with rviz/twin.rviz.'),
     'params_file': (None, 'A --params-file for every node (default: the installed '
                           'config/twin.yaml).'),

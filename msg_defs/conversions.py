@@ -9,12 +9,15 @@ something: here by a sender, in the twin by the receiver. No rclpy here; stamps 
 ``builtin_interfaces/Time`` (a node passes ``self.get_clock().now().to_msg()``).
 """
 
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 from actionlib_msgs.msg import GoalID, GoalStatus, GoalStatusArray
 from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Vector3Stamped
 from nav_msgs.msg import Odometry
+from numpy.typing import ArrayLike, NDArray
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -29,7 +32,7 @@ UNIT_NORM_TOLERANCE = 1e-6
 
 
 
-def time_from_ns(stamp_ns):
+def time_from_ns(stamp_ns: int) -> Any:
     """``builtin_interfaces/Time`` for a time in integer nanoseconds (>= 0)."""
     stamp_ns = int(stamp_ns)
     if stamp_ns < 0:
@@ -38,17 +41,17 @@ def time_from_ns(stamp_ns):
     return Time(sec=sec, nanosec=nanosec)
 
 
-def ns_from_time(stamp):
+def ns_from_time(stamp: Any) -> int:
     """Integer nanoseconds of a ``builtin_interfaces/Time``."""
     return stamp.sec * NS_PER_S + stamp.nanosec
 
 
-def status_values(status):
+def status_values(status: Any) -> dict[str, str]:
     """The key-values of a ``diagnostic_msgs/DiagnosticStatus`` as a dict of strings."""
     return {kv.key: kv.value for kv in status.values}
 
 
-def _unit_vector(values, what):
+def _unit_vector(values: ArrayLike, what: str) -> NDArray[np.float64]:
     vector = finite_vector(values, 3, what)
     norm = float(np.linalg.norm(vector))
     if abs(norm - 1.0) > UNIT_NORM_TOLERANCE:
@@ -56,13 +59,14 @@ def _unit_vector(values, what):
     return vector
 
 
-def _stamp_or_zero(stamp):
+def _stamp_or_zero(stamp: Any) -> Any:
     return Time() if stamp is None else stamp
 
 
 # --- surface normal (geometry_msgs/Vector3Stamped) ----------------------------------------
 
-def surface_normal_to_msg(normal, stamp=None, frame_id=WORLD_FRAME):
+def surface_normal_to_msg(normal: ArrayLike, stamp: Any = None,
+                          frame_id: str = WORLD_FRAME) -> Any:
     """Message for ``/sphere/surface_normal`` (or ``/sphere/reference``).
 
     Parameters
@@ -91,7 +95,7 @@ def surface_normal_to_msg(normal, stamp=None, frame_id=WORLD_FRAME):
     return msg
 
 
-def surface_normal_from_msg(msg, frame_id=WORLD_FRAME):
+def surface_normal_from_msg(msg: Any, frame_id: str = WORLD_FRAME) -> NDArray[np.float64]:
     """The unit normal carried by a ``Vector3Stamped``.
 
     Parameters
@@ -117,7 +121,8 @@ def surface_normal_from_msg(msg, frame_id=WORLD_FRAME):
 
 # --- beam voltages (sensor_msgs/JointState, volts in effort) ------------------------------
 
-def voltages_to_msg(voltages_v, stamp=None, max_abs_voltage_v=VOLTAGE_LIMIT_V):
+def voltages_to_msg(voltages_v: ArrayLike, stamp: Any = None,
+                    max_abs_voltage_v: float = VOLTAGE_LIMIT_V) -> Any:
     """Message for ``/beams/voltage_command`` or ``/beams/voltage``.
 
     Parameters
@@ -147,7 +152,7 @@ def voltages_to_msg(voltages_v, stamp=None, max_abs_voltage_v=VOLTAGE_LIMIT_V):
     return msg
 
 
-def voltages_from_msg(msg):
+def voltages_from_msg(msg: Any) -> NDArray[np.float64]:
     """Beam voltages of a ``JointState``, in beam order 1..4 whatever the joint order.
 
     The receiver applies the command's rules (:func:`msg_defs.voltage_rules.check_voltages`).
@@ -181,7 +186,8 @@ def voltages_from_msg(msg):
 
 # --- beam state (sensor_msgs/JointState, joints beam_k_z and beam_k_phi) ------------------
 
-def beam_state_to_msg(z_m, phi_rad, z_rate_m_per_s=None, phi_rate_rad_per_s=None, stamp=None):
+def beam_state_to_msg(z_m: ArrayLike, phi_rad: ArrayLike, z_rate_m_per_s: ArrayLike | None = None,
+                      phi_rate_rad_per_s: ArrayLike | None = None, stamp: Any = None) -> Any:
     """Message for ``/beams/state``.
 
     Parameters
@@ -209,12 +215,12 @@ def beam_state_to_msg(z_m, phi_rad, z_rate_m_per_s=None, phi_rate_rad_per_s=None
     msg.position = _interleave(z_m, phi_rad, 'beam position').tolist()
     if (z_rate_m_per_s is None) != (phi_rate_rad_per_s is None):
         raise ValueError('beam state: give both rates or neither')
-    if z_rate_m_per_s is not None:
+    if z_rate_m_per_s is not None and phi_rate_rad_per_s is not None:  # both, checked above
         msg.velocity = _interleave(z_rate_m_per_s, phi_rate_rad_per_s, 'beam velocity').tolist()
     return msg
 
 
-def beam_state_from_msg(msg):
+def beam_state_from_msg(msg: Any) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Heights and tilts of a ``/beams/state`` message.
 
     Returns
@@ -235,7 +241,7 @@ def beam_state_from_msg(msg):
     return position[0::2].copy(), position[1::2].copy()
 
 
-def _interleave(z_values, phi_values, what):
+def _interleave(z_values: ArrayLike, phi_values: ArrayLike, what: str) -> NDArray[np.float64]:
     joined = np.empty(2 * BEAM_COUNT)
     joined[0::2] = finite_vector(z_values, BEAM_COUNT, f'{what} z')
     joined[1::2] = finite_vector(phi_values, BEAM_COUNT, f'{what} phi')
@@ -244,7 +250,8 @@ def _interleave(z_values, phi_values, what):
 
 # --- pulse programme (trajectory_msgs/JointTrajectory, volts in effort) -------------------
 
-def programme_to_msg(times_s, voltages_v, stamp=None, max_abs_voltage_v=VOLTAGE_LIMIT_V):
+def programme_to_msg(times_s: ArrayLike, voltages_v: Iterable[ArrayLike], stamp: Any = None,
+                     max_abs_voltage_v: float = VOLTAGE_LIMIT_V) -> Any:
     """Message for ``/beams/pulse_program`` from zero-order-hold segments.
 
     Parameters
@@ -274,7 +281,7 @@ def programme_to_msg(times_s, voltages_v, stamp=None, max_abs_voltage_v=VOLTAGE_
     return msg
 
 
-def programme_from_msg(msg):
+def programme_from_msg(msg: Any) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Segments of a ``/beams/pulse_program`` message, beams in order 1..4.
 
     The receiver applies the programme's rules (:func:`msg_defs.voltage_rules.check_segments`:
@@ -298,7 +305,8 @@ def programme_from_msg(msg):
     if not msg.points:
         raise ValueError('pulse programme: no points')
     order = [names.index(name) for name in BEAM_NAMES]
-    times, rows = [], []
+    times: list[float] = []
+    rows: list[NDArray[np.float64]] = []
     for i, point in enumerate(msg.points):
         effort = list(point.effort)
         if len(effort) != len(names):
@@ -313,8 +321,9 @@ def programme_from_msg(msg):
 
 # --- sphere state (nav_msgs/Odometry) -----------------------------------------------------
 
-def sphere_state_to_msg(position_m, quaternion_wxyz, velocity_m_per_s, omega_body_rad_per_s,
-                        stamp=None):
+def sphere_state_to_msg(position_m: ArrayLike, quaternion_wxyz: ArrayLike,
+                        velocity_m_per_s: ArrayLike, omega_body_rad_per_s: ArrayLike,
+                        stamp: Any = None) -> Any:
     """Message for ``/sphere/state``.
 
     Parameters
@@ -354,7 +363,7 @@ def sphere_state_to_msg(position_m, quaternion_wxyz, velocity_m_per_s, omega_bod
     return msg
 
 
-def sphere_state_from_msg(msg):
+def sphere_state_from_msg(msg: Any) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(position_m, quaternion_wxyz) of a ``/sphere/state`` message."""
     if msg.header.frame_id != WORLD_FRAME or msg.child_frame_id != SPHERE_FRAME:
         raise ValueError(f'sphere state: expected frames {WORLD_FRAME!r} -> {SPHERE_FRAME!r}, '
@@ -376,7 +385,7 @@ _GOAL_STATUS_OF_STATE = {
 _STATE_OF_GOAL_STATUS = {v: k for k, v in _GOAL_STATUS_OF_STATE.items()}
 
 
-def programme_event_to_msg(event):
+def programme_event_to_msg(event: ProgrammeEvent) -> Any:
     """Message for ``/beams/programme_status`` from a :class:`ProgrammeEvent`.
 
     ``header.stamp`` is when it happened; the one goal status names the programme by the stamp
@@ -391,7 +400,7 @@ def programme_event_to_msg(event):
     return msg
 
 
-def programme_events_from_msg(msg):
+def programme_events_from_msg(msg: Any) -> list[ProgrammeEvent]:
     """The :class:`ProgrammeEvent` s a ``/beams/programme_status`` message carries.
 
     Raises
@@ -401,7 +410,7 @@ def programme_events_from_msg(msg):
         not a count.
     """
     time_s = ns_from_time(msg.header.stamp) / NS_PER_S
-    events = []
+    events: list[ProgrammeEvent] = []
     for status in msg.status_list:
         state = _STATE_OF_GOAL_STATUS.get(status.status)
         if state is None:

@@ -5,9 +5,11 @@ boxes from their suspension towards the centre, tilted by phi.
 """
 
 import math
+from typing import Any
 
 import numpy as np
 from geometry_msgs.msg import Point, Pose, Quaternion, Vector3
+from numpy.typing import ArrayLike, NDArray
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -31,7 +33,7 @@ REFERENCE_RGBA = (0.2, 0.9, 0.3, 0.8)
 NOMINAL_CENTRE_M = np.array([0.0, 0.0, math.sqrt(SPHERE_RADIUS_M**2 - 0.4e-3**2)])
 
 
-def _quaternion_from_normal(normal):
+def _quaternion_from_normal(normal: NDArray[np.float64]) -> NDArray[np.float64]:
     """Shortest rotation taking +z to ``normal`` (w, x, y, z)."""
     z = np.array([0.0, 0.0, 1.0])
     axis = np.cross(z, normal)
@@ -43,7 +45,9 @@ def _quaternion_from_normal(normal):
     return np.concatenate([[math.cos(half)], math.sin(half) * axis / s])
 
 
-def _marker(marker_id, kind, stamp, position, quaternion_wxyz, scale, rgba):
+def _marker(marker_id: int, kind: int, stamp: Any, position: NDArray[np.float64],
+            quaternion_wxyz: NDArray[np.float64], scale: list[float],
+            rgba: tuple[float, float, float, float]) -> Any:
     m = Marker()
     m.header.frame_id = MARKERS.frame_id
     m.header.stamp = stamp
@@ -60,7 +64,9 @@ def _marker(marker_id, kind, stamp, position, quaternion_wxyz, scale, rgba):
     return m
 
 
-def twin_markers(normal, stamp, sphere_position_m=None, beam_z_m=None, beam_phi_rad=None):
+def twin_markers(normal: ArrayLike, stamp: Any, sphere_position_m: ArrayLike | None = None,
+                 beam_z_m: ArrayLike | None = None, beam_phi_rad: ArrayLike | None = None,
+                 ) -> Any:
     """MarkerArray of the twin.
 
     Parameters
@@ -104,7 +110,7 @@ def twin_markers(normal, stamp, sphere_position_m=None, beam_z_m=None, beam_phi_
     return out
 
 
-def reference_markers(reference_normal, stamp):
+def reference_markers(reference_normal: ArrayLike, stamp: Any) -> Any:
     """MarkerArray of the reference normal: an arrow from the sphere's nominal centre, in a
     namespace of its own, so that it sits beside the simulator's markers on the same topic."""
     out = MarkerArray()
@@ -114,8 +120,10 @@ def reference_markers(reference_normal, stamp):
     return out
 
 
-def _normal_arrow(marker_id, stamp, centre, normal, rgba=(0.9, 0.9, 0.2, 1.0),
-                  namespace=NAMESPACE):
+def _normal_arrow(marker_id: int, stamp: Any, centre: NDArray[np.float64],
+                  normal: NDArray[np.float64],
+                  rgba: tuple[float, float, float, float] = (0.9, 0.9, 0.2, 1.0),
+                  namespace: str = NAMESPACE) -> Any:
     """A normal as an arrow from the sphere's centre (RViz has no display for a
     Vector3Stamped)."""
     arrow = _marker(marker_id, Marker.ARROW, stamp, np.zeros(3), np.array([1.0, 0, 0, 0]),

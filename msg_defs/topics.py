@@ -31,7 +31,10 @@ Sphere state (``/sphere/state``, nav_msgs/Odometry)
     definition requires.
 """
 
+from __future__ import annotations
+
 import dataclasses
+from typing import TYPE_CHECKING
 
 from actionlib_msgs.msg import GoalStatusArray
 from diagnostic_msgs.msg import DiagnosticArray
@@ -47,6 +50,9 @@ from msg_defs.device import BEAM_COUNT as BEAM_COUNT
 from msg_defs.device import BEAM_IDS as BEAM_IDS
 from msg_defs.device import NS_PER_S as NS_PER_S
 from msg_defs.device import VOLTAGE_LIMIT_V as VOLTAGE_LIMIT_V
+
+if TYPE_CHECKING:
+    from rclpy.qos import QoSProfile
 
 WORLD_FRAME = 'world'
 SPHERE_FRAME = 'sphere'
@@ -74,7 +80,7 @@ class QosSpec:
     reliable: bool = True
     transient_local: bool = False
 
-    def to_profile(self, min_depth=0):
+    def to_profile(self, min_depth: int = 0) -> QoSProfile:
         """The equivalent ``rclpy.qos.QoSProfile``; a subscriber that takes messages in bursts
         (a recorder, a test probe) asks for a history of at least ``min_depth``, which does
         not affect QoS compatibility.
@@ -248,7 +254,7 @@ ALL_TOPICS = (
 )
 
 
-def topic_by_name(name):
+def topic_by_name(name: str) -> Topic:
     """The :class:`Topic` called ``name``.
 
     Raises

@@ -10,8 +10,10 @@ holds between its edges). No ROS here.
 """
 
 import math
+from collections.abc import Iterable
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from msg_defs.device import BEAM_COUNT, VOLTAGE_LIMIT_V
 
@@ -20,7 +22,8 @@ class VoltageRuleError(ValueError):
     """A beam command that breaks a rule; the message says which."""
 
 
-def finite_vector(values, length, what, error=ValueError):
+def finite_vector(values: ArrayLike, length: int, what: str,
+                  error: type[Exception] = ValueError) -> NDArray[np.float64]:
     """``values`` as a float array of shape (length,) of finite numbers, or ``error``."""
     try:
         array = np.asarray(values, dtype=float)
@@ -33,7 +36,8 @@ def finite_vector(values, length, what, error=ValueError):
     return array
 
 
-def check_voltages(voltages_v, limit_v=VOLTAGE_LIMIT_V, what='voltages'):
+def check_voltages(voltages_v: ArrayLike, limit_v: float = VOLTAGE_LIMIT_V,
+                   what: str = 'voltages') -> NDArray[np.float64]:
     """``voltages_v`` as a float array of shape (BEAM_COUNT,) within [0, limit_v] V."""
     if not (math.isfinite(limit_v) and limit_v > 0):
         raise VoltageRuleError(f'voltage limit must be a positive number, got {limit_v}')
@@ -48,7 +52,9 @@ def check_voltages(voltages_v, limit_v=VOLTAGE_LIMIT_V, what='voltages'):
     return volts
 
 
-def check_segments(times_s, voltages_v, limit_v=VOLTAGE_LIMIT_V):
+def check_segments(times_s: ArrayLike, voltages_v: Iterable[ArrayLike],
+                   limit_v: float = VOLTAGE_LIMIT_V,
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Zero-order-hold segments as arrays ``(times (n,), voltages (n, BEAM_COUNT))``.
 
     Times are the segments' starts from the programme's start (s): finite, >= 0, strictly

@@ -7,6 +7,9 @@ kicking happens when Phi is at least Phi_min.)
 
 import dataclasses
 
+import numpy as np
+from numpy.typing import NDArray
+
 from sphere_control.command import Command, unit_xy
 from sphere_control.geometry import error_angle_rad, error_direction_rad, nearest_action
 from sphere_sim.kicks.discrete import DIAGONAL_DIRECTIONS_RAD
@@ -31,24 +34,27 @@ class BasicParams:
 
     phi_min_rad: float
     full_width_rad: float = 0.0
-    directions_rad: tuple = DIAGONAL_DIRECTIONS_RAD
+    directions_rad: tuple[float, ...] = DIAGONAL_DIRECTIONS_RAD
 
 
 class BasicController:
     """Eq. (58) with the resting band; not adaptive."""
 
-    def __init__(self, params):
+    def __init__(self, params: BasicParams) -> None:
         self.params = params
 
-    def decide(self, normal, reference):
+    def decide(self, normal: NDArray[np.float64],
+               reference: NDArray[np.float64]) -> Command | None:
         if error_angle_rad(normal, reference) < self.params.phi_min_rad:
             return None
         theta = error_direction_rad(normal, reference)
         return Command(nearest_action(theta, self.params.directions_rad), FULL_INTENSITY)
 
-    def observe(self, normal_before, command, normal_after):
+    def observe(self, normal_before: NDArray[np.float64], command: Command,
+                normal_after: NDArray[np.float64]) -> None:
         return None
 
-    def expected_displacement_xy(self, normal, command):
+    def expected_displacement_xy(self, normal: NDArray[np.float64],
+                                 command: Command) -> NDArray[np.float64]:
         return (self.params.full_width_rad * command.intensity
                 * unit_xy(self.params.directions_rad[command.action]))

@@ -10,17 +10,29 @@ outside the reachable cone is refused (UNREACHABLE), or after its step budget (N
 setpoints, COMPLETED for trajectories). The outcome never leaves a loop kicking forever.
 """
 
+from __future__ import annotations
+
 import dataclasses
 import enum
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from msg_defs.device import KICK_WINDOW_S
 from sphere_control import reference as ref
 from sphere_control.geometry import error_angle_rad
 from sphere_control.kick_cycle import KickCycle
 from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD
+
+if TYPE_CHECKING:
+    from sphere_control.basic import BasicController
+    from sphere_control.estimator import NormalKalmanFilter
+    from sphere_control.extended import ExtendedController
+    from sphere_control.perturbations import NoisySensor
+    from sphere_control.reference import Reference, ReferenceSample
+    from sphere_sim.kicks.discrete import KickPlant
 
 NO_ACTION = -1  # the action recorded for a step spent resting
 
@@ -103,56 +115,58 @@ class LoopHistory:
         Steps until the last rest streak began (SETTLED only).
     """
 
-    times_s: np.ndarray
-    normals: np.ndarray
-    used_normals: np.ndarray
-    references: np.ndarray
-    aims: np.ndarray
-    actions: np.ndarray
-    intensities: np.ndarray
-    clamped: np.ndarray
+    times_s: NDArray[np.float64]
+    normals: NDArray[np.float64]
+    used_normals: NDArray[np.float64]
+    references: NDArray[np.float64]
+    aims: NDArray[np.float64]
+    actions: NDArray[np.int_]
+    intensities: NDArray[np.float64]
+    clamped: NDArray[np.bool_]
     outcome: Outcome
     settle_step: int | None
 
     @property
-    def errors_rad(self):
+    def errors_rad(self) -> NDArray[np.float64]:
         """True error angle Phi per step (rad), shape (n + 1,)."""
         return np.array([error_angle_rad(n, r) for n, r in
                          zip(self.normals, self.references, strict=True)])
 
     @property
-    def squared_xy_errors(self):
+    def squared_xy_errors(self) -> NDArray[np.float64]:
         """Quadratic x-y deviation from the reference (Fig. 15b), shape (n + 1,)."""
         return np.sum((self.normals[:, :2] - self.references[:, :2]) ** 2, axis=1)
 
     @property
-    def squared_xy_aim_errors(self):
+    def squared_xy_aim_errors(self) -> NDArray[np.float64]:
         """Quadratic x-y deviation of each step's outcome from what its decision aimed at,
         shape (n,): entry k scores state k + 1 (a step at rest aimed too)."""
         return np.sum((self.normals[1:, :2] - self.aims[:, :2]) ** 2, axis=1)
 
     @property
-    def kicks(self):
+    def kicks(self) -> int:
         return int(np.count_nonzero(self.actions != NO_ACTION))
 
     @property
-    def kicks_to_settle(self):
+    def kicks_to_settle(self) -> int | None:
         """Kicks applied before settling, or None if the run did not settle."""
         if self.outcome is not Outcome.SETTLED:
             return None
         return int(np.count_nonzero(self.actions[:self.settle_step] != NO_ACTION))
 
     @property
-    def final_error_rad(self):
+    def final_error_rad(self) -> float:
         return float(self.errors_rad[-1])
 
     @property
-    def reference_clamped(self):
+    def reference_clamped(self) -> bool:
         return bool(self.clamped.any())
 
 
-def run_closed_loop(controller, plant, start_normal, reference, settings=LoopSettings(),
-                    sensor=None, estimator=None):
+def run_closed_loop(controller: BasicController | ExtendedController, plant: KickPlant,
+                    start_normal: ArrayLike, reference: Reference,
+                    settings: LoopSettings = LoopSettings(), sensor: NoisySensor | None = None,
+                    estimator: NormalKalmanFilter | None = None) -> LoopHistory:
     """Run ``controller`` on ``plant`` from ``start_normal`` towards ``reference``.
 
     Parameters
@@ -175,12 +189,14 @@ def run_closed_loop(controller, plant, start_normal, reference, settings=LoopSet
     true_normal = np.asarray(start_normal, dtype=float)
     trace = _Trace()
     stall = _StallWatch(settings)
-    outcome, settle_step, rest_streak = None, None, 0
+    outcome: Outcome | None = None
+    settle_step: int | None = None
+    rest_streak = 0
     # The node's kick cycle, with this loop as its plant: a kick starts at the sample it was
     # decided on and is over, learnt from, at the next one, a kick period later.
     cycle = KickCycle(controller, settings.kick_period_s, lead_periods=0)
 
-    def measure():
+    def measure() -> NDArray[np.float64]:
         seen = true_normal if sensor is None else sensor.measure(true_normal)
         return seen if estimator is None else estimator.update(seen)
 
@@ -223,7 +239,8 @@ def run_closed_loop(controller, plant, start_normal, reference, settings=LoopSet
     return trace.history(outcome, settle_step)
 
 
-def _target(settings, reference, sample, time_s):
+def _target(settings: LoopSettings, reference: Reference, sample: ReferenceSample,
+            time_s: float) -> ReferenceSample:
     """What the controller aims at: the current sample, or with preview where the reference
     will be one kick period on, when the kick about to be decided has settled, by its motion
     now (:func:`~sphere_control.reference.preview`, as the controller node estimates it)."""
@@ -232,7 +249,8 @@ def _target(settings, reference, sample, time_s):
     return ref.preview(reference, time_s, settings.kick_period_s, settings.cone_half_angle_rad)
 
 
-def _stop(settings, reference, sample, stall, true_normal):
+def _stop(settings: LoopSettings, reference: Reference, sample: ReferenceSample,
+          stall: _StallWatch, true_normal: NDArray[np.float64]) -> Outcome | None:
     """The outcome that ends a run before its next decision, or None."""
     if sample.clamped and settings.cone_policy is ConePolicy.REFUSE:
         return Outcome.UNREACHABLE
@@ -244,23 +262,30 @@ def _stop(settings, reference, sample, stall, true_normal):
 class _Trace:
     """A loop's history as it grows: one state per step, one action between two states."""
 
-    def __init__(self):
-        self.times, self.normals, self.used, self.refs, self.clamped = [], [], [], [], []
-        self.actions, self.intensities, self.aims = [], [], []
+    def __init__(self) -> None:
+        self.times: list[float] = []
+        self.normals: list[NDArray[np.float64]] = []
+        self.used: list[NDArray[np.float64]] = []
+        self.refs: list[NDArray[np.float64]] = []
+        self.clamped: list[bool] = []
+        self.actions: list[int] = []
+        self.intensities: list[float] = []
+        self.aims: list[NDArray[np.float64]] = []
 
-    def state(self, time_s, true_normal, seen, sample):
+    def state(self, time_s: float, true_normal: NDArray[np.float64], seen: NDArray[np.float64],
+              sample: ReferenceSample) -> None:
         self.times.append(time_s)
         self.normals.append(np.array(true_normal, dtype=float))
         self.used.append(seen)
         self.refs.append(sample.normal)
         self.clamped.append(sample.clamped)
 
-    def action(self, action, intensity, aim):
+    def action(self, action: int, intensity: float, aim: NDArray[np.float64]) -> None:
         self.actions.append(action)
         self.intensities.append(intensity)
         self.aims.append(np.array(aim, dtype=float))
 
-    def history(self, outcome, settle_step):
+    def history(self, outcome: Outcome, settle_step: int | None) -> LoopHistory:
         keep = len(self.actions) + 1  # a run that stopped mid-step has one state too many
         return LoopHistory(np.array(self.times[:keep]), np.array(self.normals[:keep]),
                            np.array(self.used[:keep]), np.array(self.refs[:keep]),
@@ -273,16 +298,16 @@ class _StallWatch:
     """A setpoint run stalls when ``stall_kicks`` kicks bring no progress of more than
     ``stall_progress_rad`` on its best error."""
 
-    def __init__(self, settings):
+    def __init__(self, settings: LoopSettings) -> None:
         self.settings = settings
         self.best_error = math.inf
         self.kicks_since_best = 0
 
-    def stalled(self, error):
+    def stalled(self, error: float) -> bool:
         if error < self.best_error - self.settings.stall_progress_rad:
             self.best_error, self.kicks_since_best = error, 0
             return False
         return self.kicks_since_best >= self.settings.stall_kicks
 
-    def kicked(self):
+    def kicked(self) -> None:
         self.kicks_since_best += 1

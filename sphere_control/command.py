@@ -4,6 +4,7 @@ import dataclasses
 from typing import Protocol
 
 import numpy as np
+from numpy.typing import NDArray
 
 
 @dataclasses.dataclass(frozen=True)
@@ -21,16 +22,19 @@ class Controller(Protocol):
     kick, ``observe`` reports the normal measured before and after it, for learning.
     """
 
-    def decide(self, normal, reference):
+    def decide(self, normal: NDArray[np.float64],
+               reference: NDArray[np.float64]) -> Command | None:
         """Command or None, for normal and reference (unit vectors, shape (3,))."""
 
-    def observe(self, normal_before, command, normal_after):
+    def observe(self, normal_before: NDArray[np.float64], command: Command,
+                normal_after: NDArray[np.float64]) -> None:
         """Learn from one executed kick (a no-op for non-adaptive controllers)."""
 
-    def expected_displacement_xy(self, normal, command):
+    def expected_displacement_xy(self, normal: NDArray[np.float64],
+                                 command: Command) -> NDArray[np.float64]:
         """The controller's own prediction of the kick's x-y displacement, shape (2,)."""
 
 
-def unit_xy(direction_rad):
+def unit_xy(direction_rad: float) -> NDArray[np.float64]:
     """Unit vector of a polar angle, shape (2,)."""
     return np.array([np.cos(direction_rad), np.sin(direction_rad)])

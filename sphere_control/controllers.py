@@ -6,11 +6,13 @@ here; the kinds are one list, :class:`ControllerKind`.
 
 import enum
 import math
+from collections.abc import Iterable
 
 import numpy as np
 
 from sphere_control.basic import BasicController, BasicParams
 from sphere_control.extended import ExtendedController, ExtendedParams
+from sphere_sim.kicks.discrete import KickPlant
 from sphere_sim.model.rotations import angle_between
 
 DEFAULT_PHI_MIN_RAD = math.radians(0.05)  # Fig. 13's tighter resting band
@@ -29,14 +31,16 @@ class ControllerKind(enum.Enum):
 CONTROLLER_KINDS = (ControllerKind.BASIC.value, ControllerKind.EXTENDED.value)
 
 
-def full_kick_width_rad(kick_plant):
+def full_kick_width_rad(kick_plant: KickPlant) -> float:
     """Rotation of a full kick from rest: the model's prior for every action's width."""
     up = np.array([0.0, 0.0, 1.0])
     return angle_between(up, kick_plant.kick(up, 0, 1.0).normal)
 
 
-def make_controller(kind, phi_min_rad, full_width_rad, directions_rad,
-                    direction_learning_min_rad=None):
+def make_controller(kind: ControllerKind | str, phi_min_rad: float, full_width_rad: float,
+                    directions_rad: Iterable[float],
+                    direction_learning_min_rad: float | None = None,
+                    ) -> BasicController | ExtendedController:
     """A fresh controller of ``kind`` (a :class:`ControllerKind` or its value).
 
     ``PRELEARNED`` gives an extended controller still to be taught by its caller.
@@ -59,7 +63,9 @@ def make_controller(kind, phi_min_rad, full_width_rad, directions_rad,
         direction_learning_min_rad=direction_learning_min_rad))
 
 
-def controller_for(kind, kick_plant, phi_min_rad=DEFAULT_PHI_MIN_RAD):
+def controller_for(kind: ControllerKind | str, kick_plant: KickPlant,
+                   phi_min_rad: float = DEFAULT_PHI_MIN_RAD,
+                   ) -> BasicController | ExtendedController:
     """A controller whose model is ``kick_plant``'s directions and full-kick width."""
     return make_controller(kind, phi_min_rad, full_kick_width_rad(kick_plant),
                            kick_plant.directions_rad)

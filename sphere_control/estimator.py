@@ -8,6 +8,7 @@ treats the model's error as process noise; measurements are the noisy normal's x
 import dataclasses
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from sphere_sim.kicks.discrete import normal_from_xy
 
@@ -48,17 +49,17 @@ class NormalKalmanFilter:
         Initial estimate.
     """
 
-    def __init__(self, params, normal):
+    def __init__(self, params: KalmanParams, normal: ArrayLike) -> None:
         self.params = params
         self.xy = np.asarray(normal, dtype=float)[:2].copy()
         self.covariance = params.initial_std_rad ** 2 * IDENTITY_2
 
     @property
-    def normal(self):
+    def normal(self) -> NDArray[np.float64]:
         """Estimated unit normal, shape (3,)."""
         return normal_from_xy(*self.xy)
 
-    def predict(self, displacement_xy):
+    def predict(self, displacement_xy: ArrayLike) -> None:
         """Time update over one kick predicted to move the normal by ``displacement_xy``."""
         d = np.asarray(displacement_xy, dtype=float)
         p = self.params
@@ -66,7 +67,7 @@ class NormalKalmanFilter:
         self.xy = self.xy + d
         self.covariance = self.covariance + q * IDENTITY_2
 
-    def update(self, measured_normal):
+    def update(self, measured_normal: ArrayLike) -> NDArray[np.float64]:
         """Measurement update with a measured normal (shape (3,)); returns the estimate."""
         r = self.params.measurement_std_rad ** 2 * IDENTITY_2
         gain = self.covariance @ np.linalg.inv(self.covariance + r)

@@ -7,12 +7,17 @@ rotation Psi* to it, and the intensity u_K* = h_a^-1(Psi*). After the kick, the 
 direction and width update sigma_a (eq. 61) and h_a (eqs. 62-63) at Table A1's learning rates.
 """
 
+from __future__ import annotations
+
 import dataclasses
 import math
+from collections.abc import Iterable
+from typing import TypeVar
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
-from sphere_control.command import Command, unit_xy
+from sphere_control.command import Command, Controller, unit_xy
 from sphere_control.geometry import (
     displacement_xy,
     error_angle_rad,
@@ -22,12 +27,14 @@ from sphere_control.geometry import (
     wrap_angle_rad,
 )
 from sphere_control.rotation_network import NetworkShape, RotationWidthNetwork
-from sphere_sim.kicks.discrete import DIAGONAL_DIRECTIONS_RAD
+from sphere_sim.kicks.discrete import DIAGONAL_DIRECTIONS_RAD, KickPlant
 from sphere_sim.model.rotations import angle_between
 
 # A kick shorter than this fraction of the model's full width says little about its direction
 # (its angle is dominated by measurement noise and interpolation), so sigma_a is not updated.
 DIRECTION_LEARNING_MIN_FRACTION = 0.2
+# The controller prelearn teaches and hands back.
+C = TypeVar('C', bound=Controller)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -61,13 +68,13 @@ class ExtendedParams:
 
     phi_min_rad: float
     full_width_rad: float
-    directions_rad: tuple = DIAGONAL_DIRECTIONS_RAD
+    directions_rad: tuple[float, ...] = DIAGONAL_DIRECTIONS_RAD
     shape: NetworkShape = dataclasses.field(default_factory=NetworkShape)
     rates: LearningRates = dataclasses.field(default_factory=LearningRates)
     direction_learning_min_rad: float | None = None
 
     @property
-    def direction_threshold_rad(self):
+    def direction_threshold_rad(self) -> float:
         if self.direction_learning_min_rad is not None:
             return self.direction_learning_min_rad
         return DIRECTION_LEARNING_MIN_FRACTION * self.full_width_rad
@@ -76,27 +83,29 @@ class ExtendedParams:
 class ExtendedController:
     """Adaptive directions and rotation widths (the gray part of Fig. 9)."""
 
-    def __init__(self, params):
+    def __init__(self, params: ExtendedParams) -> None:
         self.params = params
         self.directions_rad = np.array(params.directions_rad, dtype=float)
         self.networks = [RotationWidthNetwork.linear(params.full_width_rad, params.shape)
                          for _ in params.directions_rad]
 
-    def copy(self):
+    def copy(self) -> ExtendedController:
         """An independent controller with the same learned state (e.g. after pre-learning)."""
         other = ExtendedController(self.params)
         other.directions_rad = self.directions_rad.copy()
         other.networks = [net.copy() for net in self.networks]
         return other
 
-    def decide(self, normal, reference):
+    def decide(self, normal: NDArray[np.float64],
+               reference: NDArray[np.float64]) -> Command | None:
         if error_angle_rad(normal, reference) < self.params.phi_min_rad:
             return None
         action = nearest_action(error_direction_rad(normal, reference), self.directions_rad)
         psi_star = target_rotation_rad(normal, self.directions_rad[action], reference)
         return Command(action, self.networks[action].inverse(psi_star))
 
-    def observe(self, normal_before, command, normal_after):
+    def observe(self, normal_before: NDArray[np.float64], command: Command,
+                normal_after: NDArray[np.float64]) -> None:
         """Eqs. (61)-(63) from the measured normals before and after the kick.
 
         The achieved width Psi~ is the rotation angle times the cosine between the achieved
@@ -116,17 +125,19 @@ class ExtendedController:
         along = float(d @ unit_xy(self.directions_rad[a])) / length if length > 0.0 else 0.0
         self.networks[a].update(command.intensity, rotation * along, rates.bias, rates.weights)
 
-    def expected_displacement_xy(self, normal, command):
+    def expected_displacement_xy(self, normal: NDArray[np.float64],
+                                 command: Command) -> NDArray[np.float64]:
         a = command.action
         return self.networks[a](command.intensity) * unit_xy(self.directions_rad[a])
 
-    def direction_errors_rad(self, true_directions_rad):
+    def direction_errors_rad(self, true_directions_rad: Iterable[float]) -> NDArray[np.float64]:
         """|sigma_a - true direction| per action (rad), shape (n_actions,)."""
         return np.array([abs(wrap_angle_rad(s - t)) for s, t in
                          zip(self.directions_rad, true_directions_rad, strict=True)])
 
 
-def prelearn(controller, plant, start_normal, n_kicks, seed):
+def prelearn(controller: C, plant: KickPlant, start_normal: ArrayLike, n_kicks: int,
+             seed: int) -> C:
     """Pre-learning phase: kicks of every action in turn at random intensities.
 
     Cycling through the actions keeps the sphere near ``start_normal`` while each network sees

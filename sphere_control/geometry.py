@@ -5,8 +5,10 @@ the convention of :data:`sphere_sim.kicks.discrete.DIAGONAL_DIRECTIONS_RAD`.
 """
 
 import math
+from collections.abc import Iterable
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from sphere_sim.kicks.discrete import normal_from_xy
 from sphere_sim.model.rotations import angle_between
@@ -14,12 +16,12 @@ from sphere_sim.model.rotations import angle_between
 FULL_TURN_RAD = 2.0 * math.pi
 
 
-def wrap_angle_rad(angle_rad):
+def wrap_angle_rad(angle_rad: float) -> float:
     """The angle mapped into [-pi, pi] (rad)."""
     return math.remainder(float(angle_rad), FULL_TURN_RAD)
 
 
-def error_vector(normal, reference):
+def error_vector(normal: ArrayLike, reference: ArrayLike) -> NDArray[np.float64]:
     """Cartesian error e = xi_r - xi_n of eq. (54).
 
     Parameters
@@ -34,12 +36,12 @@ def error_vector(normal, reference):
     return np.asarray(reference, dtype=float) - np.asarray(normal, dtype=float)
 
 
-def error_angle_rad(normal, reference):
+def error_angle_rad(normal: ArrayLike, reference: ArrayLike) -> float:
     """Absolute error angle Phi in [0, pi] of eq. (55) (rad), robust for tiny angles."""
     return angle_between(normal, reference)
 
 
-def error_direction_rad(normal, reference):
+def error_direction_rad(normal: ArrayLike, reference: ArrayLike) -> float:
     """Polar angle Theta in [0, 2 pi) of the error's x-y part, eqs. (56)-(57) (rad).
 
     ``atan2`` folded into [0, 2 pi) equals the paper's case distinction on e_y. A zero x-y
@@ -51,18 +53,19 @@ def error_direction_rad(normal, reference):
     return math.atan2(e[1], e[0]) % FULL_TURN_RAD
 
 
-def nearest_action(theta_rad, directions_rad):
+def nearest_action(theta_rad: float, directions_rad: Iterable[float]) -> int:
     """Eq. (58): index of the kick direction closest to Theta (differences wrapped)."""
     gaps = [abs(wrap_angle_rad(sigma - theta_rad)) for sigma in directions_rad]
     return int(np.argmin(gaps))
 
 
-def displacement_xy(normal_before, normal_after):
+def displacement_xy(normal_before: ArrayLike, normal_after: ArrayLike) -> NDArray[np.float64]:
     """x-y displacement of the normal, shape (2,)."""
     return np.asarray(normal_after, dtype=float)[:2] - np.asarray(normal_before, dtype=float)[:2]
 
 
-def closest_point_on_kick_line(normal, direction_rad, reference):
+def closest_point_on_kick_line(normal: ArrayLike, direction_rad: float, reference: ArrayLike,
+                               ) -> tuple[NDArray[np.float64], float]:
     """Fig. 11: the point of the kick line closest to the reference.
 
     The kick line runs through the normal's x-y point along ``direction_rad``.
@@ -88,7 +91,7 @@ def closest_point_on_kick_line(normal, direction_rad, reference):
     return normal_from_xy(*xy), travel
 
 
-def target_rotation_rad(normal, direction_rad, reference):
+def target_rotation_rad(normal: ArrayLike, direction_rad: float, reference: ArrayLike) -> float:
     """Psi*: signed rotation (rad) from the normal to the closest point of its kick line."""
     target, travel = closest_point_on_kick_line(normal, direction_rad, reference)
     return math.copysign(angle_between(normal, target), travel)

@@ -19,26 +19,26 @@ calibrated intensities; only :class:`CalibratedKicks` turns them into the design
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
-from typing import Protocol
+from typing import TYPE_CHECKING, Generic, TypeVar
 
 import numpy as np
+from numpy.typing import NDArray
 
-from sphere_sim.kicks.discrete import LEVEL_NORMAL, KickResult
+from sphere_sim.kicks.discrete import LEVEL_NORMAL, KickPlant, KickResult
 from sphere_sim.model.rotations import angle_between
+
+if TYPE_CHECKING:
+    from sphere_sim.kicks.lookup_table import ProgrammedKickPlant
+    from sphere_sim.model.programme import PulseProgramme
 
 # Design intensities at which the level-state curve is sampled, 0.005 apart: every knot of the
 # shipped tables (0.01 apart at their finest) is a sample, so the calibration meets a table at
 # its knots and follows its interpolation between them, in 0.3 s.
 CURVE_SAMPLES = 201
 
-
-class KickModel(Protocol):
-    """What a calibration reads and wraps: kicks by action and intensity."""
-
-    directions_rad: Sequence[float]
-
-    def kick(self, normal: np.ndarray, action: int, intensity: float) -> KickResult: ...
+# The kick model a calibration wraps, and one that also makes programmes.
+K = TypeVar('K', bound=KickPlant)
+P = TypeVar('P', bound='ProgrammedKickPlant')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,11 +54,11 @@ class ActionCurve:
         The width reached there (rad), non-decreasing (equal at the two ends of a dip).
     """
 
-    design_intensities: np.ndarray
-    widths_rad: np.ndarray
+    design_intensities: NDArray[np.float64]
+    widths_rad: NDArray[np.float64]
 
     @classmethod
-    def measure(cls, kicks: KickModel, action: int, normal: np.ndarray = LEVEL_NORMAL,
+    def measure(cls, kicks: KickPlant, action: int, normal: NDArray[np.float64] = LEVEL_NORMAL,
                 samples: int = CURVE_SAMPLES) -> ActionCurve:
         """Sample ``action``'s kick from ``normal`` and keep where its running maximum rises:
         a width first reached at u is never asked of a larger u (least voltage)."""
@@ -103,7 +103,8 @@ class IntensityCalibration:
     curves: tuple[ActionCurve, ...]
 
     @classmethod
-    def of(cls, kicks: KickModel, normal: np.ndarray = LEVEL_NORMAL) -> IntensityCalibration:
+    def of(cls, kicks: KickPlant,
+           normal: NDArray[np.float64] = LEVEL_NORMAL) -> IntensityCalibration:
         """The calibration of every action of ``kicks`` from its kicks at ``normal``."""
         return cls(tuple(ActionCurve.measure(kicks, a, normal)
                          for a in range(len(kicks.directions_rad))))
@@ -111,7 +112,7 @@ class IntensityCalibration:
     def design_intensity(self, action: int, intensity: float) -> float:
         return self.curves[action].design_intensity(intensity)
 
-    def applied_to(self, kicks: KickModel) -> CalibratedKicks:
+    def applied_to(self, kicks: K) -> CalibratedKicks[K]:
         """``kicks`` (the nominal model or another plant of the same actions) driven in
         calibrated intensities."""
         if len(kicks.directions_rad) != len(self.curves):
@@ -120,29 +121,30 @@ class IntensityCalibration:
         return CalibratedKicks(kicks, self)
 
 
-def calibrated(kicks: KickModel) -> CalibratedKicks:
+def calibrated(kicks: K) -> CalibratedKicks[K]:
     """``kicks`` in calibrated intensities, from its own level-state curves: the controllers'
     view of the nominal kick model."""
     return IntensityCalibration.of(kicks).applied_to(kicks)
 
 
-class CalibratedKicks:
+class CalibratedKicks(Generic[K]):
     """A kick model (a table, a plant, a twin) taking calibrated intensities.
 
     ``kick`` and, where the wrapped model makes programmes, ``programme`` translate the
     intensity and pass everything else through.
     """
 
-    def __init__(self, kicks: KickModel, calibration: IntensityCalibration):
+    def __init__(self, kicks: K, calibration: IntensityCalibration) -> None:
         self.kicks = kicks
         self.calibration = calibration
         self.directions_rad = tuple(kicks.directions_rad)
 
-    def kick(self, normal: np.ndarray, action: int, intensity: float) -> KickResult:
+    def kick(self, normal: NDArray[np.float64], action: int, intensity: float) -> KickResult:
         return self.kicks.kick(normal, action,
                                self.calibration.design_intensity(action, intensity))
 
-    def programme(self, action: int, intensity: float, normal: np.ndarray = LEVEL_NORMAL):
+    def programme(self: CalibratedKicks[P], action: int, intensity: float,
+                  normal: NDArray[np.float64] = LEVEL_NORMAL) -> PulseProgramme:
         """The wrapped model's programme (:class:`~sphere_sim.model.programme.Programme`) at
         the design intensity of calibrated ``intensity``."""
         return self.kicks.programme(action, self.calibration.design_intensity(action, intensity),

@@ -15,17 +15,27 @@ programme that no report acknowledges within the stale timeout (lost on its way,
 plant that does not echo) is given up, not learned from, and the next kick decided.
 """
 
+from __future__ import annotations
+
 import dataclasses
 import enum
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from msg_defs.device import NS_PER_S
 from msg_defs.programme_events import ProgrammeState
 from sphere_control.geometry import error_angle_rad, error_direction_rad
 from sphere_control.reachable import model_kicks, speed_ratios
 from sphere_control.reference_motion import ReferenceMotion
+
+if TYPE_CHECKING:
+    from msg_defs.programme_events import ProgrammeEvent
+    from sphere_control.basic import BasicController
+    from sphere_control.command import Command
+    from sphere_control.extended import ExtendedController
 
 DEFAULT_STALE_TIMEOUT_S = 1.0
 # A kick is scheduled this many sample periods after the sample it was decided on: the time
@@ -57,7 +67,7 @@ class Decision:
     """
 
     phase: Phase
-    command: object = None
+    command: Command | None = None
     phi_rad: float = math.nan
     theta_rad: float = math.nan
     start_s: float = math.nan
@@ -72,8 +82,8 @@ class PendingKick:
     """
 
     asked_s: float
-    normal_before: np.ndarray
-    command: object
+    normal_before: NDArray[np.float64]
+    command: Command
     sent_wall_s: float
     start_s: float = math.nan
     end_s: float = math.nan
@@ -110,33 +120,35 @@ class KickCycle:
         instead of at its newest sample.
     """
 
-    def __init__(self, controller, kick_period_s, stale_timeout_s=DEFAULT_STALE_TIMEOUT_S,
-                 lead_periods=DEFAULT_LEAD_PERIODS, preview=False):
+    def __init__(self, controller: BasicController | ExtendedController, kick_period_s: float,
+                 stale_timeout_s: float = DEFAULT_STALE_TIMEOUT_S,
+                 lead_periods: int = DEFAULT_LEAD_PERIODS, preview: bool = False) -> None:
         self.controller = controller
         self.kick_period_s = kick_period_s
         self.stale_timeout_s = stale_timeout_s
         self.lead_periods = lead_periods
         self.preview = preview
-        self.latest = None  # (time_s, normal) of the newest sample
-        self.reference = None
-        self.last_sample_wall_s = None
-        self.pending = None  # PendingKick
+        # (time_s, normal) of the newest sample
+        self.latest: tuple[float, NDArray[np.float64]] | None = None
+        self.reference: NDArray[np.float64] | None = None
+        self.last_sample_wall_s: float | None = None
+        self.pending: PendingKick | None = None
         self.counts = CycleCounts()
-        self.period_s = None  # the sample period, learnt from the stamps
+        self.period_s: float | None = None  # the sample period, learnt from the stamps
         self.reference_motion = ReferenceMotion()
 
     @property
-    def kicks(self):
+    def kicks(self) -> int:
         return self.counts.kicks
 
     # --- inputs ------------------------------------------------------------------------
-    def on_reference(self, normal, time_s=None):
+    def on_reference(self, normal: ArrayLike, time_s: float | None = None) -> None:
         """A reference sample; its stamp ``time_s`` (s) feeds the motion estimate."""
         self.reference = np.asarray(normal, dtype=float)
         if time_s is not None:
             self.reference_motion.add(time_s, self.reference)
 
-    def record(self, time_s, normal, wall_s=None):
+    def record(self, time_s: float, normal: ArrayLike, wall_s: float | None = None) -> None:
         """Keep a measured sample as the newest (without deciding)."""
         if self.latest is not None and time_s > self.latest[0]:
             gap = float(time_s) - self.latest[0]
@@ -145,13 +157,13 @@ class KickCycle:
         if wall_s is not None:
             self.last_sample_wall_s = wall_s
 
-    def on_sample(self, time_s, normal, wall_s):
+    def on_sample(self, time_s: float, normal: ArrayLike, wall_s: float) -> Decision:
         """Record a measured sample; returns the :class:`Decision` it leads to."""
         self.record(time_s, normal, wall_s)
         self._give_up_unanswered(wall_s)
         return self.decide(wall_s)
 
-    def on_programme_event(self, event):
+    def on_programme_event(self, event: ProgrammeEvent) -> Decision | None:
         """A plant's report on a programme (:class:`ProgrammeEvent`).
 
         Returns the :class:`Decision` it leads to when it ends the pending kick on a sample
@@ -160,6 +172,7 @@ class KickCycle:
         if not self.concerns(event):
             return None
         p = self.pending
+        assert p is not None  # the report concerns it
         if event.state is ProgrammeState.STARTED:
             p.start_s = event.time_s
         elif event.state is ProgrammeState.ENDED:
@@ -179,18 +192,19 @@ class KickCycle:
             return None
         return self.decide() if self.over() and self.latest is not None else None
 
-    def concerns(self, event):
+    def concerns(self, event: ProgrammeEvent) -> bool:
         """Whether a programme report is about the pending kick (named by its stamp)."""
         return (self.pending is not None
                 and abs(event.asked_s - self.pending.asked_s) <= STAMP_TOL_S)
 
-    def kick_ran(self, start_s, end_s):
+    def kick_ran(self, start_s: float, end_s: float) -> None:
         """Report that the pending kick started at ``start_s`` and ended at ``end_s`` (the
         offline loop's plant, which applies a kick at once)."""
         p = self.pending
+        assert p is not None, 'no kick is pending'
         p.start_s, p.end_s = start_s, end_s
 
-    def check_stale(self, wall_s):
+    def check_stale(self, wall_s: float) -> Decision | None:
         """Decision when no sample came (call from a wall-clock timer), or None. Never a kick:
         only a sample decides one (a lockstep plant repeats its last sample while it waits
         for a command, and the repeat gives up an unanswered kick)."""
@@ -203,7 +217,7 @@ class KickCycle:
         return None
 
     # --- the cycle ---------------------------------------------------------------------
-    def over(self):
+    def over(self) -> bool:
         """True when no kick is in effect: none pending, or the pending one has reported its
         end and the newest sample is at least a kick period after its reported start."""
         p = self.pending
@@ -213,25 +227,27 @@ class KickCycle:
             return False
         return self.latest[0] >= max(p.start_s + self.kick_period_s, p.end_s) - 1e-9
 
-    def land(self):
+    def land(self) -> bool:
         """If the pending kick is over, let the controller learn from it (the newest sample
         is its outcome) and free the cycle; returns whether the cycle is free."""
         if not self.over():
             return False
         p = self.pending
         if p is not None:
+            assert self.latest is not None  # over() saw it
             if p.learn:
                 self.controller.observe(p.normal_before, p.command, self.latest[1])
                 self.counts.landed += 1
             self.pending = None
         return True
 
-    def decide(self, wall_s=None):
+    def decide(self, wall_s: float | None = None) -> Decision:
         """The next step on the newest sample: wait, rest or kick (``wall_s``: now, when the
         kick is sent; the newest sample's arrival by default)."""
         if self.latest is None:
             return Decision(Phase.NO_STATE)
         if not self.land():
+            assert self.pending is not None  # land() frees the cycle when none is
             return Decision(Phase.WAITING if math.isnan(self.pending.start_s)
                             else Phase.SETTLING)
         time_s, normal = self.latest
@@ -242,7 +258,9 @@ class KickCycle:
         lead_s = (LEAD_BEFORE_PERIOD_KNOWN_S if self.period_s is None
                   else self.period_s) * self.lead_periods
         start_s = round((time_s + lead_s) * NS_PER_S) / NS_PER_S
-        command = self.controller.decide(normal, self.target(start_s + self.kick_period_s))
+        aim = self.target(start_s + self.kick_period_s)
+        assert aim is not None  # a reference has arrived
+        command = self.controller.decide(normal, aim)
         if command is None:
             return Decision(Phase.RESTING, None, phi, theta)
         sent_wall_s = self.last_sample_wall_s if wall_s is None else wall_s
@@ -250,7 +268,7 @@ class KickCycle:
         self.counts.kicks += 1
         return Decision(Phase.KICKING, command, phi, theta, start_s)
 
-    def _give_up_unanswered(self, wall_s):
+    def _give_up_unanswered(self, wall_s: float | None) -> bool:
         """Drop a pending kick no report has acknowledged for the stale timeout; True if so."""
         p = self.pending
         if (p is None or not math.isnan(p.start_s) or wall_s is None
@@ -261,7 +279,7 @@ class KickCycle:
         return True
 
     # --- aims --------------------------------------------------------------------------
-    def target(self, landing_s):
+    def target(self, landing_s: float) -> NDArray[np.float64] | None:
         """What the controller aims at: the reference, or with preview where it will be at
         ``landing_s`` (simulated s), when the kick about to be decided is over.
 
@@ -277,7 +295,7 @@ class KickCycle:
             return motion.ahead(horizon_s)
         return self.reference
 
-    def speed_ratio(self):
+    def speed_ratio(self) -> float:
         """The reference's step per kick period over the furthest the controller's model of
         the kicks reaches along it (:mod:`sphere_control.reachable`); above 1 the reference
         outruns the plant. 0 for a reference standing still."""

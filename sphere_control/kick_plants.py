@@ -8,23 +8,34 @@
 * :class:`ContinuousKickPlant`: one kick of the continuous model per call (seconds each).
 """
 
+from __future__ import annotations
+
 import math
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from sphere_control.geometry import wrap_angle_rad
 from sphere_sim.kicks.discrete import (
     CONE_HALF_ANGLE_RAD,
     DIAGONAL_DIRECTIONS_RAD,
     EIGHT_DIRECTIONS_RAD,
+    KickPlant,
     KickResult,
     normal_from_xy,
 )
 
+if TYPE_CHECKING:
+    from sphere_sim.kicks.lookup_table import ProgrammedKickPlant, TableSpec
+    from sphere_sim.kicks.plants import ContinuousPlant
+    from sphere_sim.model.parameters import ParameterSet
+
 EIGHTH_TURN_RAD = 0.25 * math.pi
 
 
-def _turn_xy(normal, angle_rad):
+def _turn_xy(normal: ArrayLike, angle_rad: float) -> NDArray[np.float64]:
     """The normal turned about z by ``angle_rad``, shape (3,)."""
     c, s = math.cos(angle_rad), math.sin(angle_rad)
     n = np.asarray(normal, dtype=float)
@@ -46,19 +57,20 @@ class AnalyticKickPlant:
         Relative loss of width at the cone's edge (Fig. 10: widths shrink with tilt).
     """
 
-    def __init__(self, full_width_rad, directions_rad=DIAGONAL_DIRECTIONS_RAD, exponent=1.0,
-                 softening=0.0):
+    def __init__(self, full_width_rad: float,
+                 directions_rad: Iterable[float] = DIAGONAL_DIRECTIONS_RAD,
+                 exponent: float = 1.0, softening: float = 0.0) -> None:
         self.full_width_rad = float(full_width_rad)
         self.directions_rad = tuple(directions_rad)
         self.exponent = float(exponent)
         self.softening = float(softening)
 
-    def width_rad(self, normal, intensity):
+    def width_rad(self, normal: NDArray[np.float64], intensity: float) -> float:
         tilt = math.asin(min(1.0, math.hypot(normal[0], normal[1])))
         scale = 1.0 - self.softening * tilt / CONE_HALF_ANGLE_RAD
         return self.full_width_rad * float(np.clip(intensity, 0.0, 1.0)) ** self.exponent * scale
 
-    def kick(self, normal, action, intensity):
+    def kick(self, normal: NDArray[np.float64], action: int, intensity: float) -> KickResult:
         sigma = self.directions_rad[action]
         h = self.width_rad(normal, intensity)
         xy = np.asarray(normal, dtype=float)[:2] + h * np.array([math.cos(sigma), math.sin(sigma)])
@@ -72,15 +84,15 @@ class EightDirectionPlant:
     base action at phi - 45 deg, and the outcome turned back.
     """
 
-    def __init__(self, base):
+    def __init__(self, base: KickPlant) -> None:
         self.base = base
         self.directions_rad = EIGHT_DIRECTIONS_RAD
 
-    def _base_action(self, direction_rad):
+    def _base_action(self, direction_rad: float) -> tuple[int, float]:
         gaps = [abs(wrap_angle_rad(d - direction_rad)) for d in self.base.directions_rad]
         return int(np.argmin(gaps)), min(gaps)
 
-    def kick(self, normal, action, intensity):
+    def kick(self, normal: NDArray[np.float64], action: int, intensity: float) -> KickResult:
         phi = self.directions_rad[action]
         base_action, gap = self._base_action(phi)
         if gap < 1e-9:
@@ -107,7 +119,7 @@ class ContinuousKickPlant:
         The default set unless given.
     """
 
-    def __init__(self, spec, params=None):
+    def __init__(self, spec: TableSpec, params: ParameterSet | None = None) -> None:
         from sphere_sim.kicks.characteristics import KickBench
 
         self.spec = spec
@@ -115,7 +127,7 @@ class ContinuousKickPlant:
         self.directions_rad = tuple(spec.design.direction_rad + q * 0.5 * math.pi
                                     for q in range(4))
 
-    def kick(self, normal, action, intensity):
+    def kick(self, normal: NDArray[np.float64], action: int, intensity: float) -> KickResult:
         from sphere_sim.kicks.design import simulate_kick
 
         normal = np.asarray(normal, dtype=float)
@@ -147,13 +159,14 @@ class TwinKickPlant:
         Simulated time per kick (s), at least the longest programme.
     """
 
-    def __init__(self, kick_model, plant, period_s):
+    def __init__(self, kick_model: ProgrammedKickPlant, plant: ContinuousPlant,
+                 period_s: float) -> None:
         self.kick_model = kick_model
         self.plant = plant
         self.period_s = period_s
         self.directions_rad = tuple(kick_model.directions_rad)
 
-    def kick(self, normal, action, intensity):
+    def kick(self, normal: NDArray[np.float64], action: int, intensity: float) -> KickResult:
         programme = self.kick_model.programme(int(action), float(intensity), normal)
         self.plant.run_programme(programme)
         self.plant.advance(self.plant.time_s + max(self.period_s, programme.duration_s))

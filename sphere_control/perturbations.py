@@ -9,8 +9,9 @@ import dataclasses
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
-from sphere_sim.kicks.discrete import KickResult, normal_from_xy
+from sphere_sim.kicks.discrete import KickPlant, KickResult, normal_from_xy
 
 # Measured normals are kept strictly inside the unit disc so they stay unit vectors.
 MAX_MEASURED_XY_RADIUS = 0.999999
@@ -40,16 +41,16 @@ class PerturbedPlant:
     directions are :attr:`true_directions_rad`.
     """
 
-    def __init__(self, base, mismatch):
+    def __init__(self, base: KickPlant, mismatch: Mismatch) -> None:
         self.base = base
         self.mismatch = mismatch
         self.directions_rad = tuple(base.directions_rad)
 
     @property
-    def true_directions_rad(self):
+    def true_directions_rad(self) -> tuple[float, ...]:
         return tuple(d + self.mismatch.direction_offset_rad for d in self.directions_rad)
 
-    def kick(self, normal, action, intensity):
+    def kick(self, normal: NDArray[np.float64], action: int, intensity: float) -> KickResult:
         result = self.base.kick(normal, action, intensity)
         d = result.normal[:2] - np.asarray(normal, dtype=float)[:2]
         c = math.cos(self.mismatch.direction_offset_rad)
@@ -69,11 +70,11 @@ class NoisySensor:
     seed : int
     """
 
-    def __init__(self, std_rad, seed):
+    def __init__(self, std_rad: float, seed: int) -> None:
         self.std_rad = float(std_rad)
         self.rng = np.random.default_rng(seed)
 
-    def measure(self, normal):
+    def measure(self, normal: ArrayLike) -> NDArray[np.float64]:
         """A noisy unit normal, shape (3,)."""
         xy = np.asarray(normal, dtype=float)[:2] + self.rng.normal(0.0, self.std_rad, 2)
         radius = math.hypot(*xy)

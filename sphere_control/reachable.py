@@ -9,18 +9,27 @@ the controller does; the evaluation reports where on eq. (64) that happens and t
 node warns about it.
 """
 
+from __future__ import annotations
+
 import itertools
 import math
+from collections.abc import Callable, Collection
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from sphere_control import reference as ref
+
+if TYPE_CHECKING:
+    from sphere_control.basic import BasicController
+    from sphere_control.extended import ExtendedController
 
 # Below this |det| two hull points are collinear with the ray; such a pair is an edge through 0.
 COLLINEAR_TOLERANCE = 1e-15
 
 
-def kick_vectors(directions_rad, widths_rad):
+def kick_vectors(directions_rad: ArrayLike, widths_rad: ArrayLike) -> NDArray[np.float64]:
     """x-y displacement of each full kick, shape (n_actions, 2), from its direction and width
     (small angles: a rotation of w rad moves the x-y point by w)."""
     directions = np.asarray(directions_rad, dtype=float)
@@ -28,7 +37,7 @@ def kick_vectors(directions_rad, widths_rad):
     return np.column_stack([widths * np.cos(directions), widths * np.sin(directions)])
 
 
-def model_kicks(controller):
+def model_kicks(controller: BasicController | ExtendedController) -> NDArray[np.float64]:
     """The kick vectors a controller believes in: its (learned) directions, and its
     networks' full-intensity widths (extended) or its full-kick width (basic)."""
     directions = getattr(controller, 'directions_rad', None)
@@ -40,7 +49,7 @@ def model_kicks(controller):
     return kick_vectors(directions, widths)
 
 
-def reach_per_kick(kicks_xy, direction_rad):
+def reach_per_kick(kicks_xy: NDArray[np.float64], direction_rad: float) -> float:
     """Largest mean x-y displacement per kick along ``direction_rad`` (the ray's exit from the
     convex hull of 0 and the kick vectors ``kicks_xy``, shape (n, 2)); 0 if no kick has a
     component along it."""
@@ -63,14 +72,15 @@ def reach_per_kick(kicks_xy, direction_rad):
     return best
 
 
-def best_single_kick(kicks_xy, direction_rad):
+def best_single_kick(kicks_xy: NDArray[np.float64], direction_rad: float) -> float:
     """The largest component along ``direction_rad`` of one kick (what a kick towards the
     path gives when its sideways part is not taken back by the next)."""
     e = np.array([math.cos(direction_rad), math.sin(direction_rad)])
     return max(0.0, float(np.max(np.asarray(kicks_xy, dtype=float) @ e)))
 
 
-def reference_steps(reference, times_s, period_s, cone_half_angle_rad):
+def reference_steps(reference: ref.Reference, times_s: Collection[float], period_s: float,
+                    cone_half_angle_rad: float) -> NDArray[np.float64]:
     """x-y displacement of the reference over one kick period from each time, shape (n, 2)."""
     now = np.array([ref.sample(reference, t, cone_half_angle_rad).normal[:2] for t in times_s])
     ahead = np.array([ref.sample(reference, t + period_s, cone_half_angle_rad).normal[:2]
@@ -78,7 +88,10 @@ def reference_steps(reference, times_s, period_s, cone_half_angle_rad):
     return ahead - now
 
 
-def speed_ratios(steps_xy, kicks_at, reach=reach_per_kick):
+def speed_ratios(steps_xy: Collection[NDArray[np.float64]],
+                 kicks_at: Callable[[int], NDArray[np.float64]],
+                 reach: Callable[[NDArray[np.float64], float], float] = reach_per_kick,
+                 ) -> NDArray[np.float64]:
     """Needed over reachable displacement per kick for each reference step.
 
     ``kicks_at(i)`` gives the kick vectors that apply at step ``i`` (they may change over the

@@ -6,12 +6,28 @@ direction, and the sample says so, so a closed loop can refuse them or report th
 to the nearest reachable normal instead.
 """
 
+from __future__ import annotations
+
 import dataclasses
 import math
+from typing import Protocol
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD, normal_from_xy
+
+
+class Reference(Protocol):
+    """What a closed loop follows: the wanted x-y point of the normal and its velocity at a
+    time, and whether it stays where it is (a setpoint)."""
+
+    @property
+    def is_constant(self) -> bool: ...
+
+    def xy_at(self, time_s: float) -> NDArray[np.float64]: ...
+
+    def velocity_xy(self, time_s: float) -> NDArray[np.float64]: ...
 
 
 @dataclasses.dataclass(frozen=True)
@@ -28,12 +44,13 @@ class ReferenceSample:
         True if the request lay outside the cone (or was not a unit vector's x-y part).
     """
 
-    normal: np.ndarray
-    requested_xy: np.ndarray
+    normal: NDArray[np.float64]
+    requested_xy: NDArray[np.float64]
     clamped: bool
 
 
-def clamp_to_cone(xy, cone_half_angle_rad=CONE_HALF_ANGLE_RAD):
+def clamp_to_cone(xy: ArrayLike, cone_half_angle_rad: float = CONE_HALF_ANGLE_RAD,
+                  ) -> tuple[NDArray[np.float64], bool]:
     """The x-y point moved onto the cone's edge if it lies beyond; (xy (2,), clamped)."""
     xy = np.asarray(xy, dtype=float)
     limit = math.sin(cone_half_angle_rad)
@@ -47,19 +64,19 @@ def clamp_to_cone(xy, cone_half_angle_rad=CONE_HALF_ANGLE_RAD):
 class Setpoint:
     """A constant reference, given by the x-y part of the wanted normal."""
 
-    xy: tuple
+    xy: tuple[float, float]
     is_constant = True
 
     @classmethod
-    def from_normal(cls, normal):
+    def from_normal(cls, normal: ArrayLike) -> Setpoint:
         n = np.asarray(normal, dtype=float)
         n = n / np.linalg.norm(n)
         return cls((float(n[0]), float(n[1])))
 
-    def xy_at(self, time_s):
+    def xy_at(self, time_s: float) -> NDArray[np.float64]:
         return np.array(self.xy, dtype=float)
 
-    def velocity_xy(self, time_s):
+    def velocity_xy(self, time_s: float) -> NDArray[np.float64]:
         return np.zeros(2)
 
 
@@ -81,11 +98,11 @@ class CircleTrajectory:
     frequency_hz: float = 0.02
     is_constant = False
 
-    def xy_at(self, time_s):
+    def xy_at(self, time_s: float) -> NDArray[np.float64]:
         phase = 2.0 * math.pi * self.frequency_hz * time_s
         return self.amplitude * math.cos(phase) * np.array([math.cos(phase), math.sin(phase)])
 
-    def velocity_xy(self, time_s):
+    def velocity_xy(self, time_s: float) -> NDArray[np.float64]:
         """d/dt of :meth:`xy_at` (1/s): the point is (A/2)(1 + cos 2phi, sin 2phi)."""
         rate = 2.0 * math.pi * self.frequency_hz
         double = 2.0 * rate * time_s
@@ -106,30 +123,32 @@ class ScheduledReference:
     offset_s: float = 0.0
 
     @property
-    def is_constant(self):
+    def is_constant(self) -> bool:
         return self.switch_s < 0.0
 
-    def phase_at(self, time_s):
+    def phase_at(self, time_s: float) -> str:
         """'setpoint' or 'trajectory'."""
         return 'trajectory' if 0.0 <= self.switch_s <= time_s else 'setpoint'
 
-    def xy_at(self, time_s):
+    def xy_at(self, time_s: float) -> NDArray[np.float64]:
         if self.phase_at(time_s) == 'trajectory':
             return self.trajectory.xy_at(time_s - self.switch_s + self.offset_s)
         return self.setpoint.xy_at(time_s)
 
-    def velocity_xy(self, time_s):
+    def velocity_xy(self, time_s: float) -> NDArray[np.float64]:
         if self.phase_at(time_s) == 'trajectory':
             return self.trajectory.velocity_xy(time_s - self.switch_s + self.offset_s)
         return self.setpoint.velocity_xy(time_s)
 
 
-def sample(reference, time_s, cone_half_angle_rad=CONE_HALF_ANGLE_RAD):
+def sample(reference: Reference, time_s: float,
+           cone_half_angle_rad: float = CONE_HALF_ANGLE_RAD) -> ReferenceSample:
     """The :class:`ReferenceSample` of ``reference`` at ``time_s``."""
     return _sample_xy(reference.xy_at(time_s), cone_half_angle_rad)
 
 
-def preview(reference, time_s, horizon_s, cone_half_angle_rad=CONE_HALF_ANGLE_RAD):
+def preview(reference: Reference, time_s: float, horizon_s: float,
+            cone_half_angle_rad: float = CONE_HALF_ANGLE_RAD) -> ReferenceSample:
     """Where ``reference`` will be ``horizon_s`` after ``time_s`` if it goes on as it moves at
     ``time_s``: its tangent, as the controller node's estimate from the recent samples is
     (:mod:`sphere_control.reference_motion`). A jump ahead (a scheduled switch) is not
@@ -139,6 +158,6 @@ def preview(reference, time_s, horizon_s, cone_half_angle_rad=CONE_HALF_ANGLE_RA
                       cone_half_angle_rad)
 
 
-def _sample_xy(requested, cone_half_angle_rad):
+def _sample_xy(requested: NDArray[np.float64], cone_half_angle_rad: float) -> ReferenceSample:
     xy, clamped = clamp_to_cone(requested, cone_half_angle_rad)
     return ReferenceSample(normal_from_xy(*xy), requested, clamped)

@@ -9,6 +9,7 @@ it the reference counts as standing still, and a controller previewing it aims a
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from sphere_control.reference import clamp_to_cone
 from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD, normal_from_xy
@@ -33,14 +34,15 @@ class ReferenceMotion:
         Distance (x-y units) from the fitted line's prediction that counts as a jump.
     """
 
-    def __init__(self, history_s=HISTORY_S, jump_tolerance=JUMP_TOLERANCE):
+    def __init__(self, history_s: float = HISTORY_S,
+                 jump_tolerance: float = JUMP_TOLERANCE) -> None:
         self.history_s = history_s
         self.jump_tolerance = jump_tolerance
-        self.times_s = []
-        self.xys = []
+        self.times_s: list[float] = []
+        self.xys: list[NDArray[np.float64]] = []
         self.jumps = 0
 
-    def add(self, time_s, normal):
+    def add(self, time_s: float, normal: ArrayLike) -> bool:
         """Record a sample; returns True if it was a jump (the history restarted there)."""
         time_s = float(time_s)
         xy = np.asarray(normal, dtype=float)[:2]
@@ -59,7 +61,7 @@ class ReferenceMotion:
         self.xys = [self.xys[i] for i in keep]
         return jump
 
-    def velocity_xy(self):
+    def velocity_xy(self) -> NDArray[np.float64]:
         """x-y velocity (1/s) of the fitted line; zero with fewer than MIN_SAMPLES samples."""
         if len(self.times_s) < MIN_SAMPLES:
             return np.zeros(2)
@@ -71,12 +73,13 @@ class ReferenceMotion:
             return np.zeros(2)
         return ((t - t_mean) @ (xy - xy.mean(axis=0))) / spread
 
-    def predict_xy(self, time_s):
+    def predict_xy(self, time_s: float) -> NDArray[np.float64]:
         """The fitted line's x-y point at ``time_s`` (the newest sample moved on by the
         velocity)."""
         return self.xys[-1] + self.velocity_xy() * (float(time_s) - self.times_s[-1])
 
-    def ahead(self, horizon_s, cone_half_angle_rad=CONE_HALF_ANGLE_RAD):
+    def ahead(self, horizon_s: float, cone_half_angle_rad: float = CONE_HALF_ANGLE_RAD,
+              ) -> NDArray[np.float64] | None:
         """The unit normal the reference will have ``horizon_s`` after its newest sample,
         clamped into the cone; None before any sample."""
         if not self.times_s:

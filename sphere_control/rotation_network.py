@@ -8,9 +8,12 @@ several solutions, the one needing least voltage, i.e. the smallest intensity (t
 with u_K).
 """
 
+from __future__ import annotations
+
 import dataclasses
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 INTENSITY_RANGE = (0.0, 1.0)
 
@@ -27,7 +30,7 @@ class NetworkShape:
 
     n_segments: int = 5
 
-    def knots(self):
+    def knots(self) -> NDArray[np.float64]:
         """u_K,i of eq. (60), shape (n_segments,), starting at 0."""
         return np.linspace(INTENSITY_RANGE[0], INTENSITY_RANGE[1], self.n_segments,
                            endpoint=False)
@@ -46,7 +49,7 @@ class RotationWidthNetwork:
         u_K,i, increasing, in [0, 1).
     """
 
-    def __init__(self, bias_rad, weights_rad, knots):
+    def __init__(self, bias_rad: float, weights_rad: ArrayLike, knots: ArrayLike) -> None:
         self.bias_rad = float(bias_rad)
         self.weights_rad = np.array(weights_rad, dtype=float)
         self.knots = np.array(knots, dtype=float)
@@ -54,30 +57,31 @@ class RotationWidthNetwork:
             raise ValueError('weights and increasing knots must have the same length')
 
     @classmethod
-    def linear(cls, full_width_rad, shape=NetworkShape()):
+    def linear(cls, full_width_rad: float,
+               shape: NetworkShape = NetworkShape()) -> RotationWidthNetwork:
         """The prior before learning: h(u) = full_width * u (zero bias, one active slope)."""
         weights = np.zeros(shape.n_segments)
         weights[0] = full_width_rad
         return cls(0.0, weights, shape.knots())
 
-    def copy(self):
+    def copy(self) -> RotationWidthNetwork:
         return RotationWidthNetwork(self.bias_rad, self.weights_rad, self.knots)
 
-    def features(self, intensity):
+    def features(self, intensity: float) -> NDArray[np.float64]:
         """zeta(u) of eq. (60), shape (n,)."""
         return np.maximum(0.0, float(intensity) - self.knots)
 
-    def __call__(self, intensity):
+    def __call__(self, intensity: float) -> float:
         """h(u) (rad)."""
         return self.bias_rad + float(self.weights_rad @ self.features(intensity))
 
-    def vertices(self):
+    def vertices(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Intensities (shape (n+1,)) where h may change slope, with the values there (rad)."""
         u = np.append(self.knots, INTENSITY_RANGE[1])
         u[0] = max(u[0], INTENSITY_RANGE[0])
         return u, np.array([self(x) for x in u])
 
-    def inverse(self, width_rad):
+    def inverse(self, width_rad: float) -> float:
         """u_K = h^-1(Psi) by the paper's rules; always a value in [0, 1].
 
         Parameters
@@ -98,7 +102,8 @@ class RotationWidthNetwork:
                 return float(u0 + (width_rad - h0) * (u1 - u0) / (h1 - h0))
         raise AssertionError('a continuous function takes every value between its extremes')
 
-    def update(self, intensity, achieved_width_rad, bias_rate, weight_rate):
+    def update(self, intensity: float, achieved_width_rad: float, bias_rate: float,
+               weight_rate: float) -> float:
         """Eqs. (62)-(63) after a kick of ``intensity`` achieved ``achieved_width_rad``.
 
         The error Psi - Psi~ of the prediction is fed back to the bias and, through the

@@ -11,6 +11,7 @@ shows it for anything).
 import argparse
 import importlib
 import sys
+from collections.abc import Sequence
 
 import yaml
 
@@ -41,10 +42,10 @@ COMMAND_MODULES = (
 USAGE_STATUS = 2  # argparse's status for a usage error; the same for every user mistake
 
 
-def user_errors():
+def user_errors() -> tuple[type[Exception], ...]:
     """The exception types that are the user's mistake, not a bug (imported when needed)."""
     from msg_defs.voltage_rules import VoltageRuleError
-    from sphere_sim.integrate.solve import SolverError
+    from sphere_sim.integrate.segment import SolverError
     from sphere_sim.kicks.design import DesignError
     from sphere_sim.kicks.lookup_table import TableError
     from sphere_sim.kicks.offset_lookup import OffsetError
@@ -61,14 +62,14 @@ def user_errors():
             yaml.YAMLError, OSError)
 
 
-def one_line(error):
+def one_line(error: BaseException) -> str:
     """An error's message on one line (YAML's and the OS's span several)."""
     if isinstance(error, OSError) and error.filename is not None:
         return f'{error.filename}: {error.strerror or error}'
     return ' '.join(str(error).split()) or type(error).__name__
 
 
-def build_parser():
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='sphere-twin',
         description='Digital twin of an electrostatically kicked sphere micromirror.',
@@ -82,7 +83,7 @@ def build_parser():
     return parser
 
 
-def main(argv=None):
+def main(argv: Sequence[str] | None = None) -> int:
     ensure_localhost_discovery()
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -96,7 +97,7 @@ def main(argv=None):
         return USAGE_STATUS
 
 
-def _subcommands(args):
+def _subcommands(args: argparse.Namespace) -> list[str]:
     """The nested subcommand names (``table build``, ``bag info``), as argparse names them."""
     return [value for key, value in vars(args).items()
             if key.endswith('_command') and isinstance(value, str)]

@@ -8,12 +8,12 @@ import re
 _SUMMARY_RE = re.compile(r'^received (\d+) messages on (\S+)$', re.MULTILINE)
 
 
-def summary_line(count, topic_name):
+def summary_line(count: int, topic_name: str) -> str:
     """``received N messages on TOPIC``."""
     return f'received {count} messages on {topic_name}'
 
 
-def parse_summaries(text):
+def parse_summaries(text: str) -> dict[str, int]:
     """Message counts per topic found in a monitor's output.
 
     Parameters

@@ -1,13 +1,27 @@
 """Figures written by the CLI (matplotlib, Agg backend: no display needed)."""
 
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any, TypeVar
+
 import matplotlib
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+if TYPE_CHECKING:
+    from sphere_sim.integrate.solve import Trajectory
+    from sphere_sim.kicks.characteristics import OffsetSolution
+
+PathT = TypeVar('PathT', bound=str | os.PathLike[str])
 
 
-def plot_pulse_sweep(trajectories, voltages_v, threshold_v, path, title=''):
+def plot_pulse_sweep(trajectories: Sequence[Trajectory], voltages_v: Sequence[float],
+                     threshold_v: float, path: PathT, title: str = '') -> PathT:
     """Fig. 4 layout: beam z and phi over time (a) and sphere height change (b)."""
     fig, axes = plt.subplots(3, 1, figsize=(7.5, 8.5), sharex=True)
     cmap = plt.get_cmap('viridis')
@@ -34,7 +48,9 @@ def plot_pulse_sweep(trajectories, voltages_v, threshold_v, path, title=''):
     return path
 
 
-def plot_lines(x, ys, labels, xlabel, ylabel, path, title='', logx=False, logy=False):
+def plot_lines(x: ArrayLike, ys: Sequence[ArrayLike], labels: Sequence[str], xlabel: str,
+               ylabel: str, path: str | os.PathLike[str], title: str = '',
+               logx: bool = False, logy: bool = False) -> NDArray[Any]:
     """A plain multi-line plot."""
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for y, label in zip(ys, labels, strict=True):
@@ -54,7 +70,7 @@ def plot_lines(x, ys, labels, xlabel, ylabel, path, title='', logx=False, logy=F
     return np.asarray(x)
 
 
-def plot_offsets(solutions, path):
+def plot_offsets(solutions: Sequence[OffsetSolution], path: PathT) -> PathT:
     """Fig. 8 layout: the offset (V) at each grid state and the remaining direction error."""
     x = np.array([s.x_sn for s in solutions])
     y = np.array([s.y_sn for s in solutions])

@@ -19,6 +19,8 @@ Examples
 [0, 0]
 """
 
+from __future__ import annotations
+
 import contextlib
 import ctypes
 import dataclasses
@@ -30,7 +32,9 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
+from typing import IO
 
 from sphere_twin.node_runtime.ros_env import DOMAIN_ID_VAR, ensure_localhost_discovery
 
@@ -48,12 +52,12 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGKILL)
 _PR_SET_PDEATHSIG = 1  # from <linux/prctl.h>
 _domain_counter = itertools.count()
 # Domain ids this process handed out and still reserves (id -> open lock file), oldest first.
-_held_domains = {}
+_held_domains: dict[int, IO[str]] = {}
 DOMAINS_HELD = 32
 DOMAIN_LOCK_DIR = 'sphere_twin_domains'
 
 
-def fresh_domain_id():
+def fresh_domain_id() -> int:
     """A ROS domain id in [MIN_DOMAIN_ID, MAX_DOMAIN_ID] that no other process on this machine
     holds, and that this one has not handed out recently.
 
@@ -71,7 +75,7 @@ def fresh_domain_id():
     return domain_id
 
 
-def _reserve(domain_id):
+def _reserve(domain_id: int) -> bool:
     """Lock ``domain_id``'s file for this process; False if another process holds it."""
     import fcntl
 
@@ -91,7 +95,8 @@ def _reserve(domain_id):
     return True
 
 
-def child_environment(domain_id, env_overrides=None, base_env=None):
+def child_environment(domain_id: int, env_overrides: Mapping[str, str] | None = None,
+                      base_env: Mapping[str, str] | None = None) -> dict[str, str]:
     """The environment a node process is started with.
 
     Parameters
@@ -118,7 +123,7 @@ def child_environment(domain_id, env_overrides=None, base_env=None):
     return env
 
 
-def resolve_executable(name):
+def resolve_executable(name: str) -> str:
     """Full path of a console script or program.
 
     Looked up next to the running Python interpreter (a virtual environment's ``bin/``),
@@ -145,7 +150,7 @@ def resolve_executable(name):
     return found
 
 
-def _terminate_with_parent():
+def _terminate_with_parent() -> None:
     """Ask the kernel to SIGTERM this (child) process when its parent dies (Linux only)."""
     libc = ctypes.CDLL(None, use_errno=True)
     libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM))
@@ -167,55 +172,55 @@ class NodeProcess:
     """
 
     name: str
-    command: tuple
+    command: tuple[str, ...]
     domain_id: int
-    popen: subprocess.Popen
-    _stdout: object = dataclasses.field(repr=False)
-    _stderr: object = dataclasses.field(repr=False)
-    _final_output: tuple = dataclasses.field(default=None, repr=False)
+    popen: subprocess.Popen[bytes]
+    _stdout: IO[bytes] = dataclasses.field(repr=False)
+    _stderr: IO[bytes] = dataclasses.field(repr=False)
+    _final_output: tuple[str, str] | None = dataclasses.field(default=None, repr=False)
 
     @property
-    def pid(self):
+    def pid(self) -> int:
         """The process's own PID, the only thing it is ever signalled by."""
         return self.popen.pid
 
     @property
-    def returncode(self):
+    def returncode(self) -> int | None:
         """Exit code, or None while running (negative: killed by that signal)."""
         return self.popen.poll()
 
-    def running(self):
+    def running(self) -> bool:
         """Whether the process has not exited yet."""
         return self.popen.poll() is None
 
-    def stdout_text(self):
+    def stdout_text(self) -> str:
         """Everything the process wrote to standard output so far."""
         if self._final_output is not None:
             return self._final_output[0]
         return _read_all(self._stdout)
 
-    def stderr_text(self):
+    def stderr_text(self) -> str:
         """Everything the process wrote to standard error so far (ROS logging goes here)."""
         if self._final_output is not None:
             return self._final_output[1]
         return _read_all(self._stderr)
 
-    def _release_output(self):
+    def _release_output(self) -> None:
         """Keep the output of the exited process in memory and close its files."""
         if self._final_output is None:
             self._final_output = (_read_all(self._stdout), _read_all(self._stderr))
             self._stdout.close()
             self._stderr.close()
 
-    def send_signal(self, signum):
+    def send_signal(self, signum: int) -> None:
         """Signal this process's own PID; does nothing once it has exited."""
         self.popen.send_signal(signum)
 
-    def wait(self, timeout_s):
+    def wait(self, timeout_s: float | None) -> int:
         """Wait for the exit code; raises ``subprocess.TimeoutExpired`` after ``timeout_s``."""
         return self.popen.wait(timeout_s)
 
-    def wait_for_output(self, text, timeout_s):
+    def wait_for_output(self, text: str, timeout_s: float) -> None:
         """Wait until ``text`` appears in the process's stdout or stderr.
 
         Raises
@@ -238,13 +243,15 @@ class NodeProcess:
             time.sleep(POLL_PERIOD_S)
 
 
-def _read_all(file):
+def _read_all(file: IO[bytes]) -> str:
     # pread leaves the file offset alone; the child shares that offset and keeps writing.
     fd = file.fileno()
     return os.pread(fd, os.fstat(fd).st_size, 0).decode(errors='replace')
 
 
-def start_node(executable, args=(), env_overrides=None, domain_id=None):
+def start_node(executable: str, args: Sequence[str] = (),
+               env_overrides: Mapping[str, str] | None = None,
+               domain_id: int | None = None) -> NodeProcess:
     """Start a node executable as a child process.
 
     Parameters
@@ -280,7 +287,7 @@ def start_node(executable, args=(), env_overrides=None, domain_id=None):
     return NodeProcess(executable, command, domain_id, popen, stdout, stderr)
 
 
-def stop(process, timeout_s=DEFAULT_STOP_TIMEOUT_S):
+def stop(process: NodeProcess, timeout_s: float = DEFAULT_STOP_TIMEOUT_S) -> int:
     """Stop a node process and return its exit code.
 
     Sends SIGINT to the process's own PID and waits up to ``timeout_s``; if it is still
@@ -314,7 +321,7 @@ def stop(process, timeout_s=DEFAULT_STOP_TIMEOUT_S):
     return returncode
 
 
-def parameter_args(**parameters):
+def parameter_args(**parameters: object) -> list[str]:
     """ROS command-line arguments setting node parameters.
 
     >>> parameter_args(max_messages=20, publish_rate_hz=100.0)
@@ -333,7 +340,7 @@ class NodeSpec:
     """What to start: an executable and its arguments."""
 
     executable: str
-    args: tuple = ()
+    args: tuple[str, ...] = ()
 
 
 class NodeGroup:
@@ -352,19 +359,21 @@ class NodeGroup:
         In start order.
     """
 
-    def __init__(self, domain_id=None, env_overrides=None):
+    def __init__(self, domain_id: int | None = None,
+                 env_overrides: Mapping[str, str] | None = None) -> None:
         self.domain_id = fresh_domain_id() if domain_id is None else domain_id
         self.env_overrides = dict(env_overrides or {})
-        self.processes = []
+        self.processes: list[NodeProcess] = []
 
-    def start(self, executable, args=(), env_overrides=None):
+    def start(self, executable: str, args: Sequence[str] = (),
+              env_overrides: Mapping[str, str] | None = None) -> NodeProcess:
         """Start one more node in the group's domain; see :func:`start_node`."""
         process = start_node(executable, args, {**self.env_overrides, **(env_overrides or {})},
                              self.domain_id)
         self.processes.append(process)
         return process
 
-    def stop_all(self, timeout_s=DEFAULT_STOP_TIMEOUT_S):
+    def stop_all(self, timeout_s: float = DEFAULT_STOP_TIMEOUT_S) -> None:
         """Stop every process, the last started first; their exit codes stay on them.
 
         Reverse order lets consumers, started after their producers, stop first and so see
@@ -375,8 +384,9 @@ class NodeGroup:
 
 
 @contextlib.contextmanager
-def running_nodes(*specs, domain_id=None, env_overrides=None,
-                  stop_timeout_s=DEFAULT_STOP_TIMEOUT_S):
+def running_nodes(*specs: NodeSpec, domain_id: int | None = None,
+                  env_overrides: Mapping[str, str] | None = None,
+                  stop_timeout_s: float = DEFAULT_STOP_TIMEOUT_S) -> Iterator[NodeGroup]:
     """Start nodes in a fresh domain for the duration of a ``with`` block.
 
     Parameters

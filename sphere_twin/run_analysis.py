@@ -10,10 +10,16 @@ stamps of the samples received around it, since the node that sent them may stam
 clock.
 """
 
+from __future__ import annotations
+
 import dataclasses
 import math
+import os
+from collections.abc import Callable, Iterable, Sequence
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from msg_defs.conversions import (
     ns_from_time,
@@ -38,6 +44,17 @@ from sphere_control.reference_motion import JUMP_TOLERANCE
 from sphere_sim.kicks.plants import TIME_TOL_S
 from sphere_sim.model.rotations import angle_between
 from sphere_twin.bag.reader import BagError, deserialize, read_messages
+
+if TYPE_CHECKING:
+    from msg_defs.programme_events import ProgrammeEvent
+    from sphere_sim.kicks.plants import TwinPlant
+
+# (start_s, times_s (k,), voltages_v (k, 4)) of a programme; (time_s, voltages_v (4,)) of a hold.
+Kick = tuple[float, NDArray[np.float64], NDArray[np.float64]]
+Hold = tuple[float, NDArray[np.float64]]
+# What replay() feeds the plant: a programme's segments or a hold's voltages.
+_ReplayEvent = (tuple[Literal['programme'], NDArray[np.float64], NDArray[np.float64]]
+                | tuple[Literal['hold'], NDArray[np.float64]])
 
 DEFAULT_BAND_RAD = math.radians(0.05)  # Fig. 13's tighter resting band
 # A reference held at least this long counts as a setpoint whose settling time is reported.
@@ -66,13 +83,13 @@ class RecordedRun:
         was in effect), from ``/controller/status``: where its loop saw a settled state.
     """
 
-    normal_t_s: np.ndarray
-    normals: np.ndarray
-    reference_t_s: np.ndarray
-    references: np.ndarray
-    kicks: list
-    holds: list
-    decision_t_s: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
+    normal_t_s: NDArray[np.float64]
+    normals: NDArray[np.float64]
+    reference_t_s: NDArray[np.float64]
+    references: NDArray[np.float64]
+    kicks: list[Kick]
+    holds: list[Hold]
+    decision_t_s: NDArray[np.float64] = dataclasses.field(default_factory=lambda: np.zeros(0))
 
 
 class _Messages:
@@ -81,12 +98,17 @@ class _Messages:
     TOPICS = (SURFACE_NORMAL.name, SPHERE_REFERENCE.name, PULSE_PROGRAM.name,
               VOLTAGE_COMMAND.name, PROGRAMME_STATUS.name, CONTROLLER_STATUS.name)
 
-    def __init__(self):
-        self.normals, self.references, self.programmes, self.holds = [], [], [], []
-        self.reports, self.decisions = [], []
-        self.receive_map = []  # (log_time_ns, stamp_s) of the normal samples
+    def __init__(self) -> None:
+        self.normals: list[tuple[float, NDArray[np.float64]]] = []
+        self.references: list[tuple[int, NDArray[np.float64]]] = []
+        # (log_time_ns, stamp_ns, times_s, voltages_v)
+        self.programmes: list[tuple[int, int, NDArray[np.float64], NDArray[np.float64]]] = []
+        self.holds: list[tuple[int, NDArray[np.float64]]] = []
+        self.reports: list[ProgrammeEvent] = []
+        self.decisions: list[float] = []
+        self.receive_map: list[tuple[int, float]] = []  # (log_time_ns, stamp_s) of the normals
 
-    def add(self, topic, log_time_ns, msg):
+    def add(self, topic: str, log_time_ns: int, msg: Any) -> None:
         """File one message; ValueError for one that breaks the contract."""
         if topic == SURFACE_NORMAL.name:
             t = ns_from_time(msg.header.stamp) / NS_PER_S
@@ -112,7 +134,8 @@ DEVICE_TOPICS = (SURFACE_NORMAL.name, SPHERE_REFERENCE.name, PULSE_PROGRAM.name,
                  VOLTAGE_COMMAND.name)
 
 
-def load_run(bag_dir, topics=_Messages.TOPICS):
+def load_run(bag_dir: str | os.PathLike[str],
+             topics: Iterable[str] = _Messages.TOPICS) -> RecordedRun:
     """Read the contract's signals from a bag; BagError if it has no surface normal.
 
     ``topics`` limits what is read (:data:`DEVICE_TOPICS`: only what the device records);
@@ -130,14 +153,14 @@ def load_run(bag_dir, topics=_Messages.TOPICS):
     log_ns = np.array([m[0] for m in read.receive_map], dtype=float)
     stamps = np.array([m[1] for m in read.receive_map])
 
-    def on_stamps(log_time_ns):
+    def on_stamps(log_time_ns: float) -> float:
         return float(np.interp(log_time_ns, log_ns, stamps))
 
     normals = sorted(read.normals, key=lambda item: item[0])
     # A reference is in force from when it arrives (its node may stamp with another clock).
     references = sorted(((on_stamps(log), n) for log, n in read.references),
                         key=lambda r: r[0])
-    def at_stamp(log_ns, stamp_ns):
+    def at_stamp(log_ns: int, stamp_ns: int) -> float:
         return stamp_ns / NS_PER_S if stamp_ns else on_stamps(log_ns)
 
     kicks = sorted(_reported_starts(read.programmes, read.reports, at_stamp),
@@ -150,18 +173,22 @@ def load_run(bag_dir, topics=_Messages.TOPICS):
         np.unique(read.decisions))
 
 
-def _reported_starts(programmes, reports, unreported_start_s):
+def _reported_starts(programmes: Sequence[tuple[int, int, NDArray[np.float64],
+                                                NDArray[np.float64]]],
+                     reports: Iterable[ProgrammeEvent],
+                     unreported_start_s: Callable[[int, int], float]) -> list[Kick]:
     """(start_s, times, volts) of the programmes that ran: at the start the device reported,
     a refused one not at all, and one whose report was not recorded (a recorder that joined
     the topic late) at ``unreported_start_s(log_time_ns, stamp_ns)``. A report names its
     programme by the stamp it was sent with; programmes that share a stamp (0: at once) are
     matched in the order they were received."""
-    outcomes = {}  # stamp in ns -> [start_s or None (refused)], in report order
+    # stamp in ns -> [start_s or None (refused)], in report order
+    outcomes: dict[int, list[float | None]] = {}
     for event in reports:
         if event.state in (ProgrammeState.STARTED, ProgrammeState.REFUSED):
             outcomes.setdefault(round(event.asked_s * NS_PER_S), []).append(
                 event.time_s if event.state is ProgrammeState.STARTED else None)
-    kicks = []
+    kicks: list[Kick] = []
     for log_ns, stamp_ns, times, volts in sorted(programmes, key=lambda p: p[0]):
         queue = outcomes.get(stamp_ns)
         start_s = queue.pop(0) if queue else unreported_start_s(log_ns, stamp_ns)
@@ -175,7 +202,7 @@ def _reported_starts(programmes, reports, unreported_start_s):
 REFERENCE_INTERPOLATION_MAX_GAP_S = 0.25
 
 
-def reference_at(run, times_s):
+def reference_at(run: RecordedRun, times_s: ArrayLike) -> NDArray[np.float64]:
     """The reference at each time (NaN before the first sample), shape (len(times_s), 3).
 
     A moving reference is scored where it is at the sample's time, as the paper's Fig. 15b and
@@ -205,7 +232,8 @@ def reference_at(run, times_s):
     return out
 
 
-def _continuing_intervals(t_ref, refs):
+def _continuing_intervals(t_ref: NDArray[np.float64],
+                          refs: NDArray[np.float64]) -> NDArray[np.bool_]:
     """Per interval (i, i + 1) of the reference samples, shape (n - 1,): True where the step
     continues the one before it (no jump) and the gap is short."""
     n = t_ref.size
@@ -229,13 +257,14 @@ class RunStatistics:
     final_error_rad: float
     rms_error_rad: float
     max_error_rad: float
-    settle_times_s: list  # per setpoint: time until the error stays within the band (or None)
+    # per setpoint: time until the error stays within the band (or None)
+    settle_times_s: list[float | None]
     band_rad: float
     # RMS error at the samples the controller decided on (settled states, as the offline loop
     # records them); NaN for a bag without the controller's status.
     rms_decided_error_rad: float = math.nan
 
-    def to_dict(self):
+    def to_dict(self) -> dict[str, Any]:
         return {'kicks': self.kicks, 'duration_s': self.duration_s,
                 'final_error_deg': math.degrees(self.final_error_rad),
                 'rms_error_deg': math.degrees(self.rms_error_rad),
@@ -246,7 +275,7 @@ class RunStatistics:
                                           else None)}
 
 
-def errors_rad(run):
+def errors_rad(run: RecordedRun) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(times_s, error_rad) of the samples that have a reference (:func:`reference_at`)."""
     refs = reference_at(run, run.normal_t_s)
     valid = ~np.isnan(refs[:, 0])
@@ -255,7 +284,8 @@ def errors_rad(run):
     return run.normal_t_s[valid], errors
 
 
-def errors_at_decisions_rad(run):
+def errors_at_decisions_rad(run: RecordedRun,
+                            ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(times_s, error_rad) of the samples the controller decided on: the loop's error
     where it saw a settled state, as the offline closed loop records it (one per decision)."""
     times, errors = errors_rad(run)
@@ -266,11 +296,13 @@ def errors_at_decisions_rad(run):
     return times[index], errors[index]
 
 
-def setpoint_segments(run, min_duration_s=MIN_SETPOINT_S):
+def setpoint_segments(run: RecordedRun,
+                      min_duration_s: float = MIN_SETPOINT_S) -> list[tuple[float, float]]:
     """(start_s, end_s) of the stretches over which the reference stays the same."""
     if run.reference_t_s.size == 0:
         return []
-    segments, start = [], 0
+    segments: list[tuple[float, float]] = []
+    start = 0
     for i in range(1, run.reference_t_s.size + 1):
         if i == run.reference_t_s.size or angle_between(run.references[i],
                                                         run.references[start]) > 1e-12:
@@ -281,11 +313,11 @@ def setpoint_segments(run, min_duration_s=MIN_SETPOINT_S):
     return segments
 
 
-def statistics(run, band_rad=DEFAULT_BAND_RAD):
+def statistics(run: RecordedRun, band_rad: float = DEFAULT_BAND_RAD) -> RunStatistics:
     times, errors = errors_rad(run)
     if errors.size == 0:
         raise BagError('no surface normal was recorded while a reference was in force')
-    settle = []
+    settle: list[float | None] = []
     for start_s, end_s in setpoint_segments(run):
         inside = (times >= start_s) & (times <= end_s)
         seg_t, seg_e = times[inside], errors[inside]
@@ -303,7 +335,8 @@ def statistics(run, band_rad=DEFAULT_BAND_RAD):
                          float(np.sqrt(np.mean(decided ** 2))) if decided.size else math.nan)
 
 
-def plot_report(run, path, title=''):
+def plot_report(run: RecordedRun, path: str | os.PathLike[str],
+                title: str = '') -> str | os.PathLike[str]:
     """Error against time with the kicks marked, and the x-y path beside the reference."""
     from sphere_twin.plots import plt
 
@@ -334,19 +367,19 @@ def plot_report(run, path, title=''):
 
 @dataclasses.dataclass(frozen=True)
 class ReplayResult:
-    times_s: np.ndarray
-    error_rad: np.ndarray  # simulated against recorded normal at each recorded sample
+    times_s: NDArray[np.float64]
+    error_rad: NDArray[np.float64]  # simulated against recorded normal at each recorded sample
 
     @property
-    def max_error_rad(self):
+    def max_error_rad(self) -> float:
         return float(self.error_rad.max()) if self.error_rad.size else 0.0
 
     @property
-    def rms_error_rad(self):
+    def rms_error_rad(self) -> float:
         return float(np.sqrt(np.mean(self.error_rad ** 2))) if self.error_rad.size else 0.0
 
 
-def replay_start_index(run, window_s):
+def replay_start_index(run: RecordedRun, window_s: float) -> int:
     """First sample from which a replay can start: no kick recorded before it still acting."""
     t0 = run.normal_t_s[0]
     earlier = [t for t, _, _ in run.kicks if t < t0]
@@ -355,7 +388,7 @@ def replay_start_index(run, window_s):
     return int(np.searchsorted(run.normal_t_s, max(earlier) + window_s - TIME_TOL_S))
 
 
-def replay(run, plant, start_index=0):
+def replay(run: RecordedRun, plant: TwinPlant, start_index: int = 0) -> ReplayResult:
     """Feed the recorded commands open loop into ``plant``, sampled at the recorded times.
 
     The plant starts from the recorded normal at ``start_index`` (the caller builds it so;
@@ -366,11 +399,13 @@ def replay(run, plant, start_index=0):
     from sphere_sim.model.programme import PulseProgramme
 
     t0 = run.normal_t_s[start_index]
-    events = sorted([(t, 0, ('programme', times, volts)) for t, times, volts in run.kicks
+    events: list[tuple[float, int, _ReplayEvent]] = sorted(
+                    [(t, 0, ('programme', times, volts)) for t, times, volts in run.kicks
                      if t >= t0 - TIME_TOL_S]
                     + [(t, 1, ('hold', volts)) for t, volts in run.holds if t >= t0],
                     key=lambda e: (e[0], e[1]))
-    errors, k = [], 0
+    errors: list[float] = []
+    k = 0
     for t, recorded in zip(run.normal_t_s[start_index:], run.normals[start_index:],
                            strict=True):
         while k < len(events) and events[k][0] <= t + TIME_TOL_S:

@@ -2,8 +2,18 @@
 trajectory of eq. (64); which nodes it takes, what a run's observer reads off it, and the same
 scenario as an offline closed loop (no ROS), the yardstick of the node loop."""
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, cast
+
 from msg_defs.device import NS_PER_S
 from sphere_twin.processes import NodeSpec, parameter_args
+
+if TYPE_CHECKING:
+    from sphere_control.closed_loop import LoopHistory
+    from sphere_control.reference import ScheduledReference
+    from sphere_sim.kicks.plants import ContinuousPlant
+    from sphere_twin.testing import TopicProbe
 
 SETPOINT_XY = (0.01, 0.02)  # Fig. 13
 CONTROLLER = 'extended'
@@ -12,8 +22,8 @@ CONTROLLER = 'extended'
 TRAJECTORY_OFFSET_S = 12.5
 
 
-def scenario_nodes(setpoint_s, plant, real_time_factor, seed, normal_subscribers,
-                   clock_subscribers):
+def scenario_nodes(setpoint_s: float, plant: str, real_time_factor: float, seed: int,
+                   normal_subscribers: int, clock_subscribers: int) -> tuple[NodeSpec, ...]:
     """The closed loop of the scenario, in start order: controller, reference, simulator.
 
     The simulator comes last, once the controller holds the reference, and holds simulated
@@ -41,22 +51,22 @@ def scenario_nodes(setpoint_s, plant, real_time_factor, seed, normal_subscribers
 class RunLog:
     """What the demo watches while the run goes: measured normals and controller status."""
 
-    def __init__(self, probe):
+    def __init__(self, probe: TopicProbe) -> None:
         from msg_defs.topics import CONTROLLER_STATUS, SURFACE_NORMAL
 
         self.normals = probe.messages[SURFACE_NORMAL.name]
         self.statuses = probe.messages[CONTROLLER_STATUS.name]
 
-    def simulated_s(self):
+    def simulated_s(self) -> float:
         from msg_defs.conversions import ns_from_time
 
         return ns_from_time(self.normals[-1].header.stamp) / NS_PER_S if self.normals else 0.0
 
-    def controller_ready(self):
+    def controller_ready(self) -> bool:
         """The controller has the reference and waits for the first sample."""
         return any(m.status[0].message == 'no state' for m in self.statuses[-3:])
 
-    def kicks(self):
+    def kicks(self) -> int:
         from msg_defs.conversions import status_values
 
         for msg in reversed(self.statuses):
@@ -66,7 +76,7 @@ class RunLog:
         return 0
 
 
-def scenario_reference(setpoint_s):
+def scenario_reference(setpoint_s: float) -> ScheduledReference:
     """The reference node's schedule in the scenario: the setpoint, then eq. (64)."""
     from sphere_control.reference import CircleTrajectory, ScheduledReference, Setpoint
 
@@ -74,7 +84,8 @@ def scenario_reference(setpoint_s):
                               TRAJECTORY_OFFSET_S)
 
 
-def offline_loop(setpoint_s, duration_s, plant='continuous'):
+def offline_loop(setpoint_s: float, duration_s: float,
+                 plant: str = 'continuous') -> LoopHistory:
     """The scenario as an offline closed loop (:func:`~sphere_control.closed_loop.run_closed_loop`):
     the controller node's controller and kick period, the simulator's plant from its
     initial state (the continuous one carrying its state from kick to kick), the reference
@@ -93,7 +104,9 @@ def offline_loop(setpoint_s, duration_s, plant='continuous'):
     period_s = kick_period_s(kicks)
     twin = build_plant(plant)
     start = twin.snapshot().normal
-    kick_plant = calibration.applied_to(TwinKickPlant(kicks, twin, period_s)
+    # The continuous kind builds a ContinuousPlant.
+    kick_plant = calibration.applied_to(TwinKickPlant(kicks, cast('ContinuousPlant', twin),
+                                                      period_s)
                                         if plant == 'continuous' else kicks)
     settings = LoopSettings(max_steps=round(duration_s / period_s), kick_period_s=period_s)
     return run_closed_loop(controller_for(CONTROLLER, calibration.applied_to(kicks)), kick_plant,

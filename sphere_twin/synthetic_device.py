@@ -14,14 +14,25 @@ the beams' stiffness and damping; a full kick mostly on the sphere and the frict
 followed by a pause in which the sphere rests and the sensor's samples average its noise away.
 """
 
+from __future__ import annotations
+
 import dataclasses
 import math
+import os
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from msg_defs.device import SENSOR_RATE_HZ
 from sphere_sim.kicks.discrete import PAPER_FULL_KICK_RAD
+
+if TYPE_CHECKING:
+    from sphere_sim.kicks.lookup_table import CombinedKickPlant, LookupTable
+    from sphere_sim.kicks.plants import PlantSnapshot
+    from sphere_sim.model.parameters import ParameterSet
+    from sphere_sim.model.programme import PulseProgramme
 
 # The noise study's sensor noise: a tenth of the paper's full kick, per axis.
 NOISE_STUDY_STD_RAD = 0.1 * PAPER_FULL_KICK_RAD
@@ -38,7 +49,9 @@ PUBLISH_RATE_HZ = SENSOR_RATE_HZ
 MAX_TILT_RAD = math.radians(8.0)
 
 
-def kick_sequence(kicks, n_kicks, seed, intensity_range=INTENSITY_RANGE):
+def kick_sequence(kicks: LookupTable | CombinedKickPlant, n_kicks: int, seed: int,
+                  intensity_range: tuple[float, float] = INTENSITY_RANGE,
+                  ) -> list[tuple[int, float, float]]:
     """Seeded (action, intensity) pairs; the action is drawn, or chosen towards the centre by
     :func:`record_device` when the mirror has wandered."""
     rng = np.random.default_rng(seed)
@@ -47,7 +60,8 @@ def kick_sequence(kicks, n_kicks, seed, intensity_range=INTENSITY_RANGE):
              float(rng.uniform(*WIDTH_RANGE_S))) for _ in range(n_kicks)]
 
 
-def kick_programme(kicks, action, intensity, width_high_s):
+def kick_programme(kicks: LookupTable | CombinedKickPlant, action: int, intensity: float,
+                   width_high_s: float) -> PulseProgramme:
     """Kick ``action`` of the table's design with the high pair's width ``width_high_s``."""
     from sphere_sim.model.symmetry import Symmetry
 
@@ -55,9 +69,13 @@ def kick_programme(kicks, action, intensity, width_high_s):
     return Symmetry(int(action) % 4).apply_programme(design.programme(intensity))
 
 
-def record_device(bag_dir, params, n_kicks=20, seed=0, noise_std_rad=NOISE_STUDY_STD_RAD,
-                  kick_period_s=KICK_PERIOD_S, publish_rate_hz=PUBLISH_RATE_HZ, tilt_deg=(0, 0),
-                  progress=None):
+def record_device(bag_dir: str | os.PathLike[str], params: ParameterSet | None,
+                  n_kicks: int = 20, seed: int = 0,
+                  noise_std_rad: float = NOISE_STUDY_STD_RAD,
+                  kick_period_s: float = KICK_PERIOD_S,
+                  publish_rate_hz: float = PUBLISH_RATE_HZ,
+                  tilt_deg: tuple[float, float] = (0, 0),
+                  progress: Callable[[int, int], object] | None = None) -> int:
     """Record ``n_kicks`` kicks of the device ``params`` into the bag ``bag_dir``.
 
     Writes ``/beams/pulse_program`` (stamped with each programme's start),
@@ -95,23 +113,27 @@ def record_device(bag_dir, params, n_kicks=20, seed=0, noise_std_rad=NOISE_STUDY
         for topic in (PULSE_PROGRAM, SURFACE_NORMAL, SPHERE_STATE):
             bag.add_contract_topic(topic)
 
-        def sample():
+        def sample() -> PlantSnapshot:
             snap_sample, _ = runner.tick()
+            assert snap_sample is not None  # not lockstep: every tick takes a sample
             snap = snap_sample.snapshot
             ns = round(snap.time_s * NS_PER_S)
             stamp = time_from_ns(ns)
             bag.write(SURFACE_NORMAL.name, serialize_message(
                 surface_normal_to_msg(snap_sample.measured_normal, stamp)), ns)
+            assert snap.sphere is not None  # the continuous plant has the sphere
+            centre, quaternion, velocity, omega = snap.sphere
             bag.write(SPHERE_STATE.name, serialize_message(
-                sphere_state_to_msg(*snap.sphere, stamp=stamp)), ns)
+                sphere_state_to_msg(centre, quaternion, velocity, omega, stamp=stamp)), ns)
             return snap
 
         # A settled stretch before the first kick, then kick, rest, kick ...
-        snap = None
+        snap: PlantSnapshot | None = None
         for _ in range(steps_per_kick):
             snap = sample()
             samples += 1
         for i, (action, intensity, width_s) in enumerate(sequence):
+            assert snap is not None  # steps_per_kick >= 1
             xy = snap.normal[:2]
             if math.hypot(*xy) > math.sin(MAX_TILT_RAD):
                 # Towards the centre: the kick whose direction is closest to -xy.
@@ -140,17 +162,18 @@ class SyntheticDevice:
     """
 
     name: str
-    factors: dict
-    fit: tuple = None
+    factors: dict[str, float]
+    fit: tuple[str, ...] | None = None
     seed: int = 0
 
-    def truth_overrides(self, base):
+    def truth_overrides(self, base: ParameterSet) -> dict[str, float]:
         return {path: base.get(path) * factor for path, factor in self.factors.items()}
 
-    def truth(self, base):
+    def truth(self, base: ParameterSet) -> ParameterSet:
         return base.replace(**self.truth_overrides(base))
 
-    def write_truth(self, path, base_name, base):
+    def write_truth(self, path: str | os.PathLike[str], base_name: str,
+                    base: ParameterSet) -> str | os.PathLike[str]:
         """``truth.yaml``: the device as a parameter file (``base:`` + ``overrides:``)."""
         import yaml
 

@@ -25,12 +25,23 @@ and in a test::
         assert settled[0] > start[0]
 """
 
+from __future__ import annotations
+
 import contextlib
 import time
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
 
 from msg_defs.device import NS_PER_S
 from sphere_twin.node_runtime.ros_env import ensure_localhost_discovery
-from sphere_twin.processes import fresh_domain_id, parameter_args, running_nodes
+from sphere_twin.processes import NodeProcess, fresh_domain_id, parameter_args, running_nodes
+
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import ArrayLike, NDArray
+
+    from msg_defs.topics import Topic
+    from sphere_sim.kicks.lookup_table import CombinedKickPlant, LookupTable
 
 DEFAULT_TIMEOUT_S = 30.0
 SPIN_PERIOD_S = 0.02
@@ -41,7 +52,7 @@ class TwinTimeoutError(TimeoutError):
     """The simulator did not answer in time."""
 
 
-def _sample_of(msg):
+def _sample_of(msg: Any) -> tuple[float, NDArray[np.float64]]:
     from msg_defs.conversions import ns_from_time, surface_normal_from_msg
 
     return ns_from_time(msg.header.stamp) / NS_PER_S, surface_normal_from_msg(msg)
@@ -59,19 +70,20 @@ class TopicProbe:
         A node process to watch: waiting fails early if it exits.
     """
 
-    def __init__(self, domain_id, topics=(), process=None):
+    def __init__(self, domain_id: int, topics: Iterable[Topic] = (),
+                 process: NodeProcess | None = None) -> None:
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
 
         self.domain_id = domain_id
         self.process = process
-        self.messages = {topic.name: [] for topic in topics}
+        self.messages: dict[str, list[Any]] = {topic.name: [] for topic in topics}
         self._context = rclpy.Context()
         rclpy.init(context=self._context, domain_id=domain_id)
         self.node = rclpy.create_node('twin_test_probe', context=self._context)
         self._executor = SingleThreadedExecutor(context=self._context)
         self._executor.add_node(self.node)
-        self._publishers = {}
+        self._publishers: dict[str, Any] = {}
         for topic in topics:
             # A deep history: while the test publishes a burst it takes nothing, and the
             # topic's own depth would let DDS overwrite what the test then looks for.
@@ -79,21 +91,22 @@ class TopicProbe:
                                           self.messages[topic.name].append,
                                           topic.qos.to_profile(min_depth=RECORD_DEPTH))
 
-    def publisher(self, topic):
+    def publisher(self, topic: Topic) -> Any:
         """The probe's publisher on ``topic`` (created once)."""
         if topic.name not in self._publishers:
             self._publishers[topic.name] = self.node.create_publisher(
                 topic.msg_type, topic.name, topic.qos.to_profile())
         return self._publishers[topic.name]
 
-    def close(self):
+    def close(self) -> None:
         import rclpy
 
         self._executor.shutdown()
         self.node.destroy_node()
         rclpy.try_shutdown(context=self._context)
 
-    def spin_until(self, condition, timeout_s=DEFAULT_TIMEOUT_S, what='a condition'):
+    def spin_until(self, condition: Callable[[], object], timeout_s: float = DEFAULT_TIMEOUT_S,
+                   what: str = 'a condition') -> None:
         """Process messages until ``condition()`` holds; TwinTimeoutError after ``timeout_s``."""
         deadline = time.monotonic() + timeout_s
         while not condition():
@@ -105,11 +118,12 @@ class TopicProbe:
                                        f'{self.process.returncode}')
             self._executor.spin_once(timeout_sec=SPIN_PERIOD_S)
 
-    def spin_once(self, timeout_s=0.0):
+    def spin_once(self, timeout_s: float = 0.0) -> None:
         """Process the messages that are there, waiting up to ``timeout_s`` for one."""
         self._executor.spin_once(timeout_sec=timeout_s)
 
-    def wait_for_graph(self, topic, publishers=0, subscribers=0, timeout_s=DEFAULT_TIMEOUT_S):
+    def wait_for_graph(self, topic: Topic, publishers: int = 0, subscribers: int = 0,
+                       timeout_s: float = DEFAULT_TIMEOUT_S) -> None:
         """Until the probe sees at least that many publishers and subscribers on ``topic``
         (its own endpoints on it, if any, count too)."""
         node = self.node
@@ -118,7 +132,7 @@ class TopicProbe:
                         f'{publishers} publisher(s) and {subscribers} subscriber(s) on '
                         f'{topic.name}')
 
-    def wait_for_subscribers(self, topic, timeout_s=DEFAULT_TIMEOUT_S):
+    def wait_for_subscribers(self, topic: Topic, timeout_s: float = DEFAULT_TIMEOUT_S) -> None:
         """Until someone subscribes to ``topic`` (discovery is asynchronous)."""
         publisher = self.publisher(topic)
         self.spin_until(lambda: publisher.get_subscription_count() > 0, timeout_s,
@@ -148,7 +162,8 @@ class TwinClient(TopicProbe):
         Those of them that report a rejected command (not the periodic status).
     """
 
-    def __init__(self, process, domain_id, kicks, window_s):
+    def __init__(self, process: NodeProcess, domain_id: int,
+                 kicks: LookupTable | CombinedKickPlant, window_s: float) -> None:
         from msg_defs.topics import DIAGNOSTICS, SURFACE_NORMAL
 
         super().__init__(domain_id, (SURFACE_NORMAL, DIAGNOSTICS), process)
@@ -158,25 +173,25 @@ class TwinClient(TopicProbe):
         self._diagnostics = self.messages[DIAGNOSTICS.name]
 
     @property
-    def samples(self):
+    def samples(self) -> list[tuple[float, NDArray[np.float64]]]:
         return [_sample_of(m) for m in self._normals]
 
-    def latest_sample(self):
+    def latest_sample(self) -> tuple[float, NDArray[np.float64]]:
         """(time_s, normal) of the last sample received."""
         return _sample_of(self._normals[-1])
 
     @property
-    def diagnostics(self):
+    def diagnostics(self) -> list[str]:
         return [status.message for m in self._diagnostics for status in m.status]
 
     @property
-    def rejections(self):
+    def rejections(self) -> list[str]:
         from diagnostic_msgs.msg import DiagnosticStatus
 
         return [status.message for m in self._diagnostics for status in m.status
                 if status.level != DiagnosticStatus.OK]
 
-    def status(self):
+    def status(self) -> dict[str, str]:
         """The key-values of the last ``/diagnostics`` status received, or {} before one."""
         if not self._diagnostics:
             return {}
@@ -184,30 +199,31 @@ class TwinClient(TopicProbe):
 
         return status_values(self._diagnostics[-1].status[0])
 
-    def wait_for_normal(self, timeout_s=DEFAULT_TIMEOUT_S):
+    def wait_for_normal(self, timeout_s: float = DEFAULT_TIMEOUT_S) -> NDArray[np.float64]:
         """The latest measured normal, waiting for the first one."""
         self.spin_until(lambda: self._normals, timeout_s, 'surface normal')
         return self.latest_sample()[1]
 
-    def send_programme(self, times_s, voltages_v):
+    def send_programme(self, times_s: ArrayLike, voltages_v: Iterable[ArrayLike]) -> None:
         """Publish a pulse programme (segments from now)."""
         from msg_defs.conversions import programme_to_msg
         from msg_defs.topics import PULSE_PROGRAM
 
         self.send_raw(PULSE_PROGRAM, programme_to_msg(times_s, voltages_v))
 
-    def send_voltages(self, voltages_v):
+    def send_voltages(self, voltages_v: ArrayLike) -> None:
         from msg_defs.conversions import voltages_to_msg
         from msg_defs.topics import VOLTAGE_COMMAND
 
         self.send_raw(VOLTAGE_COMMAND, voltages_to_msg(voltages_v))
 
-    def send_raw(self, topic, msg):
+    def send_raw(self, topic: Topic, msg: Any) -> None:
         """Publish any message on a topic of the contract (also for tests of bad input)."""
         self.wait_for_subscribers(topic)
         self.publisher(topic).publish(msg)
 
-    def kick(self, action, intensity, timeout_s=DEFAULT_TIMEOUT_S):
+    def kick(self, action: int, intensity: float,
+             timeout_s: float = DEFAULT_TIMEOUT_S) -> NDArray[np.float64]:
         """Send the design's kick ``action`` at ``intensity``; returns the settled normal.
 
         The settled sample is the first one at or after the kick window's end; in lockstep
@@ -224,8 +240,11 @@ class TwinClient(TopicProbe):
 
 
 @contextlib.contextmanager
-def lockstep_twin(plant='discrete', scene='rest', seed=0, noise_std_rad=0.0,
-                  publish_rate_hz=None, tables=(), domain_id=None, extra_parameters=None):
+def lockstep_twin(plant: str = 'discrete', scene: str = 'rest', seed: int = 0,
+                  noise_std_rad: float = 0.0, publish_rate_hz: float | None = None,
+                  tables: Sequence[str] = (), domain_id: int | None = None,
+                  extra_parameters: Mapping[str, object] | None = None,
+                  ) -> Iterator[TwinClient]:
     """Start a lockstep simulator on a private domain; yield a :class:`TwinClient`.
 
     Parameters

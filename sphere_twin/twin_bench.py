@@ -11,9 +11,13 @@ and the kick cycle from the simulator's reports of each programme's start
 twin``) prints and writes; this module measures and returns.
 """
 
+from __future__ import annotations
+
 import dataclasses
 import math
 import time
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -49,38 +53,39 @@ class TwinBenchResult:
     publishing_fraction: float
     latency_median_ms: float
     latency_max_ms: float
-    cycle: 'LoopCycle' = None
+    cycle: LoopCycle | None = None
     pace: float = 0.0
     waiting_fraction: float = 0.0
 
     @property
-    def pace_name(self):
+    def pace_name(self) -> str:
         return 'unpaced' if self.pace == 0.0 else f'paced at {self.pace:g}'
 
     @property
-    def other_fraction(self):
+    def other_fraction(self) -> float:
         """The simulation thread's rest: rclpy (executor, callbacks, command conversion), the
         wait for the wall clock when paced, and everything else. Publishing runs on a thread
         of its own, so its share is not part of this one's."""
         return 1.0 - self.integrating_fraction - self.waiting_fraction
 
     @property
-    def kicks_per_simulated_s(self):
+    def kicks_per_simulated_s(self) -> float:
         return self.programmes / self.simulated_s if self.simulated_s > 0 else math.nan
 
-    def to_dict(self):
+    def to_dict(self) -> dict[str, Any]:
         return {**dataclasses.asdict(self), 'other_fraction': self.other_fraction,
                 'kicks_per_simulated_s': self.kicks_per_simulated_s}
 
     @classmethod
-    def from_dict(cls, data):
+    def from_dict(cls, data: Mapping[str, Any]) -> TwinBenchResult:
         fields = {k: v for k, v in data.items() if k in cls.__dataclass_fields__}
         if fields.get('cycle') is not None:
             fields['cycle'] = LoopCycle(**fields['cycle'])
         return cls(**fields)
 
     @classmethod
-    def from_status(cls, plant, values, cycle=None, pace=0.0):
+    def from_status(cls, plant: str, values: Mapping[str, str], cycle: LoopCycle | None = None,
+                    pace: float = 0.0) -> TwinBenchResult:
         """From the key-values of the simulator's ``/diagnostics`` status."""
         return cls(plant, float(values['simulated_time_s']), float(values['wall_time_s']),
                    float(values['real_time_factor']), int(values['programmes']),
@@ -105,7 +110,9 @@ class LoopCycle:
     lead_ms: float
 
     @classmethod
-    def measure(cls, asked_s, started_s, started_wall_s, decisions_s):
+    def measure(cls, asked_s: Sequence[float], started_s: Sequence[float],
+                started_wall_s: Sequence[float],
+                decisions_s: Sequence[float]) -> LoopCycle | None:
         """From the simulator's reports of the programmes' starts (the start each asked for
         and the one it got, simulated s, and when the report reached an observer, wall s) and
         the stamps of the samples kicks were decided on (simulated s).
@@ -131,7 +138,7 @@ class BenchError(RuntimeError):
     """The run did not get going or did not finish."""
 
 
-def _simulator_status(diagnostics):
+def _simulator_status(diagnostics: Sequence[Any]) -> dict[str, str]:
     """Key-values of the simulator's newest status, or {} before one."""
     for msg in reversed(diagnostics):
         status = msg.status[0]
@@ -142,8 +149,9 @@ def _simulator_status(diagnostics):
     return {}
 
 
-def run_twin_bench(plant='continuous', duration_s=DEFAULT_DURATION_S, seed=0,
-                   progress=None, real_time_factor=0.0):
+def run_twin_bench(plant: str = 'continuous', duration_s: float = DEFAULT_DURATION_S,
+                   seed: int = 0, progress: Callable[[float], object] | None = None,
+                   real_time_factor: float = 0.0) -> tuple[TwinBenchResult, str]:
     """Run the loop (unpaced, or paced at ``real_time_factor``) until the simulator reports
     ``duration_s`` of simulated time.
 
@@ -168,9 +176,10 @@ def run_twin_bench(plant='continuous', duration_s=DEFAULT_DURATION_S, seed=0,
     with running_nodes(*others, domain_id=domain_id) as group:
         probe = TopicProbe(domain_id, (SURFACE_NORMAL, CONTROLLER_STATUS, DIAGNOSTICS))
         diagnostics = probe.messages[DIAGNOSTICS.name]
-        starts = []  # (asked start, actual start in simulated s, wall s at arrival)
+        # (asked start, actual start in simulated s, wall s at arrival)
+        starts: list[tuple[float, float, float]] = []
 
-        def on_programme_status(msg):
+        def on_programme_status(msg: Any) -> None:
             starts.extend((e.asked_s, e.time_s, time.monotonic())
                           for e in programme_events_from_msg(msg)
                           if e.state is ProgrammeState.STARTED)
@@ -178,7 +187,7 @@ def run_twin_bench(plant='continuous', duration_s=DEFAULT_DURATION_S, seed=0,
         probe.node.create_subscription(PROGRAMME_STATUS.msg_type, PROGRAMME_STATUS.name,
                                        on_programme_status, PROGRAMME_STATUS.qos.to_profile())
 
-        def finished():
+        def finished() -> bool:
             status = _simulator_status(diagnostics)
             simulated = float(status.get('simulated_time_s', 0.0))
             if progress is not None and status:
@@ -203,11 +212,14 @@ def run_twin_bench(plant='continuous', duration_s=DEFAULT_DURATION_S, seed=0,
                      if m.status[0].message.startswith('kick')]
     farewell = next((line for line in process.stdout_text().splitlines()
                      if line.startswith('simulator:')), '')
-    cycle = LoopCycle.measure(*zip(*starts, strict=True), decisions) if starts else None
+    cycle = None
+    if starts:
+        asked, started, started_wall = zip(*starts, strict=True)
+        cycle = LoopCycle.measure(asked, started, started_wall, decisions)
     return TwinBenchResult.from_status(plant, status, cycle, real_time_factor), farewell
 
 
-def summary_lines(result):
+def summary_lines(result: TwinBenchResult) -> list[str]:
     """What ``sphere-twin bench twin`` prints; the last line is the headline."""
     r = result
     return [

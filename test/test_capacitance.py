@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from sphere_sim.model import capacitance as cap
+from sphere_sim.model import capacitance_rbf as rbf
 
 LENGTH_M = 500e-6  # L_ES, Table A1
 WIDTH_M = 1300e-6  # w_ES, Table A1
@@ -245,7 +246,7 @@ def test_wild_states_stay_finite_and_the_clamp_is_continuous():
 
 @pytest.fixture(scope='module')
 def fit():
-    return cap.RbfCapacitance.fit(LENGTH_M, WIDTH_M, Z_GROUND_M, THETA_F, True)
+    return rbf.RbfCapacitance.fit(LENGTH_M, WIDTH_M, Z_GROUND_M, THETA_F, True)
 
 
 def test_rbf_centres_are_the_papers(fit):
@@ -256,7 +257,7 @@ def test_rbf_centres_are_the_papers(fit):
 
 
 def test_rbf_reproduces_the_closed_form(fit):
-    diff = {(d.region, d.quantity): d for d in cap.compare_models(
+    diff = {(d.region, d.quantity): d for d in rbf.compare_models(
         LENGTH_M, WIDTH_M, Z_GROUND_M, THETA_F, True, fit=fit)}
     # Measured: interior 1.20 %, 7.9 %, 18.1 %; box 1.42 %, 22.6 %, 33.5 % of the largest
     # |C|, |dC/dz|, |dC/dphi| there. The derivatives are worst within a few sigma of the
@@ -277,7 +278,7 @@ def test_rbf_stays_within_the_closed_forms_range_where_not_fitted(fit):
                        np.linspace(phi_lo - 3e-3, phi_hi + 3e-3, 150), indexing='ij')
     c = fit.evaluate(z, p)[0]
     gap = z - Z_GROUND_M
-    fitted = (gap >= cap.FIT_MIN_GAP_M) & (gap + LENGTH_M * np.sin(p) >= cap.FIT_MIN_GAP_M)
+    fitted = (gap >= rbf.FIT_MIN_GAP_M) & (gap + LENGTH_M * np.sin(p) >= rbf.FIT_MIN_GAP_M)
     largest = np.max(_closed_grid(gap[fitted], p[fitted]))
     assert np.all(c > -1e-3 * largest)
     assert np.all(c < 2.0 * largest)
@@ -295,10 +296,10 @@ def test_rbf_derivatives_match_its_central_differences(fit):
     args = (fit.centres_z_m, fit.centres_phi_rad, fit.sigma_z_m, fit.sigma_phi_rad,
             fit.weights)
     _, dc_dz, dc_dphi = fit.evaluate(z, phi)
-    fd_z = np.array([_central_difference(lambda x, q=q: cap.rbf_evaluate(x, q, *args)[0], x0,
+    fd_z = np.array([_central_difference(lambda x, q=q: rbf.rbf_evaluate(x, q, *args)[0], x0,
                                          1e-4 * fit.sigma_z_m)
                      for x0, q in zip(z, phi, strict=True)])
-    fd_phi = np.array([_central_difference(lambda q, x=x: cap.rbf_evaluate(x, q, *args)[0], q0,
+    fd_phi = np.array([_central_difference(lambda q, x=x: rbf.rbf_evaluate(x, q, *args)[0], q0,
                                            1e-4 * fit.sigma_phi_rad)
                        for x, q0 in zip(z, phi, strict=True)])
     np.testing.assert_allclose(dc_dz, fd_z, rtol=1e-6, atol=1e-7 * np.max(np.abs(fd_z)))
@@ -306,10 +307,10 @@ def test_rbf_derivatives_match_its_central_differences(fit):
 
 
 def test_fit_is_deterministic_and_cached(fit):
-    first = cap.fit_rbf(LENGTH_M, WIDTH_M, Z_GROUND_M, THETA_F, True)
-    second = cap.fit_rbf(LENGTH_M, WIDTH_M, Z_GROUND_M, THETA_F, True)
+    first = rbf.fit_rbf(LENGTH_M, WIDTH_M, Z_GROUND_M, THETA_F, True)
+    second = rbf.fit_rbf(LENGTH_M, WIDTH_M, Z_GROUND_M, THETA_F, True)
     assert np.array_equal(first.weights, second.weights)
     assert first.condition_number == second.condition_number
     np.testing.assert_allclose(first.weights, fit.weights, rtol=0, atol=0)
-    assert cap.RbfCapacitance.fit(LENGTH_M, WIDTH_M, Z_GROUND_M, THETA_F, True) is fit
+    assert rbf.RbfCapacitance.fit(LENGTH_M, WIDTH_M, Z_GROUND_M, THETA_F, True) is fit
     assert not fit.weights.flags.writeable  # the cached fit is shared by every model

@@ -106,7 +106,7 @@ def _snapshot(*roots):
 
 
 @pytest.mark.parametrize(('argv', 'fragment'), CASES)
-def test_a_mistake_is_one_line_status_2_and_writes_nothing(argv, fragment, tmp_path,
+def test_bad_input_is_one_line_status_2_and_writes_nothing(argv, fragment, tmp_path,
                                                            monkeypatch, capsys):
     for name, text in INPUTS.items():
         (tmp_path / name).write_text(text)

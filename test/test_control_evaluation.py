@@ -7,7 +7,9 @@ import pytest
 
 from sphere_control.closed_loop import Outcome
 from sphere_control.controllers import ControllerKind
-from sphere_control.evaluation import (
+from sphere_control.kick_plants import AnalyticKickPlant
+from sphere_control.perturbations import Mismatch, PerturbedPlant
+from sphere_control.studies import (
     EVERY_KICK_SETUP,
     OUR_SETUP,
     PAPER_PHI_MIN_RAD,
@@ -20,8 +22,6 @@ from sphere_control.evaluation import (
     setpoint_study,
     tracking_study,
 )
-from sphere_control.kick_plants import AnalyticKickPlant
-from sphere_control.perturbations import Mismatch, PerturbedPlant
 from sphere_sim.kicks.discrete import PAPER_FULL_KICK_RAD
 
 
@@ -156,7 +156,7 @@ def test_default_kick_period_is_the_settle_time_rounded_up(settle_s, period_s):
 def test_speed_study_finds_where_a_slow_kick_rate_is_outrun(put):
     """At the paper's pace the 0.54 deg kick follows eq. (64) everywhere; kicking five times
     less often, each kick must cover five times the path, more than a kick reaches."""
-    from sphere_control.evaluation import speed_study
+    from sphere_control.studies import speed_study
 
     plant = PerturbedPlant(put.plant, Mismatch(math.radians(33.0)))
     paced = speed_study(put, plant, EvaluationConfig(kick_period_s=0.06))

@@ -12,6 +12,7 @@ import pytest
 import yaml
 
 from sphere_sim.kicks import identification as idf
+from sphere_sim.kicks import observations as kobs
 from sphere_sim.model.parameters import load_parameter_set
 
 BASE = load_parameter_set(idf.START_PARAMETER_SET)
@@ -28,7 +29,7 @@ def _stretch(rng, normal, n):
     return out / np.linalg.norm(out, axis=1)[:, None]
 
 
-def _recording(rest_normals, period_s=0.02, per_stretch=40, window_s=idf.SETTLE_S, seed=0):
+def _recording(rest_normals, period_s=0.02, per_stretch=40, window_s=kobs.SETTLE_S, seed=0):
     """Samples resting at each normal in turn, a programme between consecutive stretches
     (the samples inside its window moving), as a device would record them."""
     rng = np.random.default_rng(seed)
@@ -55,7 +56,7 @@ def _unit(x, y):
 def test_observations_average_each_resting_stretch_and_measure_the_sensor_noise():
     rests = [_unit(0.01 * i, -0.005 * i) for i in range(12)]
     t, normals, programmes = _recording(rests)
-    obs = idf.observations_from_samples(t, normals, programmes)
+    obs = kobs.observations_from_samples(t, normals, programmes)
     assert len(obs.kicks) == 11 and obs.dropped == 0
     for k, kick in enumerate(obs.kicks):
         assert kick.samples_before == kick.samples_after == 40
@@ -70,15 +71,15 @@ def test_observations_average_each_resting_stretch_and_measure_the_sensor_noise(
     cov = obs.residual_covariance()
     var = obs.noise_std_rad ** 2
     # Beside the sensor's noise, the restart's own error, independent from kick to kick.
-    assert np.diag(cov) == pytest.approx(np.full(22, var * 2 / 40 + idf.RESTART_STD_RAD ** 2))
+    assert np.diag(cov) == pytest.approx(np.full(22, var * 2 / 40 + kobs.RESTART_STD_RAD ** 2))
     assert np.diag(cov, 2) == pytest.approx(np.full(20, -var / 40))
     assert np.count_nonzero(cov) == 22 + 2 * 20
     w = obs.whitener()
     assert w @ cov @ w.T == pytest.approx(np.eye(22), abs=1e-9)
     # Two recordings as one: the second's shared stretches keep their place; one is itself.
-    both = idf.merge_observations([obs, obs])
+    both = kobs.merge_observations([obs, obs])
     assert both.shared == obs.shared + tuple(i + 11 for i in obs.shared)
-    assert idf.merge_observations([obs]) is obs
+    assert kobs.merge_observations([obs]) is obs
 
 
 def test_the_residuals_noise_model_is_the_noise_they_carry():
@@ -89,10 +90,10 @@ def test_the_residuals_noise_model_is_the_noise_they_carry():
     residuals, model = [], None
     for seed in range(400):
         t, normals, programmes = _recording(rests, per_stretch=20, seed=seed)
-        obs = idf.observations_from_samples(t, normals, programmes)
+        obs = kobs.observations_from_samples(t, normals, programmes)
         residuals.append(np.concatenate([(k.normal_before - k.normal_after)[:2]
                                          for k in obs.kicks]))
-        sensor = obs.residual_covariance() - idf.RESTART_STD_RAD ** 2 * np.eye(10)
+        sensor = obs.residual_covariance() - kobs.RESTART_STD_RAD ** 2 * np.eye(10)
         model = sensor / obs.noise_std_rad ** 2 * SIGMA ** 2
     measured = np.cov(np.array(residuals).T)
     # 400 draws: a covariance is good to about 7 % of the variance; 4 of those allowed.
@@ -104,14 +105,14 @@ def test_the_residuals_noise_model_is_the_noise_they_carry():
 def test_a_powered_hold_or_a_recording_without_pauses_leaves_kicks_out():
     rests = [_unit(0.0, 0.0), _unit(0.01, 0.0), _unit(0.02, 0.0)]
     t, normals, programmes = _recording(rests)
-    held = idf.observations_from_samples(t, normals, programmes,
-                                         holds=[(programmes[1][0] + 0.3, [10.0, 0, 0, 0])])
+    held = kobs.observations_from_samples(t, normals, programmes,
+                                          holds=[(programmes[1][0] + 0.3, [10.0, 0, 0, 0])])
     # The hold lies in the stretch after the second kick: that kick and the first one's
     # "after" are unaffected, the second is dropped.
     assert len(held.kicks) == 1 and held.dropped == 1 and held.shared == ()
     t, normals, programmes = _recording(rests, per_stretch=1)
-    with pytest.raises(idf.IdentificationError, match='pauses between programmes'):
-        idf.observations_from_samples(t, normals, programmes)
+    with pytest.raises(kobs.IdentificationError, match='pauses between programmes'):
+        kobs.observations_from_samples(t, normals, programmes)
 
 
 def test_fitted_parameters_are_the_declared_ones_or_those_named():
@@ -131,9 +132,9 @@ def test_fitted_parameters_are_the_declared_ones_or_those_named():
             assert fit.from_unit(fit.to_unit(value)) == pytest.approx(value, rel=1e-12)
     p = idf.params_at(BASE, named, [0.4, -12e-6])
     assert (p.friction.coulomb, p.friction.stribeck, p.beam.ground_z_m) == (0.4, 0.4, -12e-6)
-    with pytest.raises(idf.IdentificationError, match='unknown parameter'):
+    with pytest.raises(kobs.IdentificationError, match='unknown parameter'):
         idf.fit_parameters(BASE, ['beam.wingspan_m'])
-    with pytest.raises(idf.IdentificationError, match='not a number'):
+    with pytest.raises(kobs.IdentificationError, match='not a number'):
         idf.fit_parameters(BASE, ['friction.reading'])
 
 
@@ -161,10 +162,10 @@ def _kick_observations(params, n, seed=0, noise=0.0):
     for i in range(n):
         before = normal_from_xy(*rng.uniform(-0.03, 0.03, 2))
         times, volts = kicks.programme(i % 4, float(rng.uniform(0.6, 1.0))).segments()
-        probe = idf.KickObservation(float(i), times, volts, before, before, 40, 40)
+        probe = kobs.KickObservation(float(i), times, volts, before, before, 40, 40)
         after = idf.kick_end_normal(params, probe)
-        out.append(idf.KickObservation(float(i), times, volts, before, after, 40, 40))
-    return idf.Observations(tuple(out), noise)
+        out.append(kobs.KickObservation(float(i), times, volts, before, after, 40, 40))
+    return kobs.Observations(tuple(out), noise)
 
 
 class StopFitError(Exception):
@@ -337,7 +338,7 @@ def test_a_start_set_given_as_a_file_is_kept_beside_the_fitted_one(tmp_path):
                                    'fitted', '', ('friction.stribeck',))
     result = idf.IdentificationResult([fitted_p], np.zeros((3, 2)), np.zeros((3, 2)), 1e-3,
                                       np.ones((1, 1)), 4, 12, 0, 'done', 1.0)
-    obs = idf.Observations(tuple(idf.KickObservation(float(i), np.zeros(1), np.zeros((1, 4)),
+    obs = kobs.Observations(tuple(kobs.KickObservation(float(i), np.zeros(1), np.zeros((1, 4)),
                                                      np.array([0, 0, 1.0]),
                                                      np.array([0, 0, 1.0]), 5, 5)
                                  for i in range(3)), 1e-3)

@@ -28,7 +28,7 @@ BAD_STARTS = [
 
 @pytest.mark.parametrize(('executable', 'parameters', 'says'), BAD_STARTS,
                          ids=[f'{e}-{next(iter(p))}' for e, p, _ in BAD_STARTS])
-def test_a_bad_start_is_one_line_and_exit_status_2(ros_nodes, executable, parameters, says):
+def test_bad_input_at_start_is_one_line_and_exit_status_2(ros_nodes, executable, parameters, says):
     node = ros_nodes.start(executable, parameter_args(**parameters))
     assert node.wait(EXIT_TIMEOUT_S) == 2
     err = node.stderr_text()

@@ -5,15 +5,13 @@ import itertools
 import numpy as np
 import pytest
 
-from sphere_sim.integrate import solve as solve_module
+from sphere_sim.integrate import library_segments
+from sphere_sim.integrate.segment import SolverError, SolverStatus
 from sphere_sim.integrate.solve import (
     METHODS,
-    SolverError,
-    SolverStatus,
     default_onset_depth_m,
     segment_times,
     simulate,
-    solve,
 )
 from sphere_sim.model import dynamics as dyn
 from sphere_sim.model import gaps as gap_kernels
@@ -230,14 +228,14 @@ def test_odeint_resolves_the_impact(model, dropped, monkeypatch):
     check point before it, the landing agrees with the call's within the allowed depth, so the
     call stands; the impact is resolved as the other methods resolve it."""
     checks = []
-    onset = solve_module._odeint_onset
+    onset = library_segments._odeint_onset
 
     def spy(*args):
         result = onset(*args)
         checks.append(result[0])
         return result
 
-    monkeypatch.setattr(solve_module, '_odeint_onset', spy)
+    monkeypatch.setattr(library_segments, '_odeint_onset', spy)
     kwargs = {'sample_period_s': 1e-5}
     loose = simulate(model, dropped, 4.5e-3, PulseProgramme(), rtol=1e-2, method='odeint',
                      **kwargs)
@@ -258,15 +256,15 @@ def test_odeint_restarts_where_the_contact_has_closed_by_the_allowed_depth(model
     """Made to distrust every call across a closure, odeint restarts at points where the
     contact has closed by half to all of the allowed depth, and still lands as it should."""
     restarts = []
-    onset = solve_module._odeint_onset
+    onset = library_segments._odeint_onset
 
     def spy(*args):
         restarted, t, x = onset(*args)
         restarts.append((restarted, model.contact_gaps(args[3]), model.contact_gaps(x)))
         return restarted, t, x
 
-    monkeypatch.setattr(solve_module, 'ODEINT_ONSET_AGREEMENT', -1.0)
-    monkeypatch.setattr(solve_module, '_odeint_onset', spy)
+    monkeypatch.setattr(library_segments, 'ODEINT_ONSET_AGREEMENT', -1.0)
+    monkeypatch.setattr(library_segments, '_odeint_onset', spy)
     depth = default_onset_depth_m(model)
     traj = simulate(model, dropped, 4.5e-3, PulseProgramme(), rtol=1e-2, method='odeint',
                     sample_period_s=1e-5)
@@ -297,7 +295,7 @@ def test_odeint_takes_lsodas_steps(model, x_rest):
 def test_odeint_reads_the_jacobian_the_right_way_round(model, x_rest, monkeypatch):
     """Read transposed (col_deriv=True), the model's Jacobian stalls LSODA's Newton iteration
     at the first contact: the orientation odeint is given is the one that works."""
-    monkeypatch.setattr(solve_module, 'ODEINT_COL_DERIV', not solve_module.ODEINT_COL_DERIV)
+    monkeypatch.setattr(library_segments, 'ODEINT_COL_DERIV', not library_segments.ODEINT_COL_DERIV)
     with pytest.raises(SolverError) as info:
         simulate(model, x_rest, 2e-3, ASYMMETRIC, rtol=1e-6, method='odeint')
     assert info.value.status is SolverStatus.STEP_TOO_SMALL
@@ -348,12 +346,11 @@ def beams_only():
 
 @pytest.mark.parametrize('method', METHODS)
 def test_every_method_through_the_interface(beams_only, method):
-    """solve() with a model and each method: the same final state, and counters filled in."""
+    """simulate() with a model and each method: the same final state, and counters filled in."""
     programme = PulseProgramme(tuple(Pulse(b, 60.0, 0.0, 2e-4) for b in (1, 2, 3, 4)))
     x0 = rest_state(beams_only)
-    kwargs = {'x0': x0, 'programme': programme, 'rtol': 1e-8}
-    ref = solve(beams_only, (0.0, 4e-4), method='fast', **kwargs)
-    traj = solve(beams_only, (0.0, 4e-4), method=method, **kwargs)
+    ref = simulate(beams_only, x0, 4e-4, programme, rtol=1e-8, method='fast')
+    traj = simulate(beams_only, x0, 4e-4, programme, rtol=1e-8, method=method)
     diff = np.max(np.abs(traj.final_state - ref.final_state) / state_scale(beams_only))
     assert diff < 1e-4
     assert traj.stats.method == method
@@ -369,8 +366,8 @@ def test_every_method_through_the_interface(beams_only, method):
     assert np.min(traj.x[0]) < x0[0] - 1e-6
 
 
-def test_solve_starts_from_the_scene_initial_state():
+def test_simulate_starts_from_the_scene_initial_state():
     model = assemble(load_scene('beams_only'))
-    traj = solve(model, (0.0, 1e-4), rtol=1e-6)
+    traj = simulate(model, None, 1e-4, rtol=1e-6)
     np.testing.assert_allclose(traj.x[:, 0], rest_state(model), atol=1e-15)
     assert traj.status is SolverStatus.SUCCESS

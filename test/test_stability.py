@@ -18,13 +18,10 @@ import math
 import numpy as np
 import pytest
 
-from sphere_sim.integrate.solve import (
-    SolverError,
-    SolverStatus,
-    simulate,
-)
+from sphere_sim.integrate.segment import SolverError, SolverStatus
+from sphere_sim.integrate.solve import simulate
 from sphere_sim.model.assembly import assemble
-from sphere_sim.model.capacitance import RbfCapacitance
+from sphere_sim.model.capacitance_rbf import RbfCapacitance
 from sphere_sim.model.energy import energy_balance
 from sphere_sim.model.initial_state import RestError, explicit_state, rest_state
 from sphere_sim.model.programme import Pulse, PulseProgramme

@@ -6,16 +6,33 @@ records every state a solver evaluates the model at, and ``replay_wall_s`` evalu
 kernels at those states again in compiled loops, with nothing of the solver around them.
 """
 
+from __future__ import annotations
+
 import time
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numba
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from sphere_sim.model import dynamics as dyn
 from sphere_sim.model.scaling import state_scale
 
+if TYPE_CHECKING:
+    from sphere_sim.model.assembly import Model
 
-class RecordingModel:
+    # A RecordingModel stands in for a Model wherever one is taken (it forwards every attribute
+    # to the wrapped model); this tells the type checker so.
+    _ModelStandIn = Model
+else:
+    _ModelStandIn = object
+
+# One recorded evaluation: (t_s, x, u_v).
+Call = tuple[float, NDArray[np.float64], NDArray[np.float64]]
+
+
+class RecordingModel(_ModelStandIn):
     """A model whose solver functions (:meth:`Model.at_voltages`) record their arguments.
 
     Everything else is the wrapped model's. ``rhs_calls`` and ``jac_calls`` list
@@ -23,31 +40,36 @@ class RecordingModel:
     ``len(rhs_calls)`` is the solver's nfev and ``len(jac_calls)`` its njev.
     """
 
-    def __init__(self, model):
+    def __init__(self, model: Model) -> None:
         self.model = model
-        self.rhs_calls = []
-        self.jac_calls = []
+        self.rhs_calls: list[Call] = []
+        self.jac_calls: list[Call] = []
 
-    def __getattr__(self, name):
+    def __getattr__(self, name: str) -> Any:
         return getattr(self.model, name)
 
-    def at_voltages(self, u):
+    def at_voltages(self, u: ArrayLike) -> tuple[
+            Callable[..., NDArray[np.float64]],
+            Callable[[float, NDArray[np.float64]], NDArray[np.float64]]]:
         fun, jac = self.model.at_voltages(u)
         u_v = np.array(u, dtype=float)
 
-        def recording_fun(t, x, out=None):
+        def recording_fun(t: float, x: NDArray[np.float64],
+                          out: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
             self.rhs_calls.append((t, x.copy(), u_v))
             return fun(t, x, out)
 
-        def recording_jac(t, x):
+        def recording_jac(t: float, x: NDArray[np.float64]) -> NDArray[np.float64]:
             self.jac_calls.append((t, x.copy(), u_v))
             return jac(t, x)
 
         return recording_fun, recording_jac
 
 
+# A compiled kernel: numba reads its types from the arguments.
 @numba.njit(cache=True)
-def _replay_rhs(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, out):
+def _replay_rhs(  # type: ignore[no-untyped-def]
+        t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, out):
     """dx/dt at each recorded state into ``out``, shape (n_calls, n_states)."""
     diag = np.empty(dyn.N_DIAG)
     for i in range(t.size):
@@ -55,15 +77,18 @@ def _replay_rhs(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, out):
                        diag)
 
 
+# A compiled kernel: numba reads its types from the arguments.
 @numba.njit(cache=True)
-def _replay_jacobian(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, scale, out):
+def _replay_jacobian(  # type: ignore[no-untyped-def]
+        t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, scale, out):
     """The Jacobian at each recorded state into ``out``, shape (n_calls, n_states, n_states)."""
     for i in range(t.size):
         dyn.jacobian_kernel(t[i], x[i], u[i], p, flags, directions, rbf_cz, rbf_cphi, rbf_w,
                             scale, out[i])
 
 
-def replay(model, calls, jacobian=False):
+def replay(model: Model, calls: Sequence[Call],
+           jacobian: bool = False) -> tuple[NDArray[np.float64], float]:
     """Evaluate the right-hand side (or the Jacobian) of ``model`` at recorded ``calls``.
 
     Returns
@@ -77,8 +102,9 @@ def replay(model, calls, jacobian=False):
     t = np.array([c[0] for c in calls], dtype=float)
     x = np.array([c[1] for c in calls], dtype=float).reshape(len(calls), n)
     u = np.array([c[2] for c in calls], dtype=float).reshape(len(calls), model.n_beams)
-    args = (t, x, u, model.p, model.flags, model.beam_directions, model.rbf_cz,
-            model.rbf_cphi, model.rbf_w)
+    loop: Callable[..., None]
+    args: tuple[NDArray[Any], ...] = (t, x, u, model.p, model.flags, model.beam_directions,
+                                      model.rbf_cz, model.rbf_cphi, model.rbf_w)
     if jacobian:
         values = np.empty((len(calls), n, n))
         loop, args = _replay_jacobian, (*args, state_scale(model), values)
@@ -90,7 +116,7 @@ def replay(model, calls, jacobian=False):
     return values, time.perf_counter() - started
 
 
-def replay_wall_s(model, recording, repeats):
+def replay_wall_s(model: Model, recording: RecordingModel, repeats: int) -> float:
     """Fastest of ``repeats`` compiled replays of everything ``recording`` holds (s): the
     recorded solver's kernel evaluations alone."""
     parts = [(calls, jacobian) for calls, jacobian in

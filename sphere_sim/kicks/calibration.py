@@ -25,12 +25,14 @@ the shortfall is reported.
 
 import dataclasses
 import math
+from collections.abc import Callable, Sequence
 
 import numpy as np
+from numpy.typing import NDArray
 
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import rest_state
-from sphere_sim.model.parameters import CALIBRATION_TARGETS
+from sphere_sim.model.parameters import CALIBRATION_TARGETS, ParameterSet, UncertainParameter
 from sphere_sim.model.scene import load_scene
 from sphere_sim.studies.pullin import dynamic_threshold
 
@@ -55,26 +57,27 @@ class Fit:
     """The outcome of fitting one declared-uncertain parameter (jointly with the others of its
     target: ``observed`` and ``history`` are the joint fit's)."""
 
-    spec: object  # UncertainParameter
+    spec: UncertainParameter
     value: float
     observed: float  # threshold (V) at the fitted values
     target: float
-    history: tuple  # (value of this parameter, observed) of every evaluation, in order
+    # (value of this parameter, observed) of every evaluation, in order
+    history: tuple[tuple[float, float], ...]
 
     unit = 'V'
 
     @property
-    def reached(self):
+    def reached(self) -> bool:
         """False when the declared ranges stopped the fit short of its target."""
         return abs(self.observed - self.target) < FIT_TOLERANCE_V
 
     @property
-    def at_margin(self):
+    def at_margin(self) -> bool:
         """True when the value sits at its range's margin (the fit leaned on that bound)."""
         return abs(range_coordinate(self.spec, self.value) - 0.5) >= 0.5 - RANGE_MARGIN - 1e-9
 
 
-def evaluate(params, with_beams_only=True):
+def evaluate(params: ParameterSet, with_beams_only: bool = True) -> tuple[float, float, bool]:
     """Dynamic thresholds with and without the sphere, and the rest contact, for ``params``."""
     scene = load_scene('four_beam_pulse')
     model = assemble(scene, params)
@@ -88,50 +91,54 @@ def evaluate(params, with_beams_only=True):
     return with_sphere, beams_only, bool(np.all(front < 0))
 
 
-def threshold_v(params):
+def threshold_v(params: ParameterSet) -> float:
     """Fig. 4's observable: the dynamic pull-in threshold with the sphere on (V)."""
     return evaluate(params, with_beams_only=False)[0]
 
 
-def with_value(params, spec, value):
+def with_value(params: ParameterSet, spec: UncertainParameter, value: float) -> ParameterSet:
     """``params`` with ``spec``'s path and every path tied to it set to ``value``."""
     return params.replace(**{path: float(value) for path in spec.paths})
 
 
-def with_values(params, specs, values):
+def with_values(params: ParameterSet, specs: Sequence[UncertainParameter],
+                values: Sequence[float]) -> ParameterSet:
     for spec, value in zip(specs, values, strict=True):
         params = with_value(params, spec, value)
     return params
 
 
-def _geometric(spec):
+def _geometric(spec: UncertainParameter) -> bool:
     return spec.low > 0 and spec.high / spec.low > GEOMETRIC_RANGE_RATIO
 
 
-def range_coordinate(spec, value):
+def range_coordinate(spec: UncertainParameter, value: float) -> float:
     """``value`` in ``spec``'s range coordinates: 0 at its low end, 1 at its high end."""
     if _geometric(spec):
         return math.log(value / spec.low) / math.log(spec.high / spec.low)
     return (value - spec.low) / (spec.high - spec.low)
 
 
-def value_at(spec, coordinate):
+def value_at(spec: UncertainParameter, coordinate: float) -> float:
     """The inverse of :func:`range_coordinate`."""
     if _geometric(spec):
         return spec.low * (spec.high / spec.low) ** coordinate
     return spec.low + coordinate * (spec.high - spec.low)
 
 
-def bisect(observe, low, high, target, tolerance, geometric=False, progress=None):
+def bisect(observe: Callable[[float], float], low: float, high: float, target: float,
+           tolerance: float, geometric: bool = False,
+           progress: Callable[[float, float], object] | None = None
+           ) -> tuple[float, float, tuple[tuple[float, float], ...]]:
     """Bisection of a monotone ``observe(value)`` for ``target`` within [low, high].
 
     Returns ``(value, observed, history)``. When [low, high] does not bracket the target, the
     end whose observation lies closer to it is returned: the range is a physical bound and is
     never stretched; the caller reports how far the target was missed (:attr:`Fit.reached`).
     """
-    history = []
+    history: list[tuple[float, float]] = []
 
-    def look(value):
+    def look(value: float) -> float:
         observed = observe(value)
         history.append((value, observed))
         if progress is not None:
@@ -154,7 +161,7 @@ def bisect(observe, low, high, target, tolerance, geometric=False, progress=None
     return mid, f_mid, tuple(history)
 
 
-def start_coordinate(spec, reference_value):
+def start_coordinate(spec: UncertainParameter, reference_value: float) -> float:
     """Where the joint fit starts for ``spec``: the reference value inside the range's margins;
     a reference outside the range (a table value the range excludes) says nothing about where
     inside it the value lies, so the range's centre."""
@@ -164,7 +171,9 @@ def start_coordinate(spec, reference_value):
     return min(max(coordinate, RANGE_MARGIN), 1.0 - RANGE_MARGIN)
 
 
-def fit_jointly(params, specs, reference, progress=None):
+def fit_jointly(params: ParameterSet, specs: Sequence[UncertainParameter],
+                reference: ParameterSet,
+                progress: Callable[[float, float], object] | None = None) -> list[Fit]:
     """Fit ``specs`` jointly to Fig. 4's threshold: the smallest move from ``reference``.
 
     Parameters
@@ -183,14 +192,14 @@ def fit_jointly(params, specs, reference, progress=None):
     """
     target, tolerance = TARGET_THRESHOLD_V, FIT_TOLERANCE_V
     start = np.array([start_coordinate(spec, reference.get(spec.path)) for spec in specs])
-    history = []
+    history: list[tuple[tuple[float, ...], float]] = []
 
-    def candidate(coordinates):
+    def candidate(coordinates: NDArray[np.float64]) -> ParameterSet:
         inside = np.clip(coordinates, RANGE_MARGIN, 1.0 - RANGE_MARGIN)
         return with_values(params, specs, [value_at(spec, c)
                                            for spec, c in zip(specs, inside, strict=True)])
 
-    def look(coordinates):
+    def look(coordinates: NDArray[np.float64]) -> float:
         trial = candidate(coordinates)
         observed = threshold_v(trial)
         history.append((tuple(trial.get(spec.path) for spec in specs), observed))
@@ -222,7 +231,9 @@ def fit_jointly(params, specs, reference, progress=None):
             for i, spec in enumerate(specs)]
 
 
-def calibrate(params, uncertain, progress=None, reference=None):
+def calibrate(params: ParameterSet, uncertain: Sequence[UncertainParameter],
+              progress: Callable[[float, float], object] | None = None,
+              reference: ParameterSet | None = None) -> tuple[ParameterSet, list[Fit]]:
     """Fit every declared-uncertain parameter of Fig. 4's threshold jointly.
 
     Parameters

@@ -6,12 +6,16 @@ contacts' friction holds a resting sphere (docs/parameters.md, "Friction that ho
 displacement is the kick's alone: there is no drift to subtract.
 """
 
+from __future__ import annotations
+
 import concurrent.futures
 import dataclasses
 import itertools
 import math
+from collections.abc import Callable, Iterable
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from msg_defs.device import KICK_WINDOW_S
 from sphere_sim.kicks.design import KickDesign, cardan_of_normal, simulate_kick
@@ -20,6 +24,8 @@ from sphere_sim.kicks.lookup_table import TableSpec
 from sphere_sim.kicks.offset_lookup import ON_AXIS_TOL, compensating_beam, side_of_axis
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import rest_state
+from sphere_sim.model.parameters import ParameterSet
+from sphere_sim.model.programme import PulseProgramme
 from sphere_sim.model.scene import load_scene
 
 CHARACTERISTIC_RTOL = 1e-6
@@ -42,15 +48,15 @@ class KickEffect:
         x-y displacement of the unit normal over the kick window.
     """
 
-    displacement: np.ndarray
+    displacement: NDArray[np.float64]
 
     @property
-    def width_rad(self):
+    def width_rad(self) -> float:
         """Rotation width: the length of the displacement (small-angle, rad)."""
         return float(np.hypot(*self.displacement))
 
     @property
-    def direction_rad(self):
+    def direction_rad(self) -> float:
         return float(math.atan2(self.displacement[1], self.displacement[0]))
 
 
@@ -60,24 +66,27 @@ class KickBench:
     ``params`` is a :class:`~sphere_sim.model.parameters.ParameterSet`, None for the default.
     """
 
-    def __init__(self, params=None, window_s=KICK_WINDOW_S, rtol=CHARACTERISTIC_RTOL):
+    def __init__(self, params: ParameterSet | None = None, window_s: float = KICK_WINDOW_S,
+                 rtol: float = CHARACTERISTIC_RTOL) -> None:
         self.model = assemble(load_scene('rest'), params)
         self.window_s = window_s
         self.rtol = rtol
-        self._rest = {}
+        self._rest: dict[tuple[float, ...], NDArray[np.float64]] = {}
 
-    def rest(self, normal):
+    def rest(self, normal: NDArray[np.float64]) -> NDArray[np.float64]:
         key = tuple(np.round(normal, 12))
         if key not in self._rest:
             self._rest[key] = rest_state(self.model, cardan_of_normal(normal))
         return self._rest[key]
 
-    def final_normal(self, normal, programme):
+    def final_normal(self, normal: NDArray[np.float64],
+                     programme: PulseProgramme) -> NDArray[np.float64]:
         result, _ = simulate_kick(self.model, normal, programme, window_s=self.window_s,
                                   rtol=self.rtol, x_rest=self.rest(normal))
         return result.normal
 
-    def effect(self, normal, design, intensity, offset_v=0.0, offset_beam=None):
+    def effect(self, normal: NDArray[np.float64], design: KickDesign, intensity: float,
+               offset_v: float = 0.0, offset_beam: int | None = None) -> KickEffect:
         """The :class:`KickEffect` of ``design`` at ``intensity`` from rest at ``normal``."""
         moved = self.final_normal(normal, design.programme(intensity, offset_v, offset_beam))
         return KickEffect(moved[:2] - normal[:2])
@@ -88,13 +97,16 @@ class WidthCurve:
     """Rotation width (rad) over intensities for one initial tilt."""
 
     alpha_deg: float
-    intensities: np.ndarray
-    width_rad: np.ndarray
-    direction_rad: np.ndarray
+    intensities: NDArray[np.float64]
+    width_rad: NDArray[np.float64]
+    direction_rad: NDArray[np.float64]
 
 
-def rotation_width_curves(design=None, alphas_deg=(0.0, 20.0, 35.0), intensities=None,
-                          params=None, progress=None):
+def rotation_width_curves(design: KickDesign | None = None,
+                          alphas_deg: Iterable[float] = (0.0, 20.0, 35.0),
+                          intensities: ArrayLike | None = None,
+                          params: ParameterSet | None = None,
+                          progress: Callable[[], object] | None = None) -> list[WidthCurve]:
     """Fig. 10: rotation width against u_K for initial tilts alpha (about x).
 
     Returns
@@ -118,7 +130,7 @@ def rotation_width_curves(design=None, alphas_deg=(0.0, 20.0, 35.0), intensities
     return curves
 
 
-def direction_error(effect, design):
+def direction_error(effect: KickEffect, design: KickDesign) -> float:
     return math.remainder(effect.direction_rad - design.direction_rad, 2.0 * math.pi)
 
 
@@ -134,8 +146,9 @@ class OffsetSolution:
     evaluations: int  # kicks simulated by the search
 
 
-def find_offset(error_of_offset, candidates_v, tol_rad=OFFSET_DIRECTION_TOL_RAD,
-                refinements=OFFSET_REFINEMENTS):
+def find_offset(error_of_offset: Callable[[float], float], candidates_v: Iterable[float],
+                tol_rad: float = OFFSET_DIRECTION_TOL_RAD,
+                refinements: int = OFFSET_REFINEMENTS) -> tuple[float, float, int]:
     """Offset whose kick goes closest to the nominal direction: a scan, then regula falsi.
 
     The error is not monotone in the offset (an offset above the pull-in threshold turns the
@@ -175,7 +188,8 @@ def find_offset(error_of_offset, candidates_v, tol_rad=OFFSET_DIRECTION_TOL_RAD,
     return best[0], best[1], evaluations
 
 
-def _offset_job(args):
+def _offset_job(
+        args: tuple[ParameterSet | None, KickDesign, float, float, float]) -> OffsetSolution:
     params, design, intensity, x_sn, y_sn = args
     bench = _bench(params)
     normal = normal_from_xy(x_sn, y_sn)
@@ -183,14 +197,14 @@ def _offset_job(args):
     high = design.voltage_limit_v - design.low_v
     candidates = [v for v in OFFSET_SCAN_V if -design.low_v <= v <= high]
 
-    effects = {}
+    effects: dict[float, KickEffect] = {}
 
-    def effect(offset_v):
+    def effect(offset_v: float) -> KickEffect:
         if offset_v not in effects:
             effects[offset_v] = bench.effect(normal, design, intensity, offset_v, beam)
         return effects[offset_v]
 
-    def error(offset_v):
+    def error(offset_v: float) -> float:
         return direction_error(effect(offset_v), design)
 
     error_at_zero = error(0.0)
@@ -199,16 +213,16 @@ def _offset_job(args):
                           effect(offset_v).width_rad, evaluations)
 
 
-_BENCHES = {}
+_BENCHES: dict[ParameterSet | None, KickBench] = {}
 
 
-def _bench(params):
+def _bench(params: ParameterSet | None) -> KickBench:
     if params not in _BENCHES:
         _BENCHES[params] = KickBench(params)
     return _BENCHES[params]
 
 
-def offset_grid(grid_step, cone_half_angle_rad):
+def offset_grid(grid_step: float, cone_half_angle_rad: float) -> list[tuple[float, float]]:
     """(x_sn, y_sn) nodes inside the cone."""
     half = math.floor(math.sin(cone_half_angle_rad) / grid_step)
     axis = grid_step * np.arange(-half, half + 1)
@@ -216,16 +230,18 @@ def offset_grid(grid_step, cone_half_angle_rad):
             if math.hypot(x, y) <= math.sin(cone_half_angle_rad) + 1e-12]
 
 
-def upper_right_nodes(design, grid_step, cone_half_angle_rad):
+def upper_right_nodes(design: KickDesign, grid_step: float,
+                      cone_half_angle_rad: float) -> list[tuple[float, float]]:
     """The grid nodes of the upper-right half-space of the kick's axis (and on it): the lower
     left half is their mirror image (Fig. 7)."""
     return [(x, y) for x, y in offset_grid(grid_step, cone_half_angle_rad)
             if side_of_axis(design.direction_rad, x, y) >= -ON_AXIS_TOL]
 
 
-def voltage_offsets(design=None, grid_step=TableSpec.grid_step,
-                    cone_half_angle_rad=CONE_HALF_ANGLE_RAD, intensity=1.0, params=None,
-                    workers=1, progress=None):
+def voltage_offsets(design: KickDesign | None = None, grid_step: float = TableSpec.grid_step,
+                    cone_half_angle_rad: float = CONE_HALF_ANGLE_RAD, intensity: float = 1.0,
+                    params: ParameterSet | None = None, workers: int = 1,
+                    progress: Callable[[], object] | None = None) -> list[OffsetSolution]:
     """Fig. 8: the offset on the upper-right half's compensating beam (§4.1's V1) for every
     grid state of that half.
 

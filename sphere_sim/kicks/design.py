@@ -7,16 +7,21 @@ all beams stays below pull-in) to ``high_v`` (§4.2, Fig. 10). The other kick di
 images of a design under the device's symmetry (``sphere_sim.model.symmetry``).
 """
 
+from __future__ import annotations
+
 import dataclasses
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from msg_defs.device import KICK_WINDOW_S, VOLTAGE_LIMIT_V
-from sphere_sim.integrate.solve import simulate
+from sphere_sim.integrate.solve import Trajectory, simulate
 from sphere_sim.kicks.discrete import KickResult
+from sphere_sim.model.assembly import Model
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.programme import Pulse, PulseProgramme
 from sphere_sim.model.rotations import angle_between
@@ -53,8 +58,8 @@ class KickDesign:
     """
 
     direction_rad: float = math.radians(-45.0)
-    low_beams: tuple = (1, 2)
-    high_beams: tuple = (3, 4)
+    low_beams: tuple[int, ...] = (1, 2)
+    high_beams: tuple[int, ...] = (3, 4)
     low_v: float = 35.0
     high_v: float = VOLTAGE_LIMIT_V
     width_low_s: float = 4e-3
@@ -62,7 +67,8 @@ class KickDesign:
     delay_s: float = -2e-3
     voltage_limit_v: float = VOLTAGE_LIMIT_V
 
-    def programme(self, intensity=1.0, offset_v=0.0, offset_beam=None):
+    def programme(self, intensity: float = 1.0, offset_v: float = 0.0,
+                  offset_beam: int | None = None) -> PulseProgramme:
         """The pulse programme at intensity u_K with an optional offset on one beam.
 
         Raises
@@ -85,11 +91,11 @@ class KickDesign:
         return PulseProgramme(tuple(p for p in pulses if p.amplitude_v != 0.0),
                               self.voltage_limit_v)
 
-    def to_dict(self):
+    def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
     @classmethod
-    def load(cls, path):
+    def load(cls, path: str | Path) -> KickDesign:
         """The design saved by ``sphere-twin optimize-kick`` (its JSON's ``design``).
 
         Raises
@@ -108,7 +114,7 @@ class KickDesign:
                               f'optimize-kick`: {type(exc).__name__}: {exc}') from exc
 
 
-def cardan_of_normal(normal):
+def cardan_of_normal(normal: NDArray[np.float64]) -> tuple[float, float, float]:
     """(alpha, beta, 0) in degrees whose surface normal (eq. 53) is ``normal``."""
     nx, ny, nz = normal
     beta = math.asin(max(-1.0, min(1.0, nx)))
@@ -116,8 +122,10 @@ def cardan_of_normal(normal):
     return (math.degrees(alpha), math.degrees(beta), 0.0)
 
 
-def simulate_kick(model, normal, programme, window_s=KICK_WINDOW_S, rtol=1e-6, x_rest=None,
-                  method='fast'):
+def simulate_kick(model: Model, normal: NDArray[np.float64], programme: PulseProgramme,
+                  window_s: float = KICK_WINDOW_S, rtol: float = 1e-6,
+                  x_rest: NDArray[np.float64] | None = None,
+                  method: str = 'fast') -> tuple[KickResult, Trajectory]:
     """One kick from rest at ``normal``; returns the KickResult and the trajectory.
 
     Parameters
@@ -144,7 +152,8 @@ def simulate_kick(model, normal, programme, window_s=KICK_WINDOW_S, rtol=1e-6, x
     return KickResult(final, float(np.max(deviation)), settle), traj
 
 
-def deviations_rad(normals, final):
+def deviations_rad(normals: NDArray[np.float64],
+                   final: NDArray[np.float64]) -> NDArray[np.float64]:
     """Angle (rad) of each column of ``normals`` from ``final``: :func:`angle_between`'s
     numbers to the bit, with the cross products taken at once (one call per sample cost a
     kick ~13 ms, 5 % of it)."""
@@ -153,8 +162,10 @@ def deviations_rad(normals, final):
                      for c, n in zip(cross, normals.T, strict=True)])
 
 
-def final_normal(model, normal, programme, window_s=KICK_WINDOW_S, rtol=1e-6, x_rest=None,
-                 method='fast', sample_period_s=KICK_SAMPLE_PERIOD_S):
+def final_normal(model: Model, normal: NDArray[np.float64], programme: PulseProgramme,
+                 window_s: float = KICK_WINDOW_S, rtol: float = 1e-6,
+                 x_rest: NDArray[np.float64] | None = None, method: str = 'fast',
+                 sample_period_s: float = KICK_SAMPLE_PERIOD_S) -> NDArray[np.float64]:
     """The resting normal after a kick: :func:`simulate_kick`'s ``normal``, the same number,
     without the transient's peak and settling time (which take a Python loop over samples).
     ``sample_period_s`` at least ``window_s`` keeps only the end state."""
@@ -165,7 +176,8 @@ def final_normal(model, normal, programme, window_s=KICK_WINDOW_S, rtol=1e-6, x_
     return model.surface_normal(traj.x[:, -1])
 
 
-def displacement(normal_before, normal_after):
+def displacement(normal_before: NDArray[np.float64],
+                 normal_after: NDArray[np.float64]) -> tuple[float, float]:
     """(rotation angle in rad, polar direction in rad) of the normal's x-y displacement."""
     d = np.asarray(normal_after[:2]) - np.asarray(normal_before[:2])
     return angle_between(normal_before, normal_after), math.atan2(d[1], d[0])

@@ -11,6 +11,7 @@ import math
 from typing import Protocol
 
 import numpy as np
+from numpy.typing import NDArray
 
 from msg_defs.device import KICK_WINDOW_S
 
@@ -43,17 +44,26 @@ class KickResult:
         Time until the normal stays within the settling band of its final value.
     """
 
-    normal: np.ndarray
+    normal: NDArray[np.float64]
     peak_deviation_rad: float = 0.0
     settle_time_s: float = 0.0
 
 
 class KickPlant(Protocol):
-    """What a controller may ask of the device: the kick directions it offers and a kick."""
+    """What a controller may ask of the device: the kick directions it offers and a kick.
 
-    directions_rad: tuple
+    Every kick model implements it: the lookup table, the continuous model, the twin's plant,
+    the analytic and perturbed plants of the studies, and their calibrated wrappers. A kick
+    model that also says how each kick is driven (its design and pulse programme) is a
+    :class:`~sphere_sim.kicks.lookup_table.ProgrammedKickPlant`.
+    """
 
-    def kick(self, normal, action, intensity):
+    @property
+    def directions_rad(self) -> tuple[float, ...]:
+        """Nominal direction (rad, polar angle of the normal's x-y displacement) of each
+        action; its length is the number of actions."""
+
+    def kick(self, normal: NDArray[np.float64], action: int, intensity: float) -> KickResult:
         """Apply kick ``action`` (index into ``directions_rad``) of intensity in [0, 1].
 
         Parameters
@@ -69,7 +79,7 @@ class KickPlant(Protocol):
         """
 
 
-def normal_from_xy(x_sn, y_sn):
+def normal_from_xy(x_sn: float, y_sn: float) -> NDArray[np.float64]:
     """Unit normal with the given x and y components (eq. 53), z >= 0."""
     z2 = 1.0 - x_sn * x_sn - y_sn * y_sn
     if z2 < 0.0:
@@ -77,7 +87,7 @@ def normal_from_xy(x_sn, y_sn):
     return np.array([x_sn, y_sn, math.sqrt(z2)])
 
 
-def normal_from_cardan(alpha_deg, beta_deg=0.0):
+def normal_from_cardan(alpha_deg: float, beta_deg: float = 0.0) -> NDArray[np.float64]:
     """Surface normal of Cardan angles (alpha, beta, 0) in degrees (eq. A1, 53)."""
     a, b = math.radians(alpha_deg), math.radians(beta_deg)
     return np.array([math.sin(b), -math.sin(a) * math.cos(b), math.cos(a) * math.cos(b)])
@@ -85,7 +95,7 @@ def normal_from_cardan(alpha_deg, beta_deg=0.0):
 
 
 
-def settled_kick_period_s(settle_time_s):
+def settled_kick_period_s(settle_time_s: float) -> float:
     """The shortest decision period after which a kick that settles in ``settle_time_s`` is
     over: rounded up to KICK_PERIOD_STEP_S; the kick window when no settle time is known."""
     if not (math.isfinite(settle_time_s) and settle_time_s > 0.0):
@@ -93,7 +103,7 @@ def settled_kick_period_s(settle_time_s):
     return round(math.ceil(settle_time_s / KICK_PERIOD_STEP_S - 1e-9) * KICK_PERIOD_STEP_S, 9)
 
 
-def kick_period_s(kick_plant):
+def kick_period_s(kick_plant: KickPlant) -> float:
     """The kick period of a kick plant: the settle time of its full first kick from the level
     state, rounded up (:func:`settled_kick_period_s`). The offline loop decides at this
     period, the controller node waits this long after a kick's reported start, and the discrete

@@ -2,10 +2,15 @@
 Fig. 1d (caught and kept) and Fig. 10 (the width "slightly decreases" with the tilt), measured
 as ``sphere-twin validate`` prints them and the tests check them."""
 
+import numpy as np
+from numpy.typing import NDArray
+
 from sphere_sim.integrate.solve import simulate
 from sphere_sim.kicks.characteristics import rotation_width_curves
 from sphere_sim.kicks.design import KickDesign
+from sphere_sim.model.assembly import Model
 from sphere_sim.model.initial_state import rest_state
+from sphere_sim.model.parameters import ParameterSet
 from sphere_sim.model.programme import Pulse, PulseProgramme
 from sphere_sim.model.rotations import angle_between
 from sphere_sim.studies.validation import rest_model
@@ -24,7 +29,8 @@ RATCHET_PULSES = 100
 HOLD_RTOL = 1e-6
 
 
-def landed_state(tilt_deg, params=None, design=None):
+def landed_state(tilt_deg: float, params: ParameterSet | None = None,
+                 design: KickDesign | None = None) -> tuple[Model, NDArray[np.float64]]:
     """The state HOLD_SETTLE_S after ``design``'s kick (default: the paper's layout with the
     template's widths) from rest at a tilt of ``tilt_deg`` about x, and its model."""
     model = rest_model(params)
@@ -35,7 +41,9 @@ def landed_state(tilt_deg, params=None, design=None):
     return model, traj.x[:, -1].copy()
 
 
-def landed_creep_rate(tilt_deg=20.0, duration_s=HOLD_DURATION_S, params=None, design=None):
+def landed_creep_rate(tilt_deg: float = 20.0, duration_s: float = HOLD_DURATION_S,
+                      params: ParameterSet | None = None,
+                      design: KickDesign | None = None) -> float:
     """How fast a sphere that landed from a kick at a tilt of ``tilt_deg`` moves on (rad/s):
     the angle its normal turns over ``duration_s`` with no voltage, over ``duration_s``."""
     model, x = landed_state(tilt_deg, params, design)
@@ -45,14 +53,15 @@ def landed_creep_rate(tilt_deg=20.0, duration_s=HOLD_DURATION_S, params=None, de
     return angle_between(normals[:, 0], normals[:, -1]) / duration_s
 
 
-def ratchet_programme(pulses=RATCHET_PULSES):
+def ratchet_programme(pulses: int = RATCHET_PULSES) -> PulseProgramme:
     return PulseProgramme(tuple(
         Pulse(beam, RATCHET_AMPLITUDES_V[k % len(RATCHET_AMPLITUDES_V)], k * RATCHET_PERIOD_S,
               RATCHET_PULSE_S)
         for k in range(pulses) for beam in (1, 2, 3, 4)))
 
 
-def ratchet_rad(tilt_deg=35.0, pulses=RATCHET_PULSES, params=None, design=None):
+def ratchet_rad(tilt_deg: float = 35.0, pulses: int = RATCHET_PULSES,
+                params: ParameterSet | None = None, design: KickDesign | None = None) -> float:
     """How far (rad) ``pulses`` sub-break-away pulses on all beams move the normal of a sphere
     that landed from a kick at ``tilt_deg``: a contact whose friction drifts under oscillating
     loads walks the sphere down pulse by pulse; one with an elastic zone does not."""
@@ -64,7 +73,8 @@ def ratchet_rad(tilt_deg=35.0, pulses=RATCHET_PULSES, params=None, design=None):
     return angle_between(normals[:, 0], normals[:, -1])
 
 
-def width_ratio(tilt_deg=35.0, params=None, design=None):
+def width_ratio(tilt_deg: float = 35.0, params: ParameterSet | None = None,
+                design: KickDesign | None = None) -> float:
     """The full kick's rotation width from a tilt of ``tilt_deg`` (about x) over the level one
     (Fig. 10: it "slightly decreases")."""
     curves = rotation_width_curves(design, alphas_deg=(0.0, tilt_deg), intensities=[1.0],

@@ -1,11 +1,8 @@
 """System identification: fit model parameters so that the continuous model reproduces kicks
 recorded on one device.
 
-What a device records is the commands it was sent (pulse programmes, voltages held) and its
-measured surface normal (§6's magnetic sensor, with its noise), nothing more. Between kicks the
-friction holds the sphere still, so every stretch of settled samples measures one resting
-normal; their mean beats the sensor noise by the square root of their number. A kick is then an
-observation: the programme, the resting normal before it and the resting normal after it.
+The kicks come as observations (:mod:`sphere_sim.kicks.observations`): the programme, the
+resting normal before it and the resting normal after it, each a mean of settled samples.
 
 The residual of a kick is the model's resting normal after the programme, started at rest at
 the recorded normal before it, minus the recorded normal after it (its x and y components, in
@@ -20,9 +17,9 @@ engine. Every evaluated parameter vector and its residuals are appended to a che
 the optimiser is deterministic, so a rerun retraces its path from the file and goes on where the
 interrupted one stopped.
 
-The residuals are weighed by the sensor noise they carry, correlations included: the stretch
-after one kick is the stretch before the next, so one noise draw enters both. Each declared
-parameter's range enters as a weak prior (``PRIOR_SD_UNIT``).
+The residuals are weighed by the sensor noise they carry, correlations included (the
+observations' ``whitener``). Each declared parameter's range enters as a weak prior
+(``PRIOR_SD_UNIT``).
 
 Before fitting, the Jacobian at the start says what the recordings can tell: a parameter whose
 expected uncertainty spans its whole range is held at its start value and reported as
@@ -31,14 +28,19 @@ as entangled, and fitted with an interval that spans what the kicks leave open. 
 is measured on the misfit itself (``_scan_checked``), never taken from the Jacobian alone.
 """
 
+from __future__ import annotations
+
 import dataclasses
 import hashlib
 import json
 import math
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from functools import lru_cache
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from threadpoolctl import threadpool_limits
 
 from sphere_sim.kicks import misfit_scan as scan
@@ -48,12 +50,22 @@ from sphere_sim.kicks.design import (
     cardan_of_normal,
     final_normal,
 )
-from sphere_sim.kicks.engine import engine_for
+from sphere_sim.kicks.engine import SerialEngine, engine_for
+from sphere_sim.kicks.observations import (
+    SETTLE_S,
+    IdentificationError,
+    KickObservation,
+    Observations,
+)
 from sphere_sim.kicks.table_build import BLAS_THREADS_PER_KICK
-from sphere_sim.model.assembly import assemble
+from sphere_sim.model.assembly import Model, assemble
 from sphere_sim.model.initial_state import rest_state
-from sphere_sim.model.programme import PulseProgramme
+from sphere_sim.model.parameters import ParameterSet
 from sphere_sim.model.scene import load_scene
+
+# Why a parameter was set aside (:func:`select_identifiable`): its status, its partner (an
+# entangled one's) and the cosine of their effects.
+SetAside = tuple[str, int | None, float]
 
 # The fit's tolerance, a tenth of the live twin's (sphere_sim.kicks.plants.LIVE_RTOL). At the
 # live 3e-4 a kick ends within a few 1e-6 rad of the exact one, but that error jumps with the
@@ -74,23 +86,6 @@ FIT_RTOL = 3e-5
 # (one standard error, 0.01 to 0.05 with 40 kicks), or the Gauss-Newton steps miss their floor.
 # The misfit's curvature is then measured over the reported interval itself (misfit_scan).
 FD_STEP = 0.02
-# A kick counts as over, and the model is compared with the recording, this long after its
-# programme's start (or at the programme's end, if later). The kick window of the controllers
-# (KICK_WINDOW_S, 60 ms) is where a kick is within a small angle of its end; at 60 ms the sphere
-# still moves by a few 1e-6 rad, which the whitened fit reads (measured over 16 noiseless kicks
-# of device_a at its true parameters: model against recording 4.5e-6 rad median at 60 ms,
-# 1.7e-6 at 100, 200 and 500 ms alike). Four samples of a second's pause are the price.
-SETTLE_S = 0.1
-# Noiseless recordings: the integrator's own error sets the residuals' scale.
-NOISELESS_STD_RAD = 1e-9
-# The restart's own error, per axis: a kick simulated from the relaxed rest state at the
-# recorded normal ends this far (RMS) from the same kick in the continuous run that recorded it
-# (measured over 40 noiseless kicks of device_a at its true parameters, compared at SETTLE_S:
-# 8e-6 rad per axis, most kicks within 2e-6 and one 6.8e-5 off; carrying the friction
-# bristles' strain over from the kick before changes it little). It enters every residual,
-# independent from kick to kick, beside the sensor's noise: without it the whitened fit reads
-# it as a parameter change.
-RESTART_STD_RAD = 1e-5
 # An undeclared parameter named for the fit is searched within this factor of its start value:
 # a search bound of the identification, not a physical range (docs/identification.md).
 UNDECLARED_FACTOR = 2.0
@@ -130,180 +125,6 @@ UNCERTAINTY_SIGMAS = 2.0
 CHECKPOINT_VERSION = 1
 
 
-class IdentificationError(ValueError):
-    """Recordings or a request the identification cannot work with."""
-
-
-# --- observations ---------------------------------------------------------------------------------
-
-@dataclasses.dataclass(frozen=True)
-class KickObservation:
-    """One recorded kick: its programme and the resting normals around it.
-
-    Attributes
-    ----------
-    time_s : float
-        Start of the programme.
-    times_s : ndarray, shape (k,)
-    voltages_v : ndarray, shape (k, 4)
-        The programme's zero-order-hold segments.
-    normal_before, normal_after : ndarray, shape (3,)
-        Means of the settled samples before and after the kick (unit vectors).
-    samples_before, samples_after : int
-        How many samples each mean is of.
-    """
-
-    time_s: float
-    times_s: np.ndarray
-    voltages_v: np.ndarray
-    normal_before: np.ndarray
-    normal_after: np.ndarray
-    samples_before: int
-    samples_after: int
-
-    def programme(self):
-        return PulseProgramme.from_segments(self.times_s, self.voltages_v)
-
-    def to_dict(self):
-        return {'time_s': self.time_s, 'times_s': np.asarray(self.times_s).tolist(),
-                'voltages_v': np.asarray(self.voltages_v).tolist(),
-                'normal_before': np.asarray(self.normal_before).tolist(),
-                'normal_after': np.asarray(self.normal_after).tolist(),
-                'samples_before': self.samples_before, 'samples_after': self.samples_after}
-
-
-@dataclasses.dataclass(frozen=True)
-class Observations:
-    """The kicks of one or more recordings and the sensor noise measured in them."""
-
-    kicks: tuple
-    noise_std_rad: float  # per tangential axis, from the scatter within settled stretches
-    dropped: int = 0  # programmes that could not be used (no settled samples around them)
-    # Indices i whose settled stretch after kick i is the one before kick i + 1: one noise
-    # draw enters both kicks' residuals, with opposite signs.
-    shared: tuple = ()
-
-    def digest(self):
-        text = json.dumps([k.to_dict() for k in self.kicks], sort_keys=True)
-        return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-    def residual_covariance(self):
-        """Covariance (rad^2) of the residual vector (x and y of each kick) from the sensor
-        noise alone. A residual is the model's end, started from the mean before the kick,
-        minus the mean after it: it carries the noise of both means, and consecutive kicks
-        that share a stretch are anticorrelated through it."""
-        var = (self.noise_std_rad or NOISELESS_STD_RAD) ** 2
-        n = len(self.kicks)
-        cov = np.zeros((2 * n, 2 * n))
-        for i, k in enumerate(self.kicks):
-            cov[2 * i, 2 * i] = cov[2 * i + 1, 2 * i + 1] = var * (
-                1.0 / k.samples_before + 1.0 / k.samples_after) + RESTART_STD_RAD ** 2
-        for i in self.shared:
-            for axis in (0, 1):
-                a, b = 2 * i + axis, 2 * i + 2 + axis
-                cov[a, b] = cov[b, a] = -var / self.kicks[i].samples_after
-        return cov
-
-    def whitener(self):
-        """``W`` with ``W C W^T = I`` for the residuals' covariance ``C``: ``W r`` are residuals
-        in units of their noise, uncorrelated, whose sum of squares is the misfit."""
-        from scipy.linalg import solve_triangular
-
-        chol = np.linalg.cholesky(self.residual_covariance())
-        return solve_triangular(chol, np.eye(chol.shape[0]), lower=True)
-
-
-def _unit_mean(normals):
-    mean = np.mean(normals, axis=0)
-    return mean / np.linalg.norm(mean)
-
-
-def _tangential_scatter(normals, mean):
-    """Squared tangential deviations (rad^2) of unit normals from their mean, summed, and
-    the number of degrees of freedom they carry (two per sample, less two for the mean)."""
-    d = normals - mean
-    d -= np.outer(d @ mean, mean)
-    return float(np.sum(d * d)), 2 * (len(normals) - 1)
-
-
-def observations_from_samples(normal_t_s, normals, programmes, holds=(),
-                              window_s=None, min_samples=2):
-    """Cut a recording into kick observations.
-
-    Parameters
-    ----------
-    normal_t_s : ndarray, shape (n,)
-        Sample times of the measured normals.
-    normals : ndarray, shape (n, 3)
-    programmes : sequence of (start_s, times_s, voltages_v)
-        The recorded pulse programmes, in any order.
-    holds : sequence of (time_s, voltages_v)
-        Recorded voltage commands. 0 V on every beam is the rest the kicks start from; a kick
-        whose stretch before or after contains another hold is dropped (the model starts each
-        kick at rest with the beams unpowered).
-    window_s : float, optional
-        A programme's effect counts as over this long after its start (or at its end, if
-        later); samples from then until the next programme are settled. ``SETTLE_S`` unless
-        given.
-    min_samples : int
-        Fewest settled samples before and after a kick for it to count.
-
-    Raises
-    ------
-    IdentificationError
-        When no kick has settled samples on both sides.
-    """
-    window_s = SETTLE_S if window_s is None else window_s
-    t = np.asarray(normal_t_s, dtype=float)
-    n = np.asarray(normals, dtype=float)
-    progs = sorted(((float(s), np.asarray(ts, dtype=float), np.asarray(vs, dtype=float))
-                    for s, ts, vs in programmes), key=lambda p: p[0])
-    powered = [float(ht) for ht, volts in holds if np.any(np.asarray(volts) != 0.0)]
-    kicks, dropped, ss, dof, shared, last_after = [], 0, 0.0, 0, [], None
-    for i, (start, times, volts) in enumerate(progs):
-        settled_from = start + max(window_s, float(times[-1]))
-        prev_end = (progs[i - 1][0] + max(window_s, float(progs[i - 1][1][-1]))
-                    if i else -math.inf)
-        next_start = progs[i + 1][0] if i + 1 < len(progs) else math.inf
-        before = (t >= prev_end - 1e-9) & (t < start - 1e-9)
-        after = (t >= settled_from - 1e-9) & (t < next_start - 1e-9)
-        interrupted = any(prev_end - 1e-9 <= h < next_start for h in powered)
-        if before.sum() < min_samples or after.sum() < min_samples or interrupted:
-            dropped += 1
-            continue
-        n_before, n_after = _unit_mean(n[before]), _unit_mean(n[after])
-        if kicks and last_after is not None and np.array_equal(before, last_after):
-            shared.append(len(kicks) - 1)
-        last_after = after
-        kicks.append(KickObservation(start, times, volts, n_before, n_after,
-                                     int(before.sum()), int(after.sum())))
-        # Each settled stretch counted once for the noise (the one after each kick, and the
-        # one before the first).
-        for mask, mean in ([(before, n_before)] if not kicks[:-1] else []) + [(after, n_after)]:
-            s, d = _tangential_scatter(n[mask], mean)
-            ss, dof = ss + s, dof + d
-    if not kicks:
-        raise IdentificationError('no kick with settled samples before and after it: the '
-                                  'recording needs pauses between programmes')
-    noise = math.sqrt(ss / dof) if dof else 0.0  # per axis
-    return Observations(tuple(kicks), noise, dropped, tuple(shared))
-
-
-def merge_observations(parts):
-    """Observations of several recordings as one set (noise pooled by kick count). One
-    recording is returned as it is: pooling would round its noise by an ulp, and the fit's end
-    in a flat valley follows such a difference."""
-    if len(parts) == 1:
-        return parts[0]
-    kicks = tuple(k for part in parts for k in part.kicks)
-    weights = [len(part.kicks) for part in parts]
-    noise = math.sqrt(np.average([p.noise_std_rad ** 2 for p in parts], weights=weights))
-    offsets = np.cumsum([0, *weights[:-1]])
-    shared = tuple(int(o + i) for o, part in zip(offsets, parts, strict=True)
-                   for i in part.shared)
-    return Observations(kicks, noise, sum(p.dropped for p in parts), shared)
-
-
 # --- the parameters fitted ------------------------------------------------------------------------
 
 @dataclasses.dataclass(frozen=True)
@@ -317,39 +138,40 @@ class FitParameter:
     path: str
     low: float
     high: float
-    tied: tuple = ()
+    tied: tuple[str, ...] = ()
     declared: bool = True
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not (self.low * self.high > 0 and self.low < self.high):
             raise IdentificationError(f'{self.path}: the range [{self.low:g}, {self.high:g}] '
                                       'must lie on one side of zero')
 
     @property
-    def _log_bounds(self):
+    def _log_bounds(self) -> tuple[float, float]:
         a, b = math.log(abs(self.low)), math.log(abs(self.high))
         return min(a, b), max(a, b)
 
     @property
-    def sign(self):
+    def sign(self) -> float:
         return 1.0 if self.low > 0 else -1.0
 
-    def to_unit(self, value):
+    def to_unit(self, value: float) -> float:
         lo, hi = self._log_bounds
         return (math.log(abs(value)) - lo) / (hi - lo)
 
-    def from_unit(self, u):
+    def from_unit(self, u: float) -> float:
         lo, hi = self._log_bounds
         if not 0.0 < u < 1.0:  # a range's end exactly, not an ulp off
             near_zero, far = (self.low, self.high) if self.sign > 0 else (self.high, self.low)
             return near_zero if u <= 0.0 else far
         return self.sign * math.exp(lo + float(u) * (hi - lo))
 
-    def assign(self, value):
+    def assign(self, value: float) -> dict[str, float]:
         return {path: value for path in (self.path, *self.tied)}
 
 
-def fit_parameters(params, names=None):
+def fit_parameters(params: ParameterSet,
+                   names: Sequence[str] | None = None) -> list[FitParameter]:
     """The parameters to fit: those ``params`` declares uncertain, or the paths ``names``.
 
     A named path that is declared uncertain keeps its declared range and ties; any other gets
@@ -389,7 +211,8 @@ def fit_parameters(params, names=None):
     return fits
 
 
-def params_at(params, fits, values):
+def params_at(params: ParameterSet, fits: Sequence[FitParameter],
+              values: Iterable[float]) -> ParameterSet:
     """``params`` with each fitted path (and its ties) set to ``values``."""
     assigned = {}
     for fit, value in zip(fits, values, strict=True):
@@ -400,11 +223,12 @@ def params_at(params, fits, values):
 # --- one kick, one task ---------------------------------------------------------------------------
 
 @lru_cache(maxsize=8)
-def _model(params):
+def _model(params: ParameterSet) -> Model:
     return assemble(load_scene('rest'), params)
 
 
-def kick_end_normal(params, kick, rtol=FIT_RTOL):
+def kick_end_normal(params: ParameterSet, kick: KickObservation,
+                    rtol: float = FIT_RTOL) -> NDArray[np.float64]:
     """The model's resting normal after ``kick``'s programme, from rest at its recorded start."""
     with threadpool_limits(limits=BLAS_THREADS_PER_KICK):
         model = _model(params)
@@ -417,12 +241,13 @@ def kick_end_normal(params, kick, rtol=FIT_RTOL):
                           dtype=float)
 
 
-def _kick_task(task):
+def _kick_task(task: tuple[ParameterSet, KickObservation, float]) -> NDArray[np.float64]:
     params, kick, rtol = task
     return kick_end_normal(params, kick, rtol)
 
 
-def kick_residuals(observations, ends):
+def kick_residuals(observations: Observations,
+                   ends: Sequence[ArrayLike]) -> NDArray[np.float64]:
     """Residual vector (2 per kick: x and y of model minus recorded resting normal, rad)."""
     return np.concatenate([(np.asarray(end) - k.normal_after)[:2]
                            for k, end in zip(observations.kicks, ends, strict=True)])
@@ -434,18 +259,20 @@ class Evaluator:
     """Residuals at scaled parameter vectors, each simulated once (in batches on an engine)
     and appended to a checkpoint file that a rerun reads back."""
 
-    def __init__(self, params, observations, fits, engine, rtol=FIT_RTOL, checkpoint=None,
-                 progress=None):
+    def __init__(self, params: ParameterSet, observations: Observations,
+                 fits: Sequence[FitParameter], engine: SerialEngine, rtol: float = FIT_RTOL,
+                 checkpoint: str | Path | None = None,
+                 progress: Callable[[Evaluator], object] | None = None) -> None:
         self.params, self.obs, self.fits = params, observations, fits
         self.engine, self.rtol, self.progress = engine, rtol, progress
-        self.cache = {}
+        self.cache: dict[tuple[str, ...], NDArray[np.float64]] = {}
         self.simulated = 0
         self._written = False  # this run has started its own checkpoint file
         self.checkpoint = Path(checkpoint) if checkpoint is not None else None
         self.digest = self._digest()
         self.resumed = self._read_checkpoint()
 
-    def _digest(self):
+    def _digest(self) -> str:
         text = json.dumps({'version': CHECKPOINT_VERSION, 'params': self.params.digest(),
                            'observations': self.obs.digest(), 'rtol': self.rtol,
                            'fits': [dataclasses.asdict(f) for f in self.fits]},
@@ -453,10 +280,10 @@ class Evaluator:
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
     @staticmethod
-    def key(u):
+    def key(u: ArrayLike) -> tuple[str, ...]:
         return tuple(float(v).hex() for v in np.asarray(u, dtype=float))
 
-    def _read_checkpoint(self):
+    def _read_checkpoint(self) -> int:
         if self.checkpoint is None or not self.checkpoint.exists():
             return 0
         with open(self.checkpoint) as stream:
@@ -474,7 +301,7 @@ class Evaluator:
                 self.cache[tuple(entry['u'])] = np.array(entry['r'], dtype=float)
         return len(self.cache)
 
-    def _append(self, entries):
+    def _append(self, entries: Iterable[tuple[tuple[str, ...], NDArray[np.float64]]]) -> None:
         if self.checkpoint is None:
             return
         fresh = not self.checkpoint.exists() or (not self.resumed and not self._written)
@@ -485,10 +312,10 @@ class Evaluator:
                 stream.write(json.dumps({'u': list(key), 'r': r.tolist()}) + '\n')
         self._written = True
 
-    def values(self, u):
+    def values(self, u: Iterable[float]) -> list[float]:
         return [fit.from_unit(v) for fit, v in zip(self.fits, u, strict=True)]
 
-    def many(self, points):
+    def many(self, points: Sequence[ArrayLike]) -> list[NDArray[np.float64]]:
         """Residual vectors at each scaled point; the uncached ones simulated in one batch."""
         keys = [self.key(u) for u in points]
         todo = list(dict.fromkeys(k for k in keys if k not in self.cache))
@@ -512,10 +339,10 @@ class Evaluator:
             self.progress(self)
         return [self.cache[k] for k in keys]
 
-    def __call__(self, u):
+    def __call__(self, u: ArrayLike) -> NDArray[np.float64]:
         return self.many([u])[0]
 
-    def jacobian(self, u, step=FD_STEP):
+    def jacobian(self, u: ArrayLike, step: float = FD_STEP) -> NDArray[np.float64]:
         """Forward differences (backward at the range's top), all columns in one batch."""
         u = np.asarray(u, dtype=float)
         points, steps = [u], []
@@ -531,12 +358,12 @@ class Evaluator:
 
 # --- what the recordings can tell -----------------------------------------------------------------
 
-def covariance(jac_w):
+def covariance(jac_w: NDArray[np.float64]) -> NDArray[np.floating[Any]]:
     """``(J^T J)^-1`` of whitened residuals with Jacobian ``jac_w`` (pseudo-inverse)."""
     return np.linalg.pinv(jac_w.T @ jac_w)
 
 
-def select_identifiable(jac_w):
+def select_identifiable(jac_w: ArrayLike) -> tuple[list[int], dict[int, SetAside]]:
     """Which parameters the recordings can tell, and what the others are.
 
     Orthogonal selection on the whitened Jacobian ``jac_w`` (residuals in units of their
@@ -556,6 +383,7 @@ def select_identifiable(jac_w):
     jw = np.asarray(jac_w, dtype=float)
     p = jw.shape[1]
     limit = UNCERTAINTY_SIGMAS / UNRESOLVED_SHARE
+    selected: list[int]
     selected, remaining = [], list(range(p))
     while remaining:
         res = jw
@@ -581,7 +409,7 @@ def select_identifiable(jac_w):
         weak = selected[a] if alone[selected[a]] < alone[selected[b]] else selected[b]
         selected.remove(weak)
         remaining.append(weak)
-    why = {}
+    why: dict[int, SetAside] = {}
     for j in remaining:
         if alone[j] < limit or not selected:
             why[j] = ('unresolved', None, 0.0)
@@ -600,28 +428,29 @@ class Misfit:
     ``PRIOR_SD_UNIT`` (its range is where it physically lies). The prior decides only what the
     kicks leave open: along an entangled pair's valley, not across it."""
 
-    def __init__(self, evaluator, whitener, fits, start):
+    def __init__(self, evaluator: Evaluator, whitener: ArrayLike,
+                 fits: Sequence[FitParameter], start: ArrayLike) -> None:
         self.ev, self.whitener = evaluator, np.asarray(whitener, dtype=float)
         self.start = np.asarray(start, dtype=float)
         self.prior = np.array([f.declared for f in fits], dtype=bool)
 
-    def data(self, r):
+    def data(self, r: NDArray[np.float64]) -> NDArray[np.float64]:
         return self.whitener @ r
 
-    def prior_residuals(self, u):
+    def prior_residuals(self, u: ArrayLike) -> NDArray[np.float64]:
         return ((np.asarray(u, dtype=float) - self.start) / PRIOR_SD_UNIT)[self.prior]
 
-    def residuals(self, u):
+    def residuals(self, u: ArrayLike) -> NDArray[np.float64]:
         return np.concatenate([self.data(self.ev(u)), self.prior_residuals(u)])
 
-    def chi2_many(self, points):
+    def chi2_many(self, points: Sequence[ArrayLike]) -> NDArray[np.float64]:
         return np.array([float(np.sum(self.data(r) ** 2) + np.sum(self.prior_residuals(u) ** 2))
                          for u, r in zip(points, self.ev.many(points), strict=True)])
 
-    def chi2(self, u):
+    def chi2(self, u: ArrayLike) -> float:
         return float(self.chi2_many([u])[0])
 
-    def jacobian(self, u):
+    def jacobian(self, u: ArrayLike) -> NDArray[np.float64]:
         rows = np.eye(self.start.size)[self.prior] / PRIOR_SD_UNIT
         return np.vstack([self.whitener @ self.ev.jacobian(u), rows])
 
@@ -633,26 +462,27 @@ class FittedParameter:
     path: str
     start: float
     value: float
-    interval: tuple  # (low, high): UNCERTAINTY_SIGMAS standard errors either side; () if held
+    # (low, high): UNCERTAINTY_SIGMAS standard errors either side; () if held
+    interval: tuple[float, ...]
     low: float
     high: float
     declared: bool
     status: str  # 'fitted'; 'entangled' (fitted: the kicks tell a combination with another);
     # 'unresolved' (held at its start value)
     note: str = ''
-    tied: tuple = ()
+    tied: tuple[str, ...] = ()
 
     @property
-    def fitted(self):
+    def fitted(self) -> bool:
         return self.status != 'unresolved'
 
-    def contains(self, value):
+    def contains(self, value: float) -> bool:
         """Whether ``value`` lies in the reported interval (a held parameter: at its value)."""
         if not self.fitted:
             return math.isclose(value, self.value, rel_tol=1e-12)
         return min(self.interval) <= value <= max(self.interval)
 
-    def to_dict(self):
+    def to_dict(self) -> dict[str, Any]:
         return {'path': self.path, 'tied': list(self.tied), 'start': self.start,
                 'value': self.value,
                 'interval': [float(v) for v in self.interval] if self.fitted else None,
@@ -662,11 +492,11 @@ class FittedParameter:
 
 @dataclasses.dataclass
 class IdentificationResult:
-    parameters: list  # FittedParameter, in the order asked
-    vectors_before: np.ndarray  # (k, 2): x and y of model minus recorded, at the start values
-    vectors_after: np.ndarray  # (k, 2): the same at the fitted values
+    parameters: list[FittedParameter]  # in the order asked
+    vectors_before: NDArray[np.float64]  # (k, 2): x and y of model minus recorded, at the start
+    vectors_after: NDArray[np.float64]  # (k, 2): the same at the fitted values
     noise_std_rad: float
-    correlation: np.ndarray  # among the fitted ones, at the optimum
+    correlation: NDArray[np.float64]  # among the fitted ones, at the optimum
     evaluations: int
     simulated_kicks: int
     resumed_evaluations: int
@@ -675,23 +505,26 @@ class IdentificationResult:
     restarts: int = 0  # optimiser runs restarted from a lower point the scan found
 
     @property
-    def residuals_before(self):
+    def residuals_before(self) -> NDArray[np.float64]:
         """Per kick: angle (rad) between the model's and the recorded resting normal."""
         return np.hypot(*self.vectors_before.T)
 
     @property
-    def residuals_after(self):
+    def residuals_after(self) -> NDArray[np.float64]:
         return np.hypot(*self.vectors_after.T)
 
-    def fitted(self):
+    def fitted(self) -> list[FittedParameter]:
         return [p for p in self.parameters if p.fitted]
 
-    def values(self):
+    def values(self) -> dict[str, float]:
         return {p.path: p.value for p in self.parameters}
 
 
-def identify(params, observations, fits, workers=1, scheduler=None, rtol=FIT_RTOL,
-             checkpoint=None, progress=None, max_nfev=30):
+def identify(params: ParameterSet, observations: Observations, fits: Iterable[FitParameter],
+             workers: int | SerialEngine = 1, scheduler: str | None = None,
+             rtol: float = FIT_RTOL, checkpoint: str | Path | None = None,
+             progress: Callable[[Evaluator], object] | None = None,
+             max_nfev: int = 30) -> IdentificationResult:
     """Fit ``fits`` so that the model reproduces ``observations``.
 
     Parameters
@@ -757,7 +590,8 @@ def identify(params, observations, fits, workers=1, scheduler=None, rtol=FIT_RTO
                                 ev.resumed, converged, chi2, restarts)
 
 
-def _scan_checked(misfit, u, converged, free, max_nfev):
+def _scan_checked(misfit: Misfit, u: NDArray[np.float64], converged: str, free: list[int],
+                  max_nfev: int) -> tuple[NDArray[np.float64], str, NDArray[np.float64], int]:
     """The optimum's covariance (scaled coordinates of ``free``) from the misfit itself.
 
     Starting from the Gauss-Newton covariance, the misfit is evaluated two standard errors
@@ -807,7 +641,8 @@ def _scan_checked(misfit, u, converged, free, max_nfev):
         u, converged = _least_squares(misfit, better, free, max_nfev)
 
 
-def _start_points(start, fits, free):
+def _start_points(start: NDArray[np.float64], fits: Sequence[FitParameter],
+                  free: Sequence[int]) -> list[NDArray[np.float64]]:
     """Where the optimiser may start: the start values, and a quasi-random (Halton) design of
     ``STARTS_PER_PARAMETER`` points per fitted parameter over the region its prior allows (two
     prior standard deviations either side of the start; an undeclared one's whole range)."""
@@ -826,7 +661,8 @@ def _start_points(start, fits, free):
     return points
 
 
-def _best_of_starts(misfit, start, fits, free, max_nfev):
+def _best_of_starts(misfit: Misfit, start: NDArray[np.float64], fits: Sequence[FitParameter],
+                    free: list[int], max_nfev: int) -> tuple[NDArray[np.float64], str]:
     """Bounded least squares from the start values and from the ``OPTIMISER_STARTS`` lowest
     other points of :func:`_start_points` (all evaluated in one batch): the misfit of kicks has
     valleys whose floors are not smooth (a contact sequence that changes), and one Gauss-Newton
@@ -838,13 +674,14 @@ def _best_of_starts(misfit, start, fits, free, max_nfev):
     return min(ends, key=lambda end: misfit.chi2(end[0]))
 
 
-def _embed(u, free, step):
+def _embed(u: ArrayLike, free: list[int], step: NDArray[np.float64]) -> NDArray[np.float64]:
     point = np.asarray(u, dtype=float).copy()
     point[free] = np.clip(point[free] + step, 0.0, 1.0)
     return point
 
 
-def _notes(fits, why):
+def _notes(fits: Sequence[FitParameter],
+           why: Mapping[int, SetAside]) -> dict[int, tuple[str, str]]:
     """(status, note) of each parameter the selection set aside."""
     notes = {}
     for j, (status, partner, cos) in why.items():
@@ -852,25 +689,26 @@ def _notes(fits, why):
             notes[j] = (status, 'the recorded kicks barely depend on it: held at its start value')
         else:
             notes[j] = (status, f'the kicks tell only a combination of it and '
-                                f'{fits[partner].path} (their effects correlate at {cos:+.3f}): '
-                                'its interval spans what they leave open')
+                                f'{fits[cast(int, partner)].path} (their effects correlate at '
+                                f'{cos:+.3f}): its interval spans what they leave open')
     return notes
 
 
-def _least_squares(misfit, start, free, max_nfev):
+def _least_squares(misfit: Misfit, start: ArrayLike, free: list[int],
+                   max_nfev: int) -> tuple[NDArray[np.float64], str]:
     """Bounded least squares over the ``free`` scaled coordinates from ``start``;
     (u, message)."""
     from scipy.optimize import least_squares
 
-    def full(x):
+    def full(x: NDArray[np.float64]) -> NDArray[np.float64]:
         v = np.asarray(start, dtype=float).copy()
         v[free] = x
         return v
 
-    def fun(x):
+    def fun(x: NDArray[np.float64]) -> NDArray[np.float64]:
         return misfit.residuals(full(x))
 
-    def jac(x):
+    def jac(x: NDArray[np.float64]) -> NDArray[np.float64]:
         return misfit.jacobian(full(x))[:, free]
 
     x0 = np.clip(np.asarray(start)[free], 1e-3, 1.0 - 1e-3)  # strictly inside the bounds
@@ -879,7 +717,8 @@ def _least_squares(misfit, start, free, max_nfev):
     return full(sol.x), sol.message
 
 
-def within_truth(result, truth):
+def within_truth(result: IdentificationResult, truth: ParameterSet
+                 ) -> list[tuple[str, float, tuple[float, ...], float, bool, str]]:
     """Per parameter: (path, value, interval, true value, inside, status) against ``truth`` (a
     ParameterSet); a held one counts as inside when the truth equals where it was held."""
     rows = []

@@ -12,20 +12,26 @@ A table is a ``.npz`` file carrying its format version and the digests of the pa
 of the kick it was built from; loading it for other parameters is refused.
 """
 
+from __future__ import annotations
+
 import dataclasses
 import hashlib
 import json
 import math
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol, cast
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.interpolate import RegularGridInterpolator
 
 from msg_defs.device import DEFAULT_PARAMETER_SET, KICK_WINDOW_S
 from sphere_sim.kicks.design import KickDesign
-from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD, LEVEL_NORMAL, KickResult
+from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD, LEVEL_NORMAL, KickPlant, KickResult
 from sphere_sim.kicks.offset_lookup import OffsetLookup, side_of_axis
-from sphere_sim.model.parameters import load_parameter_set
+from sphere_sim.model.parameters import ParameterSet, load_parameter_set
+from sphere_sim.model.programme import PulseProgramme
 from sphere_sim.model.symmetry import Symmetry, kick_axis_mirror
 
 TABLE_FORMAT_VERSION = 1
@@ -37,6 +43,26 @@ CONE_MARGIN = 1.05  # nodes slightly beyond the cone keep interpolation inside i
 
 class TableError(ValueError):
     """A table file that is missing, malformed, of another version or for other parameters."""
+
+
+class ProgrammedKickPlant(KickPlant, Protocol):
+    """A :class:`~sphere_sim.kicks.discrete.KickPlant` that also says how each kick is driven:
+    its design and the pulse programme that makes it.
+
+    The tables (:class:`LookupTable`, :class:`CombinedKickPlant`) implement it; the discrete
+    plant decodes programmes through it (:func:`sphere_sim.kicks.plants.decode_kick`), and the
+    controllers send what ``programme`` gives.
+    """
+
+    def design(self, action: int) -> KickDesign:
+        """The kick design whose turned image ``action`` (index into ``directions_rad``) is."""
+        ...
+
+    def programme(self, action: int, intensity: float,
+                  normal: NDArray[np.float64] = LEVEL_NORMAL) -> PulseProgramme:
+        """The pulse programme of kick ``action`` at ``intensity`` in [0, 1] from rest at
+        ``normal`` (with the voltage offset for that normal, §4.1)."""
+        ...
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,9 +78,9 @@ class TableSpec:
     # across the high pair's pull-in, where the width jumps (from the level state 0.044 deg at
     # 0.54, 0.242 deg at 0.56): the calibrated intensities of small kicks fall there
     # (sphere_control.intensity_calibration), and 0.5 and 0.6 alone interpolated across it.
-    intensities: tuple = (0.0, 0.2, 0.4, 0.5, 0.52, 0.54, 0.55, 0.56, 0.57, 0.58, 0.6, 0.65,
-                          0.7, 0.75, 0.8, 0.84, 0.87, 0.9, 0.92, 0.94, 0.95, 0.96, 0.97, 0.98,
-                          0.99, 1.0)
+    intensities: tuple[float, ...] = (0.0, 0.2, 0.4, 0.5, 0.52, 0.54, 0.55, 0.56, 0.57, 0.58,
+                                      0.6, 0.65, 0.7, 0.75, 0.8, 0.84, 0.87, 0.9, 0.92, 0.94,
+                                      0.95, 0.96, 0.97, 0.98, 0.99, 1.0)
     window_s: float = KICK_WINDOW_S
     rtol: float = 1e-6
     parameter_set: str = DEFAULT_PARAMETER_SET
@@ -63,7 +89,7 @@ class TableSpec:
     # §4.1's voltage offsets on the design's compensating beams; none by default.
     offsets: OffsetLookup = dataclasses.field(default_factory=OffsetLookup)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         outside = [math.hypot(x, y) for _, _, x, y in self.nodes() if math.hypot(x, y) >= 1.0]
         if outside:
             raise TableError(
@@ -73,17 +99,17 @@ class TableSpec:
                 f'band of nodes beyond fit inside the unit disk with a grid step below '
                 f'{self.largest_safe_grid_step():.3g}')
 
-    def largest_safe_grid_step(self):
+    def largest_safe_grid_step(self) -> float:
         """Below this step every node lies inside the unit disk (a sufficient bound: the nodes
         reach at most one step beyond the cone and its margin)."""
         return 1.0 - CONE_MARGIN * math.sin(self.cone_half_angle_rad)
 
-    def axis(self):
+    def axis(self) -> NDArray[np.float64]:
         """Grid nodes (shape (n,)) of x_sn and of y_sn, symmetric about 0."""
         half = math.ceil(CONE_MARGIN * math.sin(self.cone_half_angle_rad) / self.grid_step)
-        return self.grid_step * np.arange(-half, half + 1)
+        return cast(NDArray[np.float64], self.grid_step * np.arange(-half, half + 1))
 
-    def nodes(self):
+    def nodes(self) -> list[tuple[int, int, float, float]]:
         """(i, j, x, y) of the nodes to simulate: within the cone and not deep below y = -x."""
         axis = self.axis()
         out = []
@@ -95,17 +121,18 @@ class TableSpec:
                     out.append((i, j, float(x), float(y)))
         return out
 
-    def side(self, x, y):
+    def side(self, x: float, y: float) -> float:
         """Signed distance of (x, y) from the kick's own axis, > 0 on the simulated side."""
         return side_of_axis(self.design.direction_rad, x, y)
 
-    def node_programme(self, x_sn, y_sn, intensity):
+    def node_programme(self, x_sn: float, y_sn: float, intensity: float) -> PulseProgramme:
         """The programme simulated at a node: the design with the offset of the upper-right
         half's beam, also at the band of nodes beyond the axis, so that the interpolation
         between the axis and those nodes follows one programme."""
         return self.offsets.programme(self.design, x_sn, y_sn, intensity, upper_right=True)
 
-    def programme(self, action, intensity, normal=LEVEL_NORMAL):
+    def programme(self, action: int, intensity: float,
+                  normal: NDArray[np.float64] = LEVEL_NORMAL) -> PulseProgramme:
         """Kick ``action`` (the design turned by ``action`` quarter turns) at ``intensity`` from
         rest at ``normal``, with the offset §4.1's half-space rule gives for that normal."""
         g = Symmetry(int(action) % 4)
@@ -113,11 +140,11 @@ class TableSpec:
         return g.apply_programme(self.offsets.programme(self.design, local[0], local[1],
                                                         float(intensity)))
 
-    def to_dict(self):
+    def to_dict(self) -> dict[str, Any]:
         return json.loads(json.dumps(_jsonable(self)))
 
     @classmethod
-    def from_dict(cls, data):
+    def from_dict(cls, data: Mapping[str, Any]) -> TableSpec:
         data = dict(data)
         design = dict(data.pop('design'))
         design['low_beams'] = tuple(design['low_beams'])
@@ -126,14 +153,15 @@ class TableSpec:
         data['offsets'] = OffsetLookup.from_dict(data.get('offsets', {}))
         return cls(design=KickDesign(**design), **data)
 
-    def digest(self, params_digest):
+    def digest(self, params_digest: str) -> str:
         text = json.dumps({'spec': _jsonable(self), 'params': params_digest}, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def _jsonable(obj):
+def _jsonable(obj: Any) -> Any:
     if dataclasses.is_dataclass(obj):
-        return {k: _jsonable(v) for k, v in dataclasses.asdict(obj).items()}
+        # An instance: the specs hold no dataclass types.
+        return {k: _jsonable(v) for k, v in dataclasses.asdict(cast(Any, obj)).items()}
     if isinstance(obj, dict):
         return {k: _jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -155,20 +183,27 @@ class LookupTable:
     meta : dict
     """
 
-    axis: np.ndarray
-    intensities: np.ndarray
-    displacement: np.ndarray
-    peak_rad: np.ndarray
-    settle_s: np.ndarray
-    meta: dict
+    axis: NDArray[np.float64]
+    intensities: NDArray[np.float64]
+    displacement: NDArray[np.float64]
+    peak_rad: NDArray[np.float64]
+    settle_s: NDArray[np.float64]
+    meta: dict[str, Any]
+
+    if TYPE_CHECKING:
+        # Set by __post_init__ (through object.__setattr__: the table is frozen), not fields.
+        _spec: TableSpec = dataclasses.field(init=False, repr=False, compare=False)
+        _mirror: Symmetry = dataclasses.field(init=False, repr=False, compare=False)
+        _interp: RegularGridInterpolator = dataclasses.field(init=False, repr=False,
+                                                             compare=False)
 
     @property
-    def directions_rad(self):
+    def directions_rad(self) -> tuple[float, ...]:
         """Nominal direction of each action: the design's kick and its quarter turns."""
         d = self.spec.design.direction_rad
         return tuple(d + q * 0.5 * math.pi for q in range(4))
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         spec = TableSpec.from_dict(self.meta['spec'])
         object.__setattr__(self, '_spec', spec)
         object.__setattr__(self, '_mirror', kick_axis_mirror(spec.design.direction_rad))
@@ -179,7 +214,7 @@ class LookupTable:
             grid, values, method='linear', bounds_error=False, fill_value=np.nan))
 
     # --- the KickPlant interface -----------------------------------------------------------
-    def kick(self, normal, action, intensity):
+    def kick(self, normal: NDArray[np.float64], action: int, intensity: float) -> KickResult:
         """Interpolated outcome of kick ``action`` (0..3) at ``intensity`` from ``normal``."""
         g = Symmetry(int(action) % 4)
         local = g.inverse().apply_vector(normal)
@@ -195,17 +230,18 @@ class LookupTable:
             moved = self._mirror.apply_vector(moved)
         return KickResult(g.apply_vector(moved), float(values[2]), float(values[3]))
 
-    def design(self, action):
+    def design(self, action: int) -> KickDesign:
         """The kick design whose turned image ``action`` is."""
         return self.spec.design
 
-    def programme(self, action, intensity, normal=LEVEL_NORMAL):
+    def programme(self, action: int, intensity: float,
+                  normal: NDArray[np.float64] = LEVEL_NORMAL) -> PulseProgramme:
         """The pulse programme of kick ``action`` at ``intensity`` from rest at ``normal``: the
         design turned, with the table's voltage offset for that normal (§4.1's half-space
         rule: the offset's beam follows the half the normal points into)."""
         return self._spec.programme(action, intensity, normal)
 
-    def direction_errors_rad(self, intensity=1.0):
+    def direction_errors_rad(self, intensity: float = 1.0) -> NDArray[np.float64]:
         """|direction - nominal| (rad) of the reference kick at ``intensity`` from every node
         of the simulated half inside the cone: how far the table's kicks stray from their
         nominal direction, the offsets' measure (§4.1)."""
@@ -218,7 +254,7 @@ class LookupTable:
                                             2.0 * math.pi)) for i, j in inside])
 
     # --- files -----------------------------------------------------------------------------
-    def save(self, path):
+    def save(self, path: str | Path) -> Path:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(path, axis=self.axis, intensities=self.intensities,
@@ -227,7 +263,8 @@ class LookupTable:
         return path
 
     @classmethod
-    def load(cls, path=DEFAULT_TABLE_PATH, params=None):
+    def load(cls, path: str | Path = DEFAULT_TABLE_PATH,
+             params: ParameterSet | None = None) -> LookupTable:
         """Load a table; with ``params`` given, refuse one built for other parameters."""
         path = Path(path)
         try:
@@ -251,11 +288,11 @@ class LookupTable:
         return cls(meta=meta, **arrays)
 
     @property
-    def spec(self):
+    def spec(self) -> TableSpec:
         """The :class:`TableSpec` the table was built from."""
         return self._spec
 
-    def parameters(self):
+    def parameters(self) -> ParameterSet:
         """The parameter set the table names, refused if its values changed since the build."""
         params = load_parameter_set(self.meta['parameter_set'])
         if params.digest() != self.meta['params_digest']:
@@ -266,7 +303,7 @@ class LookupTable:
         return params
 
     @classmethod
-    def load_current(cls, path=DEFAULT_TABLE_PATH):
+    def load_current(cls, path: str | Path = DEFAULT_TABLE_PATH) -> LookupTable:
         """Load a table and refuse it unless its parameter set still has the values it had."""
         table = cls.load(path)
         table.parameters()
@@ -285,7 +322,7 @@ class CombinedKickPlant:
         Built for the same parameters and window.
     """
 
-    def __init__(self, tables):
+    def __init__(self, tables: Sequence[LookupTable]) -> None:
         digests = {t.meta['params_digest'] for t in tables}
         if len(digests) != 1:
             raise TableError('the tables were built for different parameter sets')
@@ -293,24 +330,26 @@ class CombinedKickPlant:
                    for table in tables for a, d in enumerate(table.directions_rad)]
         # Counter-clockwise from the hind-left kick's -45 deg, as DIAGONAL_/EIGHT_DIRECTIONS_RAD.
         entries.sort(key=lambda e: round((e[0] + 0.25 * math.pi) % (2 * math.pi), 9))
-        self._entries = [(table, a) for _, table, a in entries]
+        self._entries: list[tuple[LookupTable, int]] = [(table, a) for _, table, a in entries]
         self.directions_rad = tuple(d for d, _, _ in entries)
         self.tables = tuple(tables)
         self.spec = tables[0].spec
 
-    def kick(self, normal, action, intensity):
+    def kick(self, normal: NDArray[np.float64], action: int, intensity: float) -> KickResult:
         table, local = self._entries[action]
         return table.kick(normal, local, intensity)
 
-    def design(self, action):
+    def design(self, action: int) -> KickDesign:
         return self._entries[action][0].spec.design
 
-    def programme(self, action, intensity, normal=LEVEL_NORMAL):
+    def programme(self, action: int, intensity: float,
+                  normal: NDArray[np.float64] = LEVEL_NORMAL) -> PulseProgramme:
         table, local = self._entries[action]
         return table.programme(local, intensity, normal)
 
 
-def load_kick_model(table_paths=(), params=None):
+def load_kick_model(table_paths: Iterable[str | Path] = (),
+                    params: ParameterSet | None = None) -> LookupTable | CombinedKickPlant:
     """The discrete kick model: one table, or several combined into one action set.
 
     Parameters

@@ -10,7 +10,10 @@ tolerance where the integrator's own jumps are worth well under one (identificat
 Pure arithmetic: the caller evaluates the points.
 """
 
+from typing import Any
+
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 # Points lie this many standard errors from the optimum: where the interval is reported.
 SCAN_SIGMAS = 2.0
@@ -18,18 +21,20 @@ SCAN_SIGMAS = 2.0
 MIN_SCALE = 1e-3
 
 
-def principal_scales(cov):
+def principal_scales(
+        cov: NDArray[np.floating[Any]]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Standard errors along the principal directions of ``cov`` and the directions
     (columns): ``cov = vectors @ diag(scales**2) @ vectors.T``."""
     values, vectors = np.linalg.eigh(0.5 * (cov + cov.T))
     return np.sqrt(np.clip(values, MIN_SCALE ** 2, None)), vectors
 
 
-def covariance_of(scales, vectors):
+def covariance_of(scales: ArrayLike, vectors: NDArray[np.float64]) -> NDArray[np.float64]:
     return (vectors * np.asarray(scales) ** 2) @ vectors.T
 
 
-def measured_curvature(t_plus, rise_plus, t_minus, rise_minus):
+def measured_curvature(t_plus: float, rise_plus: float, t_minus: float,
+                       rise_minus: float) -> float | None:
     """The coefficient ``a`` of the parabola ``a t^2 + b t`` through the misfit's rise at
     ``t_plus`` and at ``-t_minus`` along a direction (``t`` in the standard errors that were
     scanned, both >= 0): 1 where the covariance scanned is right, below 1 where the misfit

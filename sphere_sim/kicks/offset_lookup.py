@@ -12,27 +12,34 @@ every beam holds ``low_v`` and there is no kick, with or without an offset on th
 gives the offsets for the full kick only; docs/motion_primitives.md says why this reading.
 """
 
+from __future__ import annotations
+
 import dataclasses
 import functools
 import json
 import math
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
+from numpy.typing import NDArray
 
+from sphere_sim.kicks.design import KickDesign
+from sphere_sim.model.programme import PulseProgramme
 from sphere_sim.model.symmetry import beam_position_angle_rad, kick_axis_mirror
 
 # A node on the kick's axis belongs to the upper-right half (side >= 0) within this distance.
 ON_AXIS_TOL = 1e-9
 
 
-def side_of_axis(direction_rad, x_sn, y_sn):
+def side_of_axis(direction_rad: float, x_sn: float, y_sn: float) -> float:
     """Signed distance of (x_sn, y_sn) from the kick's axis: > 0 in the upper-right half-space,
     the one left of the kick's direction (for the hind-left kick, y_sn > -x_sn)."""
     return -math.sin(direction_rad) * x_sn + math.cos(direction_rad) * y_sn
 
 
-def compensating_beam(design, upper_right=True):
+def compensating_beam(design: KickDesign, upper_right: bool = True) -> int:
     """The low beam that takes the offset in the upper-right half-space (or the other one).
 
     The two low beams that the kick's axis mirror swaps are the candidates (§4.1's V1 and V2).
@@ -69,23 +76,23 @@ class OffsetLookup:
     """
 
     grid_step: float = 0.0
-    nodes: tuple = ()
+    nodes: tuple[tuple[float, float, float], ...] = ()
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         nodes = tuple((float(x), float(y), float(v)) for x, y, v in self.nodes)
         object.__setattr__(self, 'nodes', nodes)
         if nodes and not self.grid_step > 0.0:
             raise ValueError('offsets need the grid step they were searched on')
 
-    def __bool__(self):
+    def __bool__(self) -> bool:
         return bool(self.nodes)
 
     @classmethod
-    def from_dict(cls, data):
+    def from_dict(cls, data: Mapping[str, Any]) -> OffsetLookup:
         return cls(float(data.get('grid_step', 0.0)), tuple(map(tuple, data.get('nodes', ()))))
 
     @classmethod
-    def load(cls, path, design, parameter_set):
+    def load(cls, path: str | Path, design: KickDesign, parameter_set: str) -> OffsetLookup:
         """The offsets saved by ``sphere-twin primitives offsets`` for ``design`` on the named
         parameter set.
 
@@ -110,7 +117,7 @@ class OffsetLookup:
                               f'{parameter_set!r}')
         return lookup
 
-    def offset_v(self, direction_rad, x_sn, y_sn):
+    def offset_v(self, direction_rad: float, x_sn: float, y_sn: float) -> float:
         """The full kick's offset at (x_sn, y_sn), bilinear over the grid.
 
         A point of the lower-left half reads its mirror image's offset; grid nodes the search
@@ -128,7 +135,8 @@ class OffsetLookup:
         return float((1 - fx) * (1 - fy) * grid[i, j] + fx * (1 - fy) * grid[i + 1, j]
                      + (1 - fx) * fy * grid[i, j + 1] + fx * fy * grid[i + 1, j + 1])
 
-    def programme(self, design, x_sn, y_sn, intensity, upper_right=None):
+    def programme(self, design: KickDesign, x_sn: float, y_sn: float, intensity: float,
+                  upper_right: bool | None = None) -> PulseProgramme:
         """The design's programme at ``intensity`` with the offset for a rest at (x_sn, y_sn).
 
         ``upper_right`` chooses the half whose beam takes the offset; by default the half the
@@ -144,7 +152,8 @@ class OffsetLookup:
 
 
 @functools.lru_cache(maxsize=8)
-def _full_grid(lookup, direction_rad):
+def _full_grid(lookup: OffsetLookup,
+               direction_rad: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The offsets on the whole square grid: the searched half, its mirror image, and the
     nearest searched node's offset beyond the cone."""
     step = lookup.grid_step
@@ -159,4 +168,4 @@ def _full_grid(lookup, direction_rad):
     for i, j in np.argwhere(~np.isfinite(grid)):
         nearest = known[np.argmin(np.hypot(*(known - (i, j)).T))]
         grid[i, j] = grid[tuple(nearest)]
-    return grid, axis
+    return grid, cast(NDArray[np.float64], axis)

@@ -8,15 +8,20 @@ from rest at zero tilt, over the kick window.
 
 import dataclasses
 import math
+from collections.abc import Callable, Sequence
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.optimize import differential_evolution
 
 from sphere_sim.kicks.design import KICK_RELAXATION, KickDesign, final_normal, simulate_kick
-from sphere_sim.kicks.engine import engine_for
-from sphere_sim.model.assembly import assemble
+from sphere_sim.kicks.discrete import KickResult
+from sphere_sim.kicks.engine import SerialEngine, engine_for
+from sphere_sim.model.assembly import Model, assemble
 from sphere_sim.model.initial_state import rest_state
+from sphere_sim.model.parameters import ParameterSet
 from sphere_sim.model.rotations import angle_between
 from sphere_sim.model.scene import load_scene
 
@@ -37,7 +42,7 @@ class OptimisedKick:
     evaluations: int
     seed: int
 
-    def to_dict(self):
+    def to_dict(self) -> dict[str, Any]:
         out = dataclasses.asdict(self)
         out['design']['direction_deg'] = math.degrees(self.design.direction_rad)
         return out
@@ -49,7 +54,8 @@ SETUP_CACHE_SIZE = 8
 
 
 @lru_cache(maxsize=SETUP_CACHE_SIZE)
-def _setup(scene_name, params):
+def _setup(scene_name: str,
+           params: ParameterSet | None) -> tuple[Model, NDArray[np.float64]]:
     """Model and rest state, built once per process (not once per unpickled objective)."""
     model = assemble(load_scene(scene_name), params)
     return model, rest_state(model, relaxation=KICK_RELAXATION)
@@ -62,22 +68,23 @@ class _Objective:
     (:func:`_setup`), however many times the objective is unpickled there.
     """
 
-    def __init__(self, scene_name, params, template):
+    def __init__(self, scene_name: str, params: ParameterSet | None,
+                 template: KickDesign) -> None:
         self.scene_name = scene_name
         self.params = params
         self.template = template
 
-    def design(self, v):
+    def design(self, v: Sequence[float]) -> KickDesign:
         return dataclasses.replace(self.template, width_low_s=float(v[0]),
                                    width_high_s=float(v[1]), delay_s=float(v[2]))
 
-    def outcome(self, v):
+    def outcome(self, v: Sequence[float]) -> KickResult:
         model, x_rest = _setup(self.scene_name, self.params)
         result, _ = simulate_kick(model, NORMAL_AT_REST, self.design(v).programme(),
                                   rtol=OPTIMISATION_RTOL, x_rest=x_rest)
         return result
 
-    def __call__(self, v):
+    def __call__(self, v: Sequence[float]) -> float:
         # The final normal alone: the transient's peak and settling time are not searched on.
         model, x_rest = _setup(self.scene_name, self.params)
         normal = final_normal(model, NORMAL_AT_REST, self.design(v).programme(),
@@ -86,8 +93,10 @@ class _Objective:
         return -float(normal[0] * math.cos(d) + normal[1] * math.sin(d))
 
 
-def optimise_kick(template=None, params=None, seed=1, popsize=8,
-                  maxiter=12, workers=1, progress=None):
+def optimise_kick(template: KickDesign | None = None, params: ParameterSet | None = None,
+                  seed: int = 1, popsize: int = 8, maxiter: int = 12,
+                  workers: int | SerialEngine = 1,
+                  progress: Callable[[float], object] | None = None) -> OptimisedKick:
     """Differential evolution over (width_low_s, width_high_s, delay_s).
 
     Parameters
@@ -106,7 +115,7 @@ def optimise_kick(template=None, params=None, seed=1, popsize=8,
     objective = _Objective('rest', params, template)
     bounds = [WIDTH_BOUNDS_S, WIDTH_BOUNDS_S, DELAY_BOUNDS_S]
 
-    def callback(intermediate_result):
+    def callback(intermediate_result: Any) -> None:
         if progress is not None:
             progress(-intermediate_result.fun)
 

@@ -6,16 +6,23 @@ beams and a timed pulse programme, then advances to a later time and reports a
 cannot carry out a command raises :class:`PlantError` and stays as it was.
 """
 
+from __future__ import annotations
+
 import dataclasses
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from msg_defs.device import BEAM_COUNT, KICK_WINDOW_S
 from sphere_sim.integrate.solve import simulate
 from sphere_sim.kicks.discrete import PAPER_FULL_KICK_RAD
+from sphere_sim.model.assembly import Model
 from sphere_sim.model.initial_state import initial_state
-from sphere_sim.model.programme import VoltageSchedule
+from sphere_sim.model.programme import PulseProgramme, VoltageSchedule
+
+if TYPE_CHECKING:
+    from sphere_sim.kicks.lookup_table import ProgrammedKickPlant
 
 # The live twin's tolerance: a whole kick window (the optimised kick from rest and from a
 # 35 deg tilt) then ends within 3.5e-6 and 5.9e-6 rad of the rtol 1e-9 run, below 1 % of the
@@ -61,10 +68,10 @@ class PlantSnapshot:
     """
 
     time_s: float
-    normal: np.ndarray
-    voltages_v: np.ndarray
-    sphere: tuple = None
-    beams: tuple = None
+    normal: NDArray[np.float64]
+    voltages_v: NDArray[np.float64]
+    sphere: tuple[NDArray[np.float64], ...] | None = None
+    beams: tuple[NDArray[np.float64], ...] | None = None
 
 
 class TwinPlant(Protocol):
@@ -73,16 +80,16 @@ class TwinPlant(Protocol):
     time_s: float
     busy_until_s: float  # when the last command's effect is over (programme end + settling)
 
-    def hold(self, voltages_v):
+    def hold(self, voltages_v: ArrayLike) -> None:
         """Hold ``voltages_v`` (V, shape (4,)) on the beams from now on."""
 
-    def run_programme(self, programme):
+    def run_programme(self, programme: PulseProgramme) -> None:
         """Start ``programme`` (a PulseProgramme, times from now)."""
 
-    def advance(self, t_end_s):
+    def advance(self, t_end_s: float) -> None:
         """Advance simulated time to ``t_end_s`` (s)."""
 
-    def snapshot(self):
+    def snapshot(self) -> PlantSnapshot:
         """The :class:`PlantSnapshot` now."""
 
 
@@ -101,7 +108,8 @@ class ContinuousPlant:
         least the programme itself).
     """
 
-    def __init__(self, model, x0=None, rtol=LIVE_RTOL, kick_period_s=KICK_WINDOW_S):
+    def __init__(self, model: Model, x0: ArrayLike | None = None, rtol: float = LIVE_RTOL,
+                 kick_period_s: float = KICK_WINDOW_S) -> None:
         if not model.has_sphere:
             raise PlantError('the continuous plant needs a scene with the sphere')
         self.model = model
@@ -113,15 +121,15 @@ class ContinuousPlant:
         self.schedule = VoltageSchedule()
         self.stats_nfev = 0
 
-    def hold(self, voltages_v):
+    def hold(self, voltages_v: ArrayLike) -> None:
         self.schedule.replace_from(self.time_s, [0.0], [voltages_v])
 
-    def run_programme(self, programme):
+    def run_programme(self, programme: PulseProgramme) -> None:
         times, volts = programme.segments()
         self.schedule.replace_from(self.time_s, times, volts)
         self.busy_until_s = self.time_s + max(programme.duration_s, self.kick_period_s)
 
-    def advance(self, t_end_s):
+    def advance(self, t_end_s: float) -> None:
         if t_end_s > self.time_s:
             # The held segments go to the solver as they are; it stops at each edge. One
             # sample per segment: only the end state is kept.
@@ -132,7 +140,7 @@ class ContinuousPlant:
         self.time_s = max(self.time_s, t_end_s)
         self.schedule.forget_before(self.time_s)
 
-    def snapshot(self):
+    def snapshot(self) -> PlantSnapshot:
         m, x = self.model, self.x
         o = m.sphere_offset
         sphere = (x[o:o + 3].copy(), x[o + 3:o + 7].copy(), x[o + 7:o + 10].copy(),
@@ -142,7 +150,8 @@ class ContinuousPlant:
             self.time_s), sphere, beams)
 
 
-def decode_kick(kick_plant, programme, normal):
+def decode_kick(kick_plant: ProgrammedKickPlant, programme: PulseProgramme,
+                normal: NDArray[np.float64]) -> tuple[int, float]:
     """(action, intensity) of the kick of ``kick_plant`` that ``programme`` is from rest at
     ``normal``, or PlantError.
 
@@ -182,23 +191,24 @@ class DiscretePlant:
         Delay from the programme's start to the new resting normal.
     """
 
-    def __init__(self, kick_plant, normal0=None, window_s=KICK_WINDOW_S):
+    def __init__(self, kick_plant: ProgrammedKickPlant, normal0: ArrayLike | None = None,
+                 window_s: float = KICK_WINDOW_S) -> None:
         self.kick_plant = kick_plant
         self.normal = np.array([0.0, 0.0, 1.0] if normal0 is None else normal0, dtype=float)
         self.window_s = window_s
         self.time_s = 0.0
         self.busy_until_s = 0.0
         self.schedule = VoltageSchedule()
-        self._pending = None  # (time_s, normal)
+        self._pending: tuple[float, NDArray[np.float64]] | None = None  # (time_s, normal)
         self.kicks = 0
 
-    def hold(self, voltages_v):
+    def hold(self, voltages_v: ArrayLike) -> None:
         if np.any(np.asarray(voltages_v) != 0.0):
             raise PlantError('the discrete plant models kicks only: send a pulse programme, '
                              'or 0 V on every beam')
         self.schedule.replace_from(self.time_s, [0.0], [np.zeros(BEAM_COUNT)])
 
-    def run_programme(self, programme):
+    def run_programme(self, programme: PulseProgramme) -> None:
         if self._pending is not None:
             raise PlantError(f'a kick is still running until t = {self._pending[0]:.4f} s')
         action, intensity = decode_kick(self.kick_plant, programme, self.normal)
@@ -210,13 +220,13 @@ class DiscretePlant:
         self.busy_until_s = done
         self.kicks += 1
 
-    def advance(self, t_end_s):
+    def advance(self, t_end_s: float) -> None:
         if self._pending is not None and t_end_s >= self._pending[0] - TIME_TOL_S:
             self.normal = self._pending[1]
             self._pending = None
         self.time_s = max(self.time_s, t_end_s)
         self.schedule.forget_before(self.time_s)
 
-    def snapshot(self):
+    def snapshot(self) -> PlantSnapshot:
         return PlantSnapshot(self.time_s, self.normal.copy(),
                              self.schedule.voltages_at(self.time_s))

@@ -6,25 +6,38 @@ Finished entries are appended to a partial file as they arrive, so an interrupte
 where it stopped.
 """
 
+from __future__ import annotations
+
 import concurrent.futures
 import dataclasses
 import json
 import math
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from functools import lru_cache
 from pathlib import Path
+from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
 from sphere_sim.kicks.design import KICK_RELAXATION, cardan_of_normal, simulate_kick
-from sphere_sim.kicks.discrete import normal_from_xy
-from sphere_sim.kicks.engine import DaskEngine, PoolEngine, engine_for
+from sphere_sim.kicks.discrete import KickResult, normal_from_xy
+from sphere_sim.kicks.engine import DaskEngine, PoolEngine, SerialEngine, engine_for
 from sphere_sim.kicks.lookup_table import TABLE_FORMAT_VERSION, LookupTable, TableError, TableSpec
-from sphere_sim.model.assembly import assemble
+from sphere_sim.model.assembly import Model, assemble
 from sphere_sim.model.initial_state import rest_state
-from sphere_sim.model.parameters import load_parameter_set
+from sphere_sim.model.parameters import ParameterSet, load_parameter_set
 from sphere_sim.model.rotations import angle_between
 from sphere_sim.model.scene import load_scene
+
+if TYPE_CHECKING:
+    from distributed import Client
+
+# A table entry as it is stored and sent between processes: JSON (``key``, ``dx``, ``dy``,
+# ``peak_rad``, ``settle_s``).
+Entry = dict[str, Any]
+EntryKey = tuple[int, int, int]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -39,30 +52,30 @@ class KickJob:
     intensity: float
 
     @property
-    def key(self):
+    def key(self) -> EntryKey:
         return (self.i, self.j, self.k)
 
 
-def jobs_of(spec):
+def jobs_of(spec: TableSpec) -> list[KickJob]:
     return [KickJob(i, j, k, x, y, float(u)) for i, j, x, y in spec.nodes()
             for k, u in enumerate(spec.intensities)]
 
 
-def spec_to_dict(spec):
+def spec_to_dict(spec: TableSpec) -> dict[str, Any]:
     return spec.to_dict()
 
 
-def spec_from_dict(data):
+def spec_from_dict(data: Mapping[str, Any]) -> TableSpec:
     return TableSpec.from_dict(data)
 
 
 @lru_cache(maxsize=4)
-def _model(params):
+def _model(params: ParameterSet) -> Model:
     return assemble(load_scene('rest'), params)
 
 
 @lru_cache(maxsize=256)
-def _rest(params, x_sn, y_sn):
+def _rest(params: ParameterSet, x_sn: float, y_sn: float) -> NDArray[np.float64]:
     model = _model(params)
     return rest_state(model, cardan_of_normal(normal_from_xy(x_sn, y_sn)),
                       relaxation=KICK_RELAXATION)
@@ -74,7 +87,8 @@ def _rest(params, x_sn, y_sn):
 BLAS_THREADS_PER_KICK = 1
 
 
-def run_kick_job(spec_data, params, job, x_rest=None):
+def run_kick_job(spec_data: Mapping[str, Any], params: ParameterSet, job: KickJob,
+                 x_rest: NDArray[np.float64] | None = None) -> Entry:
     """Simulate one entry; returns a JSON-able dict (pure: same inputs, same output).
 
     ``x_rest`` is the rest state of the job's node (:func:`node_rest`), computed here (and
@@ -84,13 +98,14 @@ def run_kick_job(spec_data, params, job, x_rest=None):
         return _run_kick_job(spec_data, params, job, x_rest)
 
 
-def node_rest(params, x_sn, y_sn):
+def node_rest(params: ParameterSet, x_sn: float, y_sn: float) -> NDArray[np.float64]:
     """The rest state at one grid node: a task of its own, shared by the node's kicks."""
     with threadpool_limits(limits=BLAS_THREADS_PER_KICK):
         return _rest(params, x_sn, y_sn)
 
 
-def _run_kick_job(spec_data, params, job, x_rest):
+def _run_kick_job(spec_data: Mapping[str, Any], params: ParameterSet, job: KickJob,
+                  x_rest: NDArray[np.float64] | None) -> Entry:
     spec = spec_from_dict(spec_data)
     model = _model(params)
     normal = normal_from_xy(job.x_sn, job.y_sn)
@@ -102,8 +117,8 @@ def _run_kick_job(spec_data, params, job, x_rest):
             'settle_s': result.settle_time_s}
 
 
-def _read_partial(path, digest):
-    done = {}
+def _read_partial(path: str | Path | None, digest: str) -> dict[EntryKey, Entry]:
+    done: dict[EntryKey, Entry] = {}
     if path is None or not Path(path).exists():
         return done
     with open(path) as stream:
@@ -119,15 +134,16 @@ def _read_partial(path, digest):
     return done
 
 
-def _by_state(jobs):
+def _by_state(jobs: Iterable[KickJob]) -> list[list[KickJob]]:
     """Jobs grouped by grid node, whose rest state (the costly relaxation) is computed once."""
-    groups = {}
+    groups: dict[tuple[int, int], list[KickJob]] = {}
     for job in jobs:
         groups.setdefault((job.i, job.j), []).append(job)
     return list(groups.values())
 
 
-def _engine_map(jobs, spec_data, params, engine):
+def _engine_map(jobs: Iterable[KickJob], spec_data: Mapping[str, Any], params: ParameterSet,
+                engine: SerialEngine) -> Iterator[Entry]:
     """Yield results as they complete, from Dask, a process pool or this process.
 
     On a pool or Dask, each node's rest state is one task and each kick another, fed with it:
@@ -145,10 +161,13 @@ def _engine_map(jobs, spec_data, params, engine):
                 yield run_kick_job(spec_data, params, job)
 
 
-def _pool_map(groups, spec_data, params, pool):
+def _pool_map(groups: Iterable[list[KickJob]], spec_data: Mapping[str, Any],
+              params: ParameterSet,
+              pool: concurrent.futures.ProcessPoolExecutor) -> Iterator[Entry]:
     rests = {pool.submit(node_rest, params, group[0].x_sn, group[0].y_sn): group
              for group in groups}
-    pending = set(rests)
+    # Rest states and kicks alike.
+    pending: set[concurrent.futures.Future[Any]] = set(rests)
     while pending:
         done, pending = concurrent.futures.wait(
             pending, return_when=concurrent.futures.FIRST_COMPLETED)
@@ -161,7 +180,8 @@ def _pool_map(groups, spec_data, params, pool):
                 yield future.result()
 
 
-def _dask_map(groups, spec_data, params, client):
+def _dask_map(groups: Iterable[list[KickJob]], spec_data: Mapping[str, Any],
+              params: ParameterSet, client: Client) -> Iterator[Entry]:
     from distributed import as_completed
 
     futures = []
@@ -177,7 +197,8 @@ class ReuseError(TableError):
     """A table whose entries cannot stand for the ones a spec asks for."""
 
 
-def reusable_entries(spec, params_digest, table):
+def reusable_entries(spec: TableSpec, params_digest: str,
+                     table: LookupTable) -> dict[EntryKey, Entry]:
     """The entries of ``table`` that ``spec`` asks for too, keyed as its jobs.
 
     ``table`` must have been built for the same kick, grid, window, tolerance, offsets and
@@ -196,7 +217,7 @@ def reusable_entries(spec, params_digest, table):
     if table.meta['params_digest'] != params_digest:
         raise ReuseError('the table to reuse was built for other parameter values')
     old = {round(float(u), 12): k for k, u in enumerate(table.intensities)}
-    entries = {}
+    entries: dict[EntryKey, Entry] = {}
     for job in jobs_of(spec):
         k = old.get(round(job.intensity, 12))
         if k is None or np.isnan(table.displacement[job.i, job.j, k, 0]):
@@ -208,8 +229,11 @@ def reusable_entries(spec, params_digest, table):
     return entries
 
 
-def build_table(spec, params=None, workers=1, scheduler=None, partial_path=None,
-                progress=None, reuse=None):
+def build_table(spec: TableSpec, params: ParameterSet | None = None,
+                workers: int | SerialEngine = 1, scheduler: str | None = None,
+                partial_path: str | Path | None = None,
+                progress: Callable[[int, int], object] | None = None,
+                reuse: LookupTable | None = None) -> LookupTable:
     """Simulate every entry of ``spec`` (resuming from ``partial_path``) into a LookupTable.
 
     Parameters
@@ -238,7 +262,7 @@ def build_table(spec, params=None, workers=1, scheduler=None, partial_path=None,
     reused = {} if reuse is None else reusable_entries(spec, params.digest(), reuse)
     reused = {key: entry for key, entry in reused.items() if key not in done}
     todo = [job for job in jobs if job.key not in done and job.key not in reused]
-    stream = None
+    stream: IO[str] | None = None
     if partial_path is not None:
         fresh = not done
         stream = open(partial_path, 'w' if fresh else 'a')  # noqa: SIM115 - closed below
@@ -260,14 +284,15 @@ def build_table(spec, params=None, workers=1, scheduler=None, partial_path=None,
     return _assemble(spec, params, digest, done)
 
 
-def _record(entry, done, stream):
+def _record(entry: Entry, done: dict[EntryKey, Entry], stream: IO[str] | None) -> None:
     done[tuple(entry['key'])] = entry
     if stream is not None:
         stream.write(json.dumps(entry) + '\n')
         stream.flush()
 
 
-def _assemble(spec, params, digest, entries):
+def _assemble(spec: TableSpec, params: ParameterSet, digest: str,
+              entries: Mapping[EntryKey, Entry]) -> LookupTable:
     axis = spec.axis()
     n, m = axis.size, len(spec.intensities)
     displacement = np.full((n, n, m, 2), np.nan)
@@ -284,10 +309,11 @@ def _assemble(spec, params, digest, entries):
                        meta)
 
 
-def random_check_points(n_points, seed, cone_half_angle_rad, n_actions=4):
+def random_check_points(n_points: int, seed: int, cone_half_angle_rad: float,
+                        n_actions: int = 4) -> list[tuple[NDArray[np.float64], int, float]]:
     """Seeded random (normal, action, intensity) inside the cone."""
     rng = np.random.default_rng(seed)
-    points = []
+    points: list[tuple[NDArray[np.float64], int, float]] = []
     while len(points) < n_points:
         x, y = rng.uniform(-1, 1, 2) * math.sin(cone_half_angle_rad)
         if math.hypot(x, y) <= math.sin(cone_half_angle_rad):
@@ -296,7 +322,8 @@ def random_check_points(n_points, seed, cone_half_angle_rad, n_actions=4):
     return points
 
 
-def direct_kick(spec, params, normal, action, intensity):
+def direct_kick(spec: TableSpec, params: ParameterSet, normal: NDArray[np.float64], action: int,
+                intensity: float) -> KickResult:
     """The continuous model's outcome for the same kick the table interpolates."""
     model = _model(params)
     programme = spec.programme(action, intensity, normal)
@@ -307,7 +334,9 @@ def direct_kick(spec, params, normal, action, intensity):
     return result
 
 
-def check_table(table, n_points=8, seed=0, progress=None):
+def check_table(table: LookupTable, n_points: int = 8, seed: int = 0,
+                progress: Callable[[int, int], object] | None = None
+                ) -> tuple[float, list[float]]:
     """Largest angle (rad) between interpolated and simulated final normals, and all errors.
 
     The simulations use the parameter set the table names; a set whose values changed since

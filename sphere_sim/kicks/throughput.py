@@ -14,11 +14,15 @@ Computes and returns; the CLI (``sphere-twin bench throughput``) prints and writ
 the kicks (not in ``studies``) because it drives the kick workloads, which sit in this room.
 """
 
+from __future__ import annotations
+
 import contextlib
 import dataclasses
 import math
 import os
 import time
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -32,8 +36,13 @@ from sphere_sim.kicks.optimization import optimise_kick
 from sphere_sim.kicks.table_build import build_table, jobs_of
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import explicit_state
-from sphere_sim.model.parameters import load_parameter_set
+from sphere_sim.model.parameters import ParameterSet, load_parameter_set
 from sphere_sim.model.scene import load_scene
+
+if TYPE_CHECKING:
+    from distributed import LocalCluster
+
+    from sphere_sim.integrate.solve import Trajectory
 
 ENGINES = ('serial', 'pool', 'dask')
 # Worker counts of the pool and Dask runs unless asked otherwise (the serial run is 1).
@@ -61,7 +70,7 @@ class Plan:
     quick: bool
 
     @classmethod
-    def of(cls, quick):
+    def of(cls, quick: bool) -> Plan:
         if quick:
             # 5 nodes within 23.6 deg x 1 intensity; DE of 12 per generation.
             return cls(TableSpec(grid_step=0.4, intensities=(1.0,),
@@ -87,23 +96,23 @@ class Run:
     cpu_s: float = 0.0  # CPU time of this process and the workers over wall_s
 
     @property
-    def cpu_s_per_kick(self):
+    def cpu_s_per_kick(self) -> float:
         return self.cpu_s / self.kicks
 
     @property
-    def kicks_per_s_per_core(self):
+    def kicks_per_s_per_core(self) -> float:
         return self.kicks / (self.wall_s * self.workers)
 
 
 class _IntegrationClock:
     """Counts and times the ``simulate`` calls of kicks made in this process."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.kicks = 0
         self.seconds = 0.0
 
-    def wrap(self, simulate):
-        def timed(*args, **kwargs):
+    def wrap(self, simulate: Callable[..., Trajectory]) -> Callable[..., Trajectory]:
+        def timed(*args: Any, **kwargs: Any) -> Trajectory:
             started = time.perf_counter()
             try:
                 return simulate(*args, **kwargs)
@@ -114,7 +123,7 @@ class _IntegrationClock:
 
 
 @contextlib.contextmanager
-def integration_clock():
+def integration_clock() -> Iterator[_IntegrationClock]:
     """Times every kick's integration in this process while the block runs."""
     clock = _IntegrationClock()
     original = design_module.simulate
@@ -130,14 +139,14 @@ class _Engine:
     """A started engine of :mod:`sphere_sim.kicks.engine` for one run, with its start-up
     (processes, imports, the compiled kernels loaded by a warm-up kick) timed apart."""
 
-    def __init__(self, name, workers):
+    def __init__(self, name: str, workers: int) -> None:
         self.name = name
         self.workers = workers
-        self.engine = None
+        self.engine: SerialEngine | None = None
         self.startup_s = 0.0
-        self._cluster = None
+        self._cluster: LocalCluster | None = None
 
-    def __enter__(self):
+    def __enter__(self) -> SerialEngine:
         started = time.perf_counter()
         if self.name == 'dask':
             import dask
@@ -155,25 +164,26 @@ class _Engine:
         self.startup_s = time.perf_counter() - started
         return self.engine
 
-    def __exit__(self, *exc):
+    def __exit__(self, *exc: object) -> None:
+        assert self.engine is not None  # set by __enter__
         self.engine.close()
         if self._cluster is not None:
             self._cluster.close()
 
 
-def _warm_worker():
+def _warm_worker() -> None:
     """Load the compiled kernels in a fresh worker, as any long-running worker has."""
     warm_up()
 
 
-def warm_up():
+def warm_up() -> None:
     """One short kick: the compiled kernels are then loaded (their compilation is cached)."""
     model = assemble(load_scene('rest'))
     simulate_kick(model, np.array([0.0, 0.0, 1.0]), KickDesign().programme(1.0),
                   window_s=1e-3, x_rest=explicit_state(model))
 
 
-def clear_caches():
+def clear_caches() -> None:
     """Forget the set-ups a previous run left in this process (models, rest states): each
     run pays for its own, and a pool forked afterwards starts without them."""
     table_build._model.cache_clear()
@@ -182,28 +192,31 @@ def clear_caches():
 
 
 # --- workloads -----------------------------------------------------------------------------
-def _table(plan, params, engine):
+def _table(plan: Plan, params: ParameterSet, engine: SerialEngine) -> int:
     build_table(plan.table_spec, params, workers=engine)
     return len(jobs_of(plan.table_spec))
 
 
-def _optimisation(plan, params, engine, maxiter=None):
+def _optimisation(plan: Plan, params: ParameterSet, engine: SerialEngine,
+                  maxiter: int | None = None) -> int:
     kick = optimise_kick(params=params, popsize=plan.popsize,
                          maxiter=plan.maxiter if maxiter is None else maxiter, workers=engine)
     return kick.evaluations + 1  # and the best design's outcome, simulated once more
 
 
-def _calibration(plan, params, engine):
+def _calibration(plan: Plan, params: ParameterSet, engine: SerialEngine) -> int:
     """A kick optimisation at each end of an estimate's range, on one engine."""
     spec = next(s for s in params.uncertain if s.path == CALIBRATION_PATH)
     return sum(_optimisation(plan, with_value(params, spec, value), engine,
                              plan.calibration_maxiter) for value in (spec.low, spec.high))
 
 
-RUNNERS = {'table': _table, 'optimisation': _optimisation, 'calibration': _calibration}
+RUNNERS: dict[str, Callable[[Plan, ParameterSet, SerialEngine], int]] = {
+    'table': _table, 'optimisation': _optimisation, 'calibration': _calibration}
 
 
-def run_workload(workload, engine_name, plan, params, workers=1):
+def run_workload(workload: str, engine_name: str, plan: Plan, params: ParameterSet,
+                 workers: int = 1) -> tuple[Run, _IntegrationClock | None]:
     """Time one workload on an engine of ``workers`` (1 for 'serial'); returns (Run, bare
     clock or None)."""
     clear_caches()
@@ -219,7 +232,7 @@ def run_workload(workload, engine_name, plan, params, workers=1):
                clock.kicks, cpu_s), bare
 
 
-def _cpu_s(engine):
+def _cpu_s(engine: SerialEngine) -> float:
     """CPU seconds used so far by this process and, on a pool or Dask, by the workers: a
     machine busy with other work slows a run's wall time, much less its CPU time."""
     own = time.process_time()
@@ -233,14 +246,14 @@ def _cpu_s(engine):
 PROBE_ITERATIONS = 3_000_000
 
 
-def _probe(n):
+def _probe(n: int) -> int:
     total = 0
     for i in range(n):
         total += i * i
     return total
 
 
-def machine_scaling(workers=2):
+def machine_scaling(workers: int = 2) -> float:
     """1 -> ``workers`` process scaling of a pure CPU loop on this machine now."""
     started = time.perf_counter()
     for _ in range(workers):
@@ -255,51 +268,51 @@ def machine_scaling(workers=2):
 
 @dataclasses.dataclass
 class Summary:
-    runs: list
-    bare_kicks_per_s: dict  # workload -> kicks/s of the bare integration, one core
+    runs: list[Run]
+    bare_kicks_per_s: dict[str, float]  # workload -> kicks/s of the bare integration, one core
     quick: bool
     # Worker count -> the CPU loop's 1 -> n scaling, before and after the runs.
-    machine_scaling: dict = dataclasses.field(default_factory=dict)
-    load_average: tuple = ()  # the 1-minute load average, before and after the runs
+    machine_scaling: dict[int, tuple[float, ...]] = dataclasses.field(default_factory=dict)
+    load_average: tuple[float, ...] = ()  # the 1-minute load average, before and after the runs
 
-    def run(self, workload, engine, workers=None):
+    def run(self, workload: str, engine: str, workers: int | None = None) -> Run:
         """The run of ``workload`` on ``engine`` (with ``workers``, if given)."""
         return next(r for r in self.runs if r.workload == workload and r.engine == engine
                     and (workers is None or r.workers == workers))
 
-    def ratio(self, workload, engine='serial', workers=None):
+    def ratio(self, workload: str, engine: str = 'serial', workers: int | None = None) -> float:
         """Kicks/s per core of the workload over the bare integration rate of its kicks."""
         return (self.run(workload, engine, workers).kicks_per_s_per_core
                 / self.bare_kicks_per_s[workload])
 
-    def cpu_efficiency(self, workload, engine, workers=None):
+    def cpu_efficiency(self, workload: str, engine: str, workers: int | None = None) -> float:
         """CPU per kick on one worker over that on ``engine``: 1 when the workers do no more
         work per kick than one process does (what the 1 -> n scaling over n is on an idle
         machine, but for a worker waiting)."""
         return (self.run(workload, 'serial').cpu_s_per_kick
                 / self.run(workload, engine, workers).cpu_s_per_kick)
 
-    def scaling(self, workload, engine, workers=None):
+    def scaling(self, workload: str, engine: str, workers: int | None = None) -> float:
         """Total kicks/s on ``engine``'s workers over that on one."""
         one, many = self.run(workload, 'serial'), self.run(workload, engine, workers)
         return (many.kicks / many.wall_s) / (one.kicks / one.wall_s)
 
-    def loop_scaling(self, workers):
+    def loop_scaling(self, workers: int) -> float:
         """The CPU loop's 1 -> ``workers`` scaling, the mean of before and after the runs."""
         return float(np.mean(self.machine_scaling[workers]))
 
-    def of_loop(self, workload, engine, workers):
+    def of_loop(self, workload: str, engine: str, workers: int) -> float:
         """The workload's 1 -> n scaling over the CPU loop's on as many processes: 1 when
         it scales as well as the machine lets any work scale."""
         return self.scaling(workload, engine, workers) / self.loop_scaling(workers)
 
-    def worker_counts(self):
+    def worker_counts(self) -> list[int]:
         return sorted({r.workers for r in self.runs if r.engine != 'serial'})
 
-    def parallel_runs(self):
+    def parallel_runs(self) -> list[Run]:
         return [r for r in self.runs if r.engine != 'serial']
 
-    def to_dict(self):
+    def to_dict(self) -> dict[str, Any]:
         return {'quick': self.quick, 'bare_kicks_per_s': self.bare_kicks_per_s,
                 'machine_scaling': {str(n): list(v) for n, v in self.machine_scaling.items()},
                 'load_average': list(self.load_average),
@@ -315,15 +328,17 @@ class Summary:
                     for r in self.parallel_runs() if r.workload == w}
                     for w in self.workloads()}}
 
-    def engines(self):
+    def engines(self) -> list[str]:
         return list(dict.fromkeys(r.engine for r in self.runs))
 
-    def workloads(self):
+    def workloads(self) -> list[str]:
         return list(self.bare_kicks_per_s)
 
 
-def throughput(quick=False, workloads=WORKLOADS, engines=ENGINES,
-               worker_counts=DEFAULT_WORKER_COUNTS, progress=None):
+def throughput(quick: bool = False, workloads: Iterable[str] = WORKLOADS,
+               engines: Sequence[str] = ENGINES,
+               worker_counts: Sequence[int] = DEFAULT_WORKER_COUNTS,
+               progress: Callable[[str, str, int], object] | None = None) -> Summary:
     """Every workload on one worker and on every other engine with each of ``worker_counts``;
     returns a :class:`Summary`.
 
@@ -341,6 +356,8 @@ def throughput(quick=False, workloads=WORKLOADS, engines=ENGINES,
     warm_up()
     probes = {n: [machine_scaling(n)] for n in counts}
     loads = [_load_average()]
+    runs: list[Run]
+    bare: dict[str, float]
     runs, bare = [], {}
     for workload in workloads:
         for engine, workers in [('serial', 1)] + [(e, n) for n in counts for e in engines[1:]]:
@@ -356,5 +373,5 @@ def throughput(quick=False, workloads=WORKLOADS, engines=ENGINES,
     return Summary(runs, bare, quick, {n: tuple(v) for n, v in probes.items()}, tuple(loads))
 
 
-def _load_average():
+def _load_average() -> float:
     return os.getloadavg()[0] if hasattr(os, 'getloadavg') else math.nan

@@ -7,8 +7,10 @@ kernel never enters sphere, contact or friction code for it.
 
 import dataclasses
 import math
+from collections.abc import Callable
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from sphere_sim.model import dynamics as dyn
 from sphere_sim.model import gaps as gap_kernels
@@ -17,17 +19,22 @@ from sphere_sim.model.friction import BRISTLE_READINGS, READING_PAPER, READINGS
 from sphere_sim.model.parameters import ParameterSet
 from sphere_sim.model.rotations import quat_to_matrix
 from sphere_sim.model.scaling import state_scale
+from sphere_sim.model.scene import Scene
 from sphere_sim.model.sphere_geometry import mass_properties
 
 SPHERE_STATES = dyn.SPHERE_STATES
 
+# What Model.at_voltages returns: ``fun(t, x, out=None)`` and ``jac(t, x)``.
+RhsFunction = Callable[..., NDArray[np.float64]]
+JacobianFunction = Callable[[float, NDArray[np.float64]], NDArray[np.float64]]
 
-def beam_angle_rad(beam):
+
+def beam_angle_rad(beam: int) -> float:
     """delta_k: beams numbered clockwise in a top view (y up), beam 1 on the left (-x)."""
     return -(beam - 1) * 0.5 * math.pi
 
 
-def pack_parameters(params: ParameterSet):
+def pack_parameters(params: ParameterSet) -> NDArray[np.float64]:
     """The packed parameter vector ``p`` of :mod:`sphere_sim.model.dynamics`, shape (N_PARAMS,)."""
     b, s, c, f = params.beam, params.sphere, params.contact, params.friction
     mp = mass_properties(s.radius_m, s.cut_angle_rad, mass_kg=s.mass_kg)
@@ -94,58 +101,59 @@ class Model:
         Their cos and sin, which is what the compiled kernels use.
     """
 
-    scene: object
+    scene: Scene
     params: ParameterSet
-    beams: tuple
+    beams: tuple[int, ...]
     has_sphere: bool
-    parts: tuple
-    p: np.ndarray
-    flags: np.ndarray
-    beam_angles: np.ndarray
-    beam_directions: np.ndarray
-    rbf_cz: np.ndarray
-    rbf_cphi: np.ndarray
-    rbf_w: np.ndarray
+    parts: tuple[str, ...]
+    p: NDArray[np.float64]
+    flags: NDArray[np.int64]
+    beam_angles: NDArray[np.float64]
+    beam_directions: NDArray[np.float64]
+    rbf_cz: NDArray[np.float64]
+    rbf_cphi: NDArray[np.float64]
+    rbf_w: NDArray[np.float64]
     jit: bool = True
 
     @property
-    def kernel_arrays(self):
+    def kernel_arrays(self) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64],
+                                     NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """The packed model as the compiled integrator takes it, one record:
         ``(p, flags, beam_directions, rbf_cz, rbf_cphi, rbf_w)``."""
         return (self.p, self.flags, self.beam_directions, self.rbf_cz, self.rbf_cphi,
                 self.rbf_w)
 
     @property
-    def n_beams(self):
+    def n_beams(self) -> int:
         return len(self.beams)
 
     @property
-    def has_bristles(self):
+    def has_bristles(self) -> bool:
         """True when each tip carries a friction bristle (``paper`` and ``stiction`` readings)."""
         return bool(self.flags[dyn.F_STICTION])
 
     @property
-    def n_states(self):
+    def n_states(self) -> int:
         return self.bristle_offset + (dyn.BRISTLE_STATES * self.n_beams if self.has_bristles
                                       else 0)
 
     @property
-    def sphere_offset(self):
+    def sphere_offset(self) -> int:
         return 4 * self.n_beams
 
     @property
-    def bristle_offset(self):
+    def bristle_offset(self) -> int:
         """Index of the first bristle state (the end of the sphere's states)."""
         return 4 * self.n_beams + (SPHERE_STATES if self.has_sphere else 0)
 
-    def bristles(self, x):
+    def bristles(self, x: ArrayLike) -> NDArray[np.float64]:
         """Bristle deflections (m), shape (n_beams, 3) (zeros without a bristle reading)."""
         if not self.has_bristles:
             return np.zeros((self.n_beams, 3))
         o = self.bristle_offset
         return np.asarray(x)[o:o + dyn.BRISTLE_STATES * self.n_beams].reshape(self.n_beams, 3)
 
-    def state_names(self):
+    def state_names(self) -> list[str]:
         names = [f'beam_{b}_{q}' for b in self.beams for q in ('z_m', 'phi_rad')]
         names += [f'beam_{b}_{q}' for b in self.beams for q in ('zdot_m_per_s', 'phidot_rad_per_s')]
         if self.has_sphere:
@@ -156,10 +164,11 @@ class Model:
             names += [f'beam_{b}_bristle_{a}_m' for b in self.beams for a in 'xyz']
         return names
 
-    def _kernel(self):
+    def _kernel(self) -> Callable[..., None]:
         return dyn.rhs_kernel if self.jit else dyn.rhs_kernel.py_func
 
-    def rhs(self, t, x, u, diag=None):
+    def rhs(self, t: float, x: ArrayLike, u: ArrayLike,
+            diag: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
         """dx/dt at time ``t`` (s), state ``x`` and beam voltages ``u`` (V, shape (n_beams,))."""
         out = np.empty(self.n_states)
         if diag is None:
@@ -169,7 +178,7 @@ class Model:
                        self.beam_directions, self.rbf_cz, self.rbf_cphi, self.rbf_w, out, diag)
         return out
 
-    def jacobian(self, t, x, u):
+    def jacobian(self, t: float, x: ArrayLike, u: ArrayLike) -> NDArray[np.float64]:
         """d(dx/dt)/dx, shape (n_states, n_states), by compiled differences of the kernel."""
         jac = np.empty((self.n_states, self.n_states))
         kernel = dyn.jacobian_kernel if self.jit else dyn.jacobian_kernel.py_func
@@ -178,7 +187,7 @@ class Model:
                state_scale(self), jac)
         return jac
 
-    def at_voltages(self, u):
+    def at_voltages(self, u: ArrayLike) -> tuple[RhsFunction, JacobianFunction]:
         """``(fun, jac)`` of the model with the beam voltages ``u`` (V) held, for solvers.
 
         ``fun(t, x, out=None)`` returns dx/dt and ``jac(t, x)`` returns d(dx/dt)/dx, as
@@ -198,20 +207,21 @@ class Model:
         scale = state_scale(self)
         diag = np.empty(dyn.N_DIAG)
 
-        def fun(t, x, out=None):
+        def fun(t: float, x: NDArray[np.float64],
+                out: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
             if out is None:
                 out = np.empty(n)
             kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, out, diag)
             return out
 
-        def jac(t, x):
+        def jac(t: float, x: NDArray[np.float64]) -> NDArray[np.float64]:
             out = np.empty((n, n))
             jacobian_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, scale, out)
             return out
 
         return fun, jac
 
-    def diagnostics(self, t, x, u):
+    def diagnostics(self, t: float, x: ArrayLike, u: ArrayLike) -> dict[str, float]:
         """Powers (W) and smallest gaps (m) at one state, keyed by name."""
         diag = np.empty(dyn.N_DIAG)
         self.rhs(t, x, u, diag)
@@ -225,23 +235,25 @@ class Model:
         }
 
     # --- state access -------------------------------------------------------------------
-    def beam_coordinates(self, x):
+    def beam_coordinates(self, x: NDArray[np.float64],
+                         ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+                                    NDArray[np.float64]]:
         """(z_m, phi_rad, zdot, phidot), each shape (n_beams,) (or (n_beams, n_times))."""
         n = self.n_beams
         return x[0:2 * n:2], x[1:2 * n:2], x[2 * n:4 * n:2], x[2 * n + 1:4 * n:2]
 
-    def sphere_quaternion(self, x):
+    def sphere_quaternion(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         o = self.sphere_offset
         return x[o + 3:o + 7]
 
-    def surface_normal(self, x):
+    def surface_normal(self, x: ArrayLike) -> NDArray[np.float64]:
         """Inertial unit normal of the flat face, shape (3,) (or (3, n_times))."""
         x = np.asarray(x)
         if x.ndim == 2:
             return np.stack([self.surface_normal(col) for col in x.T], axis=1)
         return quat_to_matrix(np.ascontiguousarray(self.sphere_quaternion(x)))[:, 2].copy()
 
-    def tip_positions(self, x):
+    def tip_positions(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Beam tip positions (m), shape (n_beams, 3), eq. (31)."""
         z, phi, _, _ = self.beam_coordinates(x)
         b = self.params.beam
@@ -250,14 +262,14 @@ class Model:
                          z + b.length_m * np.sin(phi)], axis=1)
 
     # --- energy -------------------------------------------------------------------------
-    def capacitances(self, x):
+    def capacitances(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Capacitance of each beam (F), shape (n_beams,)."""
         z, phi, _, _ = self.beam_coordinates(x)
         cap = dyn.capacitance_of if self.jit else dyn.capacitance_of.py_func
         return np.array([cap(zk, pk, self.p, self.flags, self.rbf_cz, self.rbf_cphi,
                              self.rbf_w)[0] for zk, pk in zip(z, phi, strict=True)])
 
-    def mechanical_energy(self, x):
+    def mechanical_energy(self, x: NDArray[np.float64]) -> float:
         """Kinetic + gravitational + spring + contact elastic energy (J) of the parts present.
 
         The electrostatic co-energy is not included: with a voltage V held constant, the
@@ -291,7 +303,7 @@ class Model:
             energy += self.bristle_energy(x)
         return energy
 
-    def bristle_energy(self, x):
+    def bristle_energy(self, x: NDArray[np.float64]) -> float:
         """Elastic energy held in the friction bristles (J): 1/2 k_b |b|^2 each with the
         ``paper`` reading's constant stiffness, whether in contact or relaxing; with the
         ``stiction`` reading 1/2 mu_c F_n |b_t|^2 / delta each, with F_n the contact's elastic
@@ -315,7 +327,7 @@ class Model:
             energy += 0.5 * f.coulomb * f_n * float(tangential @ tangential) / f.presliding_m
         return energy
 
-    def bristle_limits_m(self, x):
+    def bristle_limits_m(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Largest deflection (m) each tip's bristle holds elastically at state ``x``, shape
         (n_beams,): the presliding delta of the ``stiction`` reading; with the ``paper``
         reading the edge of the elastic zone at rest, the break-away ratio of mu_b F_n / k_b
@@ -328,28 +340,28 @@ class Model:
                            for gap in self.sphere_gaps(x)])
         return f.breakaway_ratio * f.static_coefficient * normal / f.bristle_stiffness_n_per_m
 
-    def sphere_centre(self, x):
+    def sphere_centre(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         o = self.sphere_offset
         R = quat_to_matrix(np.ascontiguousarray(x[o + 3:o + 7]))
         return x[o:o + 3] + R[:, 2] * self.params.sphere.cog_offset_m
 
-    def sphere_gaps(self, x):
+    def sphere_gaps(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Signed tip-to-sphere-surface distances (m), shape (n_beams,), eq. (32)."""
         return (np.linalg.norm(self._tips_from_centre(x), axis=1)
                 - self.params.sphere.radius_m)
 
-    def _tips_from_centre(self, x):
+    def _tips_from_centre(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Vectors from the full-sphere centre to each beam tip (m), shape (n_beams, 3)."""
         return self.tip_positions(x) - self.sphere_centre(x)
 
-    def ground_gaps(self, x):
+    def ground_gaps(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Rear and front beam-ground gaps (m), shape (2, n_beams), eq. (23)-(24)."""
         b = self.params.beam
         z, phi, _, _ = self.beam_coordinates(x)
         rear = z - b.ground_z_m - b.insulation_virtual_m
         return np.stack([rear, rear + b.ground_length_m * np.tan(phi)])
 
-    def contact_gaps(self, x):
+    def contact_gaps(self, x: ArrayLike) -> NDArray[np.float64]:
         """Gaps (m) of all point contacts, as the integrators see them: rear and front ground
         gaps, then tip-to-sphere gaps (:func:`~sphere_sim.model.gaps.contact_gaps`)."""
         n = gap_kernels.n_contacts(self.flags)
@@ -358,7 +370,7 @@ class Model:
                                  self.beam_directions, out)
         return out[:n]
 
-    def electrode_gaps(self, x):
+    def electrode_gaps(self, x: ArrayLike) -> NDArray[np.float64]:
         """Smallest electrode gap (m) of each beam
         (:func:`~sphere_sim.model.gaps.electrode_gaps`)."""
         out = np.empty(max(1, self.n_beams))
@@ -366,7 +378,7 @@ class Model:
         return out[:self.n_beams]
 
 
-def assemble(scene, params=None, jit=True):
+def assemble(scene: Scene, params: ParameterSet | None = None, jit: bool = True) -> Model:
     """Assemble the model a scene declares.
 
     Parameters
@@ -406,7 +418,7 @@ def assemble(scene, params=None, jit=True):
     rbf_cz = rbf_cphi = np.zeros(1)
     rbf_w = np.zeros((1, 1))
     if flags[dyn.F_RBF]:
-        from sphere_sim.model.capacitance import RbfCapacitance
+        from sphere_sim.model.capacitance_rbf import RbfCapacitance
 
         b = params.beam
         fit = RbfCapacitance.fit(b.electrode_length_m, b.electrode_width_m, b.ground_z_m,

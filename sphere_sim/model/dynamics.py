@@ -27,7 +27,8 @@ import math
 import numba
 import numpy as np
 
-from sphere_sim.model.capacitance import closed_form, rbf_evaluate
+from sphere_sim.model.capacitance import closed_form
+from sphere_sim.model.capacitance_rbf import rbf_evaluate
 from sphere_sim.model.contact_law import contact_force
 from sphere_sim.model.friction import (
     BRISTLE_RELEASE_S,

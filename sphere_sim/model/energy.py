@@ -6,25 +6,44 @@ with damping, contact losses and friction it can only fall.
 """
 
 import dataclasses
+from typing import Protocol
 
 import numpy as np
+from numpy.typing import NDArray
+
+from sphere_sim.model.assembly import Model
 
 
 @dataclasses.dataclass(frozen=True)
 class EnergyBalance:
     """Energies along a trajectory, each shape (n_times,), in J."""
 
-    t: np.ndarray
-    mechanical_j: np.ndarray
-    electrical_work_j: np.ndarray
+    t: NDArray[np.float64]
+    mechanical_j: NDArray[np.float64]
+    electrical_work_j: NDArray[np.float64]
 
     @property
-    def surplus_j(self):
+    def surplus_j(self) -> NDArray[np.float64]:
         """E_mech(t) - E_mech(0) - W_el(t): zero without losses, never positive with them."""
         return self.mechanical_j - self.mechanical_j[0] - self.electrical_work_j
 
 
-def energy_balance(traj):
+class SampledTrajectory(Protocol):
+    """What :func:`energy_balance` reads of a trajectory (``sphere_sim.integrate``'s, which this
+    room may not import): the model, times (n_times,), states (n_states, n_times) and voltages
+    (n_beams, n_times)."""
+
+    @property
+    def model(self) -> Model: ...
+    @property
+    def t(self) -> NDArray[np.float64]: ...
+    @property
+    def x(self) -> NDArray[np.float64]: ...
+    @property
+    def u(self) -> NDArray[np.float64]: ...
+
+
+def energy_balance(traj: SampledTrajectory) -> EnergyBalance:
     """Mechanical energy and cumulative electrical work at the trajectory's samples."""
     model = traj.model
     mech = np.array([model.mechanical_energy(traj.x[:, i]) for i in range(traj.t.size)])

@@ -3,11 +3,13 @@
 import dataclasses
 import math
 import warnings
+from collections.abc import Callable, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from scipy.integrate import ODEintWarning, odeint, solve_ivp
 
-from sphere_sim.model.assembly import assemble
+from sphere_sim.model.assembly import JacobianFunction, Model, RhsFunction, assemble
 from sphere_sim.model.rotations import cardan_to_quat, quat_to_matrix
 from sphere_sim.model.scaling import state_scale
 from sphere_sim.model.sphere_geometry import mass_properties
@@ -34,7 +36,7 @@ class RestError(RuntimeError):
     """No static rest state was found."""
 
 
-def explicit_state(model, sphere_position_m=None):
+def explicit_state(model: Model, sphere_position_m: ArrayLike | None = None) -> NDArray[np.float64]:
     """State from the scene's explicit values (zeros where not given), shape (n_states,)."""
     init = model.scene.initial
     n = model.n_beams
@@ -55,7 +57,7 @@ def explicit_state(model, sphere_position_m=None):
     return x
 
 
-def _touching_position(model, x):
+def _touching_position(model: Model, x: NDArray[np.float64]) -> NDArray[np.float64]:
     """Centre of gravity of a sphere resting on undeflected tips at the origin's vertical."""
     b, s = model.params.beam, model.params.sphere
     tip_radius = b.suspension_radius_m - b.length_m
@@ -64,7 +66,8 @@ def _touching_position(model, x):
     return np.array([0.0, 0.0, centre_z]) - R[:, 2] * s.cog_offset_m
 
 
-def rest_state(model, sphere_angles_deg=None, relaxation='radau'):
+def rest_state(model: Model, sphere_angles_deg: Sequence[float] | None = None,
+               relaxation: str = 'radau') -> NDArray[np.float64]:
     """Static equilibrium of beams and sphere position for a fixed sphere orientation.
 
     The sphere is first let down onto the tips and relaxed by integrating the model with its
@@ -99,7 +102,7 @@ def rest_state(model, sphere_angles_deg=None, relaxation='radau'):
                               np.zeros(n))
 
 
-def _dissipative_twin(model):
+def _dissipative_twin(model: Model) -> Model:
     """The same model with damping and contact losses on: same rest states, and it settles."""
     effects = model.scene.effects
     if effects.damping and effects.contact_losses:
@@ -109,7 +112,8 @@ def _dissipative_twin(model):
     return assemble(scene, model.params, jit=model.jit)
 
 
-def polish_equilibrium(model, x, u):
+def polish_equilibrium(model: Model, x: NDArray[np.float64],
+                       u: ArrayLike) -> NDArray[np.float64]:
     """Newton on the positions of beams and sphere (orientation held) under voltages ``u``.
 
     With friction bristles (the ``paper`` and ``stiction`` readings) a second Newton follows
@@ -126,10 +130,10 @@ def polish_equilibrium(model, x, u):
         When the largest force imbalance stays above ``REST_TOLERANCE`` of the weight per tip.
     """
     n = model.n_beams
-    free = list(range(2 * n))
+    free_list = list(range(2 * n))
     if model.has_sphere:
-        free += [model.sphere_offset + i for i in range(3)]
-    free = np.array(free)
+        free_list += [model.sphere_offset + i for i in range(3)]
+    free = np.array(free_list)
     scale = np.where(free % 2 == 0, REST_SCALE_Z_M, REST_SCALE_PHI_RAD)
     if model.has_sphere:
         scale[-3:] = REST_SCALE_Z_M
@@ -164,7 +168,10 @@ def polish_equilibrium(model, x, u):
     return x
 
 
-def _polish(model, x, u, free, scale, accel_index, force_scale, limit=None):
+def _polish(model: Model, x: NDArray[np.float64], u: ArrayLike, free: NDArray[np.intp],
+            scale: NDArray[np.float64],
+            accel_index: NDArray[np.intp], force_scale: NDArray[np.float64],
+            limit: Callable[[NDArray[np.float64]], bool] | None = None) -> NDArray[np.float64]:
     """``x`` with ``free`` moved by Newton until the accelerations at ``accel_index`` vanish.
 
     ``limit(v)``, if given, bounds the solution in place and returns True when it had to: the
@@ -172,7 +179,7 @@ def _polish(model, x, u, free, scale, accel_index, force_scale, limit=None):
     """
     x = x.copy()
 
-    def residual(v):
+    def residual(v: NDArray[np.float64]) -> NDArray[np.float64]:
         y = x.copy()
         y[free] = v * scale
         return model.rhs(0.0, y, u)[accel_index] * force_scale
@@ -188,7 +195,7 @@ def _polish(model, x, u, free, scale, accel_index, force_scale, limit=None):
     return x
 
 
-def _bristle_scale_m(model):
+def _bristle_scale_m(model: Model) -> float:
     """A bristle's deflection at its static limit under the resting load of a tip (m)."""
     f = model.params.friction
     if f.reading == 'paper':
@@ -196,7 +203,8 @@ def _bristle_scale_m(model):
     return f.presliding_m
 
 
-def _clip_to_static_limit(model, x, v, scale, free):
+def _clip_to_static_limit(model: Model, x: NDArray[np.float64], v: NDArray[np.float64],
+                          scale: NDArray[np.float64], free: NDArray[np.intp]) -> bool:
     """Shorten, in ``v``, any bristle deflected past its static limit (``Model.bristle_limits``:
     the presliding delta of the ``stiction`` reading, the elastic zone's edge of the ``paper``
     reading); True if one was. Such a tilt is more than friction can hold."""
@@ -212,7 +220,9 @@ def _clip_to_static_limit(model, x, v, scale, free):
     return bool(np.any(over))
 
 
-def _newton(residual, v, iterations=NEWTON_ITERATIONS, step=NEWTON_FD_STEP):
+def _newton(residual: Callable[[NDArray[np.float64]], NDArray[np.float64]], v: NDArray[np.float64],
+            iterations: int = NEWTON_ITERATIONS,
+            step: float = NEWTON_FD_STEP) -> NDArray[np.float64]:
     """Damped Newton with a central-difference Jacobian.
 
     The step is halved until the residual shrinks: a contact that engages during an update is
@@ -240,13 +250,13 @@ def _newton(residual, v, iterations=NEWTON_ITERATIONS, step=NEWTON_FD_STEP):
     return v
 
 
-def _weight_per_tip_n(model):
+def _weight_per_tip_n(model: Model) -> float:
     if model.has_sphere:
         return model.params.sphere.mass_kg * model.params.gravity_m_per_s2 / 4.0
     return model.params.beam.mass_kg * model.params.gravity_m_per_s2
 
 
-def _generalised_masses(model, free):
+def _generalised_masses(model: Model, free: NDArray[np.intp]) -> NDArray[np.float64]:
     """Mass (kg) or inertia over beam length (kg m) per free coordinate, for force units."""
     b = model.params.beam
     out = []
@@ -258,7 +268,8 @@ def _generalised_masses(model, free):
     return np.array(out)
 
 
-def _relax(model, x, relaxation='radau', voltages=None, hold_orientation=True):
+def _relax(model: Model, x: NDArray[np.float64], relaxation: str = 'radau',
+           voltages: ArrayLike | None = None, hold_orientation: bool = True) -> NDArray[np.float64]:
     """Integrate with all rates damped out and the sphere's orientation held (or free)."""
     frozen = np.zeros(model.n_states, dtype=bool)
     if model.has_sphere and hold_orientation:
@@ -269,12 +280,12 @@ def _relax(model, x, relaxation='radau', voltages=None, hold_orientation=True):
     u = np.zeros(model.n_beams) if voltages is None else np.asarray(voltages, dtype=float)
     rhs, jacobian = model.at_voltages(u)
 
-    def fun(t, y):
+    def fun(t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
         dydt = rhs(t, y)
         dydt[frozen] = 0.0
         return dydt
 
-    def jac(t, y):
+    def jac(t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
         dfdy = jacobian(t, y)
         dfdy[frozen] = 0.0
         return dfdy
@@ -288,7 +299,8 @@ def _relax(model, x, relaxation='radau', voltages=None, hold_orientation=True):
     return y
 
 
-def _relax_radau(model, x, fun, jac):
+def _relax_radau(model: Model, x: NDArray[np.float64], fun: RhsFunction,
+                 jac: JacobianFunction) -> NDArray[np.float64]:
     sol = solve_ivp(fun, (0.0, RELAX_TIME_S), x, method='Radau', rtol=RADAU_RELAX_RTOL,
                     atol=RADAU_RELAX_RTOL * state_scale(model), jac=jac)
     if not sol.success:
@@ -296,7 +308,8 @@ def _relax_radau(model, x, fun, jac):
     return sol.y[:, -1].copy()
 
 
-def _relax_odeint(model, x, fun, jac):
+def _relax_odeint(model: Model, x: NDArray[np.float64], fun: RhsFunction,
+                  jac: JacobianFunction) -> NDArray[np.float64] | None:
     """The relaxed state by odeint, or None where LSODA gave up."""
     with warnings.catch_warnings():
         warnings.simplefilter('ignore', ODEintWarning)  # a stall falls back to Radau
@@ -308,7 +321,7 @@ def _relax_odeint(model, x, fun, jac):
     return ys[-1].copy()
 
 
-def _acceleration_index(model, free):
+def _acceleration_index(model: Model, free: NDArray[np.intp]) -> NDArray[np.intp]:
     """Indices in dx/dt of the accelerations conjugate to the free positions."""
     n = model.n_beams
     index = []
@@ -320,7 +333,7 @@ def _acceleration_index(model, free):
     return np.array(index)
 
 
-def initial_state(model):
+def initial_state(model: Model) -> NDArray[np.float64]:
     """The scene's initial state, shape (n_states,)."""
     init = model.scene.initial
     if init.mode == 'explicit':

@@ -11,6 +11,7 @@ import json
 import math
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 import yaml
 
@@ -44,12 +45,12 @@ class BeamParams:
     ground_length_m: float
 
     @property
-    def suspension_radius_m(self):
+    def suspension_radius_m(self) -> float:
         """Horizontal distance of the suspension from the centre, L_B + d_B/2 (eq. 3)."""
         return self.length_m + 0.5 * self.tip_distance_m
 
     @property
-    def inertia_suspension_kg_m2(self):
+    def inertia_suspension_kg_m2(self) -> float:
         """Rotational inertia about the suspension point, the (2,2) entry of the mass matrix."""
         if self.inertia_about == 'suspension':
             return self.inertia_kg_m2
@@ -121,9 +122,9 @@ class UncertainParameter:
     high: float
     reason: str
     target: str
-    tied: tuple = ()
+    tied: tuple[str, ...] = ()
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.target not in (*CALIBRATION_TARGETS, ESTIMATE_TARGET):
             raise ParameterError(f'uncertain {self.path}: target must be one of '
                                  f'{(*CALIBRATION_TARGETS, ESTIMATE_TARGET)}, got '
@@ -133,7 +134,7 @@ class UncertainParameter:
         object.__setattr__(self, 'tied', tuple(self.tied))
 
     @property
-    def paths(self):
+    def paths(self) -> tuple[str, ...]:
         """The fitted path and every path tied to it."""
         return (self.path, *self.tied)
 
@@ -148,12 +149,12 @@ class ParameterSet:
     sphere: SphereParams
     contact: ContactParams
     friction: FrictionParams
-    uncertain: tuple = ()
+    uncertain: tuple[UncertainParameter, ...] = ()
 
-    def to_dict(self):
+    def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
-    def digest(self):
+    def digest(self) -> str:
         """Short content hash of the physical values (name, description and the calibration's
         declarations excluded: rewording a reason must not invalidate a table)."""
         physical = {k: v for k, v in self.to_dict().items()
@@ -161,21 +162,23 @@ class ParameterSet:
         text = json.dumps(physical, sort_keys=True, default=str)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
-    def replace(self, **paths):
+    def replace(self, **paths: float | str) -> 'ParameterSet':
         """A copy with dotted-path values replaced: ``replace(**{'beam.mass_kg': 1e-7})``."""
         data = self.to_dict()
         for path, value in paths.items():
             _set_path(data, path, value)
         return _from_dict(data)
 
-    def get(self, path):
+    def get(self, path: str) -> Any:
         node = self
         for part in path.split('.'):
             node = getattr(node, part)
         return node
 
 
-_SECTIONS = {
+_Section = BeamParams | ElectrostaticParams | SphereParams | ContactParams | FrictionParams
+
+_SECTIONS: dict[str, type[_Section]] = {
     'beam': BeamParams,
     'electrostatics': ElectrostaticParams,
     'sphere': SphereParams,
@@ -188,7 +191,7 @@ _CHOICES = {
 }
 
 
-def _set_path(data, path, value):
+def _set_path(data: dict[str, Any], path: str, value: Any) -> None:
     keys = path.split('.')
     node = data
     for key in keys[:-1]:
@@ -200,7 +203,7 @@ def _set_path(data, path, value):
     node[keys[-1]] = value
 
 
-def _section(section, cls, values):
+def _section(section: str, cls: type[_Section], values: Any) -> _Section:
     """One section's dataclass from its YAML mapping, every key checked and converted."""
     if not isinstance(values, dict):
         raise ParameterError(f'parameter set lacks section {section!r}')
@@ -215,7 +218,7 @@ def _section(section, cls, values):
     return cls(**{key: _value(section, key, allowed[key], value) for key, value in values.items()})
 
 
-def _value(section, key, kind, value):
+def _value(section: str, key: str, kind: object, value: Any) -> Any:
     choices = _CHOICES.get((section, key))
     if choices is not None:
         if value not in choices:
@@ -229,14 +232,14 @@ def _value(section, key, kind, value):
         raise ParameterError(f'{section}.{key} must be a number, got {value!r}') from exc
 
 
-def _from_dict(data):
+def _from_dict(data: dict[str, Any]) -> ParameterSet:
     top_fields = {f.name for f in dataclasses.fields(ParameterSet)}
     unknown = set(data) - top_fields - {'base', 'overrides'}
     if unknown:
         raise ParameterError(
             f'unknown key(s) {sorted(unknown)} in parameter set; allowed: {sorted(top_fields)}')
-    kwargs = {section: _section(section, cls, data.get(section))
-              for section, cls in _SECTIONS.items()}
+    kwargs: dict[str, Any] = {section: _section(section, cls, data.get(section))
+                              for section, cls in _SECTIONS.items()}
     _check_friction(kwargs['friction'])
     uncertain = tuple(_uncertain(item) for item in data.get('uncertain', ()) or ())
     return ParameterSet(
@@ -252,7 +255,7 @@ def _from_dict(data):
 _LAW_CHECK_SPEEDS = tuple(10.0 ** (k / 20.0) for k in range(-100, 41))
 
 
-def _check_friction(f):
+def _check_friction(f: FrictionParams) -> None:
     """Refuse coefficients with which the ``paper`` reading would inject energy or divide by
     zero: its loaded part mu_c tanh(v/v_c) + (mu_s - mu_c tanh(v_s/v_c)) b(v/v_s) must not turn
     negative at any speed, and the bristle's constants must be positive."""
@@ -284,7 +287,7 @@ def _check_friction(f):
                                  f'{loaded:.3g} F_n there')
 
 
-def _uncertain(item):
+def _uncertain(item: Any) -> UncertainParameter:
     if isinstance(item, UncertainParameter):
         return item
     fields = {f.name for f in dataclasses.fields(UncertainParameter)}
@@ -299,7 +302,7 @@ def _uncertain(item):
     return UncertainParameter(**item)
 
 
-def _read_yaml(path):
+def _read_yaml(path: Path) -> dict[str, Any]:
     try:
         with open(path) as stream:
             data = yaml.safe_load(stream)
@@ -313,7 +316,7 @@ def _read_yaml(path):
     return data
 
 
-def _resolve(data, seen=()):
+def _resolve(data: dict[str, Any], seen: tuple[str, ...] = ()) -> dict[str, Any]:
     base = data.get('base')
     if base is None:
         return data
@@ -330,19 +333,19 @@ def _resolve(data, seen=()):
     return merged
 
 
-def _path_of(name_or_path):
+def _path_of(name_or_path: str | Path) -> Path:
     path = Path(name_or_path)
     if path.suffix in ('.yaml', '.yml'):
         return path
     return PARAMS_DIR / f'{name_or_path}.yaml'
 
 
-def available_parameter_sets():
+def available_parameter_sets() -> list[str]:
     return sorted(p.stem for p in PARAMS_DIR.glob('*.yaml'))
 
 
 @lru_cache(maxsize=32)
-def load_parameter_set(name_or_path=DEFAULT_PARAMETER_SET):
+def load_parameter_set(name_or_path: str | Path = DEFAULT_PARAMETER_SET) -> ParameterSet:
     """Load a parameter set by name (``table_a1``, ``calibrated``) or YAML path.
 
     Raises

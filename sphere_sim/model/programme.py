@@ -3,8 +3,11 @@ running device holds over time (:class:`VoltageSchedule`); both held constant be
 
 import dataclasses
 import math
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any, Self
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from msg_defs.device import BEAM_IDS, VOLTAGE_LIMIT_V
 from msg_defs.voltage_rules import VoltageRuleError, check_segments, check_voltages
@@ -24,7 +27,7 @@ class Pulse:
     width_s: float
 
     @property
-    def end_s(self):
+    def end_s(self) -> float:
         return self.start_s + self.width_s
 
 
@@ -37,10 +40,10 @@ class PulseProgramme:
     unipolar drivers, at most the limit), as a command from the wire does.
     """
 
-    pulses: tuple = ()
+    pulses: tuple[Pulse, ...] = ()
     voltage_limit_v: float = VOLTAGE_LIMIT_V
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         object.__setattr__(self, 'pulses', tuple(self.pulses))
         if not (math.isfinite(self.voltage_limit_v) and self.voltage_limit_v > 0):
             raise ProgrammeError(
@@ -55,7 +58,7 @@ class PulseProgramme:
             except VoltageRuleError as error:
                 raise ProgrammeError(str(error)) from None
 
-    def _check_pulse(self, where, pulse):
+    def _check_pulse(self, where: str, pulse: Pulse) -> None:
         if pulse.beam not in BEAM_IDS:
             raise ProgrammeError(f'{where}: beam must be one of {BEAM_IDS}')
         for name in ('amplitude_v', 'start_s', 'width_s'):
@@ -67,7 +70,7 @@ class PulseProgramme:
             raise ProgrammeError(f'{where}: start_s must be >= 0, got {pulse.start_s}')
 
     @classmethod
-    def from_dicts(cls, items, voltage_limit_v=VOLTAGE_LIMIT_V):
+    def from_dicts(cls, items: Iterable[Any], voltage_limit_v: float = VOLTAGE_LIMIT_V) -> Self:
         pulses = []
         for i, item in enumerate(items):
             allowed = {f.name for f in dataclasses.fields(Pulse)}
@@ -81,12 +84,12 @@ class PulseProgramme:
                 raise ProgrammeError(f'pulse {i}: {exc}') from exc
         return cls(tuple(pulses), voltage_limit_v)
 
-    def edges(self):
+    def edges(self) -> list[float]:
         """Sorted times (s) at which any voltage changes."""
         times = {p.start_s for p in self.pulses} | {p.end_s for p in self.pulses}
         return sorted(times)
 
-    def voltages_at(self, t_s, beams=BEAM_IDS):
+    def voltages_at(self, t_s: float, beams: Sequence[int] = BEAM_IDS) -> NDArray[np.float64]:
         """Voltages (V) on ``beams`` at ``t_s``; an edge belongs to the segment after it."""
         out = np.zeros(len(beams))
         for pulse in self.pulses:
@@ -94,7 +97,8 @@ class PulseProgramme:
                 out[beams.index(pulse.beam)] += pulse.amplitude_v
         return out
 
-    def segments(self, beams=BEAM_IDS):
+    def segments(self, beams: Sequence[int] = BEAM_IDS,
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The programme as zero-order-hold segments.
 
         Returns
@@ -108,12 +112,13 @@ class PulseProgramme:
         return np.array(times), np.array([self.voltages_at(t, beams) for t in times])
 
     @property
-    def duration_s(self):
+    def duration_s(self) -> float:
         """End of the last pulse (s)."""
         return max((p.end_s for p in self.pulses), default=0.0)
 
     @classmethod
-    def from_segments(cls, times_s, voltages_v, voltage_limit_v=VOLTAGE_LIMIT_V):
+    def from_segments(cls, times_s: ArrayLike, voltages_v: Iterable[ArrayLike],
+                      voltage_limit_v: float = VOLTAGE_LIMIT_V) -> Self:
         """Inverse of :meth:`segments` for beams 1..4, the device's command rules applied.
 
         Raises
@@ -133,7 +138,7 @@ class PulseProgramme:
                   for beam, v in zip(BEAM_IDS, row, strict=True) if v != 0.0]
         return cls(tuple(pulses), voltage_limit_v)
 
-    def mirrored(self, beam_map):
+    def mirrored(self, beam_map: Mapping[int, int]) -> 'PulseProgramme':
         """The same programme with beams renamed by ``beam_map`` (dict old -> new)."""
         return PulseProgramme(tuple(dataclasses.replace(p, beam=beam_map[p.beam])
                                     for p in self.pulses), self.voltage_limit_v)
@@ -148,28 +153,29 @@ class VoltageSchedule:
     it offers ``edges()`` and ``voltages_at(t_s, beams)``, so the solvers take either.
     """
 
-    def __init__(self):
-        self.times_s = [0.0]
-        self.voltages_v = [np.zeros(len(BEAM_IDS))]
+    def __init__(self) -> None:
+        self.times_s: list[float] = [0.0]
+        self.voltages_v: list[NDArray[np.float64]] = [np.zeros(len(BEAM_IDS))]
 
-    def replace_from(self, t_s, times_s, voltages_v):
+    def replace_from(self, t_s: float, times_s: Iterable[float],
+                     voltages_v: Iterable[ArrayLike]) -> None:
         """From ``t_s`` on, the segments ``times_s`` (relative, from 0) and ``voltages_v``."""
         keep = [i for i, t in enumerate(self.times_s) if t < t_s]
         self.times_s = [self.times_s[i] for i in keep] + [t_s + float(t) for t in times_s]
         self.voltages_v = [self.voltages_v[i] for i in keep] + [np.array(v, dtype=float)
                                                                 for v in voltages_v]
 
-    def voltages_at(self, t_s, beams=BEAM_IDS):
+    def voltages_at(self, t_s: float, beams: Iterable[int] = BEAM_IDS) -> NDArray[np.float64]:
         """Voltages (V) on ``beams`` at ``t_s``; an edge belongs to the segment after it."""
         i = int(np.searchsorted(self.times_s, t_s, side='right')) - 1
         held = self.voltages_v[max(i, 0)]
         return np.array([held[b - 1] for b in beams])
 
-    def edges(self):
+    def edges(self) -> list[float]:
         """Times (s) at which the held voltages change, as :meth:`PulseProgramme.edges`."""
         return list(self.times_s)
 
-    def forget_before(self, t_s):
+    def forget_before(self, t_s: float) -> None:
         """Drop segments that ended before ``t_s`` (the schedule stays short in long runs)."""
         i = int(np.searchsorted(self.times_s, t_s, side='right')) - 1
         if i > 0:

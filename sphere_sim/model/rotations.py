@@ -9,13 +9,17 @@ import math
 
 import numba
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+# quat_rows and quat_to_matrix are numba kernels: numba reads their types from the arguments,
+# hence the `type: ignore[no-untyped-def]` on their defs.
 
 # Closer than this to beta = +-90 deg, alpha and gamma turn about one axis (gimbal lock).
 GIMBAL_LOCK_MARGIN_RAD = 1e-9
 
 
 @numba.njit(cache=True, inline='always')
-def quat_rows(q):
+def quat_rows(q):  # type: ignore[no-untyped-def]
     """Rows of the body-to-inertial rotation matrix of a quaternion (normalised here).
 
     A tuple of three row tuples, so that the compiled kernels allocate nothing.
@@ -28,7 +32,7 @@ def quat_rows(q):
 
 
 @numba.njit(cache=True)
-def quat_to_matrix(q):
+def quat_to_matrix(q):  # type: ignore[no-untyped-def]
     """Body-to-inertial rotation matrix of a quaternion (normalised here), shape (3, 3)."""
     rows = quat_rows(q)
     R = np.empty((3, 3))
@@ -38,7 +42,7 @@ def quat_to_matrix(q):
     return R
 
 
-def cardan_to_matrix(alpha, beta, gamma):
+def cardan_to_matrix(alpha: float, beta: float, gamma: float) -> NDArray[np.float64]:
     """I_A_S of eq. (A1)."""
     ca, sa = math.cos(alpha), math.sin(alpha)
     cb, sb = math.cos(beta), math.sin(beta)
@@ -50,7 +54,7 @@ def cardan_to_matrix(alpha, beta, gamma):
     ])
 
 
-def matrix_to_quat(R):
+def matrix_to_quat(R: ArrayLike) -> NDArray[np.float64]:
     """Unit quaternion [w, x, y, z] with w >= 0 of a rotation matrix (Shepperd's method)."""
     R = np.asarray(R, dtype=float)
     trace = R[0, 0] + R[1, 1] + R[2, 2]
@@ -74,11 +78,11 @@ def matrix_to_quat(R):
     return -q if q[0] < 0.0 else q
 
 
-def cardan_to_quat(alpha, beta, gamma):
+def cardan_to_quat(alpha: float, beta: float, gamma: float) -> NDArray[np.float64]:
     return matrix_to_quat(cardan_to_matrix(alpha, beta, gamma))
 
 
-def matrix_to_cardan(R):
+def matrix_to_cardan(R: NDArray[np.float64]) -> NDArray[np.float64]:
     """Cardan angles [alpha, beta, gamma] (rad) of I_A_S; gamma = 0 at gimbal lock."""
     sb = min(1.0, max(-1.0, R[0, 2]))
     beta = math.asin(sb)
@@ -88,16 +92,16 @@ def matrix_to_cardan(R):
     return np.array([math.atan2(-R[1, 2], R[2, 2]), beta, math.atan2(-R[0, 1], R[0, 0])])
 
 
-def quat_to_cardan(q):
+def quat_to_cardan(q: ArrayLike) -> NDArray[np.float64]:
     return matrix_to_cardan(quat_to_matrix(np.asarray(q, dtype=float)))
 
 
-def surface_normal_of_quat(q):
+def surface_normal_of_quat(q: ArrayLike) -> NDArray[np.float64]:
     """Unit normal of the flat face in the inertial frame: the body z axis, eq. (53)."""
     return quat_to_matrix(np.asarray(q, dtype=float))[:, 2].copy()
 
 
-def angle_between(a, b):
+def angle_between(a: ArrayLike, b: ArrayLike) -> float:
     """Angle (rad) between two unit vectors, robust for tiny angles."""
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)

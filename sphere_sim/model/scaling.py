@@ -4,7 +4,10 @@ Tolerances are set against them (atol = rtol * scale), the Jacobian's difference
 them, and the benchmarks' scaled errors divide by them.
 """
 
+from typing import Protocol
+
 import numpy as np
+from numpy.typing import NDArray
 
 SCALE_BEAM_Z_M = 1e-6
 SCALE_BEAM_PHI_RAD = 1e-3
@@ -21,7 +24,25 @@ SCALE_SPHERE_OMEGA_RAD_PER_S = 0.1
 SCALE_BRISTLE_M = 1e-7
 
 
-def state_scale(model):
+class StateLayout(Protocol):
+    """Where a model keeps each kind of state (:class:`~sphere_sim.model.assembly.Model`, which
+    imports this module, has it)."""
+
+    @property
+    def n_beams(self) -> int: ...
+    @property
+    def n_states(self) -> int: ...
+    @property
+    def has_sphere(self) -> bool: ...
+    @property
+    def sphere_offset(self) -> int: ...
+    @property
+    def has_bristles(self) -> bool: ...
+    @property
+    def bristle_offset(self) -> int: ...
+
+
+def state_scale(model: StateLayout) -> NDArray[np.float64]:
     """Per-state characteristic magnitudes, shape (n_states,)."""
     n = model.n_beams
     scale = np.empty(model.n_states)

@@ -8,13 +8,15 @@ model is assembled from what the scene declares and nothing else
 
 import dataclasses
 import math
+from collections.abc import Collection
 from functools import lru_cache
 from pathlib import Path
+from typing import Any, Self, overload
 
 import yaml
 
 from msg_defs.device import BEAM_IDS, DEFAULT_PARAMETER_SET, VOLTAGE_LIMIT_V
-from sphere_sim.model.parameters import ParameterError, load_parameter_set
+from sphere_sim.model.parameters import ParameterError, ParameterSet, load_parameter_set
 from sphere_sim.model.programme import ProgrammeError, PulseProgramme
 
 SCENES_DIR = Path(__file__).parents[1] / 'scenes'
@@ -42,7 +44,7 @@ class Effects:
     stribeck: bool = True
 
     @property
-    def any_friction(self):
+    def any_friction(self) -> bool:
         return self.viscous or self.coulomb or self.stribeck
 
 
@@ -56,13 +58,13 @@ class InitialState:
     """
 
     mode: str = 'rest'
-    sphere_angles_deg: tuple = (0.0, 0.0, 0.0)
+    sphere_angles_deg: tuple[float, ...] = (0.0, 0.0, 0.0)
     sphere_lift_m: float = 0.0
-    sphere_position_m: tuple = None
-    sphere_velocity_m_per_s: tuple = (0.0, 0.0, 0.0)
-    sphere_omega_rad_per_s: tuple = (0.0, 0.0, 0.0)
-    beam_z_m: tuple = None
-    beam_phi_rad: tuple = None
+    sphere_position_m: tuple[float, ...] | None = None
+    sphere_velocity_m_per_s: tuple[float, ...] = (0.0, 0.0, 0.0)
+    sphere_omega_rad_per_s: tuple[float, ...] = (0.0, 0.0, 0.0)
+    beam_z_m: tuple[float, ...] | None = None
+    beam_phi_rad: tuple[float, ...] | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -70,16 +72,16 @@ class Scene:
     name: str
     description: str
     parameter_set: str
-    beams: tuple
+    beams: tuple[int, ...]
     sphere: bool
     effects: Effects
     capacitance: str
     initial: InitialState
     programme: PulseProgramme
     duration_s: float
-    perturbation: tuple = ()  # ((dotted parameter path, value), ...)
+    perturbation: tuple[tuple[str, float], ...] = ()  # ((dotted parameter path, value), ...)
 
-    def parameters(self, base=None):
+    def parameters(self, base: ParameterSet | None = None) -> ParameterSet:
         """The parameter set (``base`` instead of the one named, if given) with the plant
         perturbation applied."""
         params = load_parameter_set(self.parameter_set) if base is None else base
@@ -87,29 +89,35 @@ class Scene:
             params = params.replace(**dict(self.perturbation))
         return params
 
-    def replace(self, **changes):
+    def replace(self, **changes: Any) -> Self:
         return dataclasses.replace(self, **changes)
 
 
-def _require_mapping(value, key):
+def _require_mapping(value: Any, key: str) -> dict[str, Any]:
     if not isinstance(value, dict):
         raise SceneError(f'{key!r} must be a mapping, got {type(value).__name__}')
     return value
 
 
-def _check_keys(mapping, allowed, where):
+def _check_keys(mapping: Collection[str], allowed: Collection[str], where: str) -> None:
     extra = set(mapping) - set(allowed)
     if extra:
         raise SceneError(f'unknown key(s) {sorted(extra)} in {where}; allowed: {sorted(allowed)}')
 
 
-def _bool(value, key):
+def _bool(value: Any, key: str) -> bool:
     if not isinstance(value, bool):
         raise SceneError(f'{key!r} must be true or false, got {value!r}')
     return value
 
 
-def _vector(value, key, length):
+@overload
+def _vector(value: None, key: str, length: int) -> None: ...
+@overload
+def _vector(value: list[Any], key: str, length: int) -> tuple[float, ...]: ...
+@overload
+def _vector(value: Any, key: str, length: int) -> tuple[float, ...] | None: ...
+def _vector(value: Any, key: str, length: int) -> tuple[float, ...] | None:
     if value is None:
         return None
     if not isinstance(value, (list, tuple)) or len(value) != length:
@@ -123,7 +131,7 @@ def _vector(value, key, length):
     return out
 
 
-def _number(value, key, minimum=None):
+def _number(value: Any, key: str, minimum: float | None = None) -> float:
     try:
         out = float(value)
     except (TypeError, ValueError) as exc:
@@ -134,7 +142,7 @@ def _number(value, key, minimum=None):
     return out
 
 
-def scene_from_dict(data, name='scene'):
+def scene_from_dict(data: Any, name: str = 'scene') -> Scene:
     """Build and validate a :class:`Scene` from a parsed YAML mapping."""
     data = _require_mapping(data, name)
     top = ('name', 'description', 'parameters', 'beams', 'sphere', 'effects', 'capacitance',
@@ -223,12 +231,12 @@ def scene_from_dict(data, name='scene'):
     return scene
 
 
-def available_scenes():
+def available_scenes() -> list[str]:
     return sorted(p.stem for p in SCENES_DIR.glob('*.yaml'))
 
 
 @lru_cache(maxsize=64)
-def load_scene(name_or_path):
+def load_scene(name_or_path: str | Path) -> Scene:
     """Load a scene by name (a file in ``sphere_sim/scenes``) or by YAML path."""
     path = Path(name_or_path)
     if path.suffix not in ('.yaml', '.yml'):

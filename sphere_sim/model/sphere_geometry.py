@@ -8,6 +8,7 @@ import dataclasses
 import math
 
 import numpy as np
+from numpy.typing import NDArray
 
 
 @dataclasses.dataclass(frozen=True)
@@ -28,20 +29,20 @@ class MassProperties:
     volume_m3: float
     mass_kg: float
     cog_offset_m: float
-    inertia_centre_kg_m2: np.ndarray
-    inertia_cog_kg_m2: np.ndarray
+    inertia_centre_kg_m2: NDArray[np.float64]
+    inertia_cog_kg_m2: NDArray[np.float64]
 
 
-def cap_height_m(radius_m, cut_angle_rad):
+def cap_height_m(radius_m: float, cut_angle_rad: float) -> float:
     return radius_m * (1.0 - math.cos(0.5 * cut_angle_rad))
 
 
-def cut_sphere_volume_m3(radius_m, cut_angle_rad):
+def cut_sphere_volume_m3(radius_m: float, cut_angle_rad: float) -> float:
     h = cap_height_m(radius_m, cut_angle_rad)
     return 4.0 / 3.0 * math.pi * radius_m**3 - math.pi * h**2 * (3.0 * radius_m - h) / 3.0
 
 
-def cog_offset_m(radius_m, cut_angle_rad):
+def cog_offset_m(radius_m: float, cut_angle_rad: float) -> float:
     """d_cog: the removed cap's first moment divided by the remaining volume."""
     h = cap_height_m(radius_m, cut_angle_rad)
     cap_volume = math.pi * h**2 * (3.0 * radius_m - h) / 3.0
@@ -51,7 +52,8 @@ def cog_offset_m(radius_m, cut_angle_rad):
     return cap_volume * cap_centroid / cut_sphere_volume_m3(radius_m, cut_angle_rad)
 
 
-def mass_properties(radius_m, cut_angle_rad, density_kg_m3=None, mass_kg=None):
+def mass_properties(radius_m: float, cut_angle_rad: float, density_kg_m3: float | None = None,
+                    mass_kg: float | None = None) -> MassProperties:
     """Mass properties of the cut sphere; give either the density or the mass.
 
     Returns
@@ -61,7 +63,9 @@ def mass_properties(radius_m, cut_angle_rad, density_kg_m3=None, mass_kg=None):
     if (density_kg_m3 is None) == (mass_kg is None):
         raise ValueError('give exactly one of density_kg_m3 and mass_kg')
     volume = cut_sphere_volume_m3(radius_m, cut_angle_rad)
-    density = density_kg_m3 if density_kg_m3 is not None else mass_kg / volume
+    # Exactly one of the two is given (checked above): mass_kg is a float where it is used.
+    density = (density_kg_m3 if density_kg_m3 is not None
+               else mass_kg / volume)  # type: ignore[operator]
     mass = density * volume
     c2 = math.cos(0.5 * cut_angle_rad)
     c4 = math.cos(0.25 * cut_angle_rad)

@@ -11,13 +11,16 @@ import itertools
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
+from sphere_sim.model.assembly import Model
+from sphere_sim.model.programme import PulseProgramme
 from sphere_sim.model.rotations import matrix_to_quat, quat_to_matrix
 
 BEAMS = (1, 2, 3, 4)
 
 
-def beam_position_angle_rad(beam):
+def beam_position_angle_rad(beam: int) -> float:
     """Polar angle of a beam's suspension: beam 1 left (180 deg), then clockwise."""
     return math.pi - (beam - 1) * 0.5 * math.pi
 
@@ -28,7 +31,7 @@ class Symmetry:
     mirrored: bool = False
 
     @property
-    def matrix(self):
+    def matrix(self) -> NDArray[np.float64]:
         """The 3x3 orthogonal map of inertial vectors."""
         c = round(math.cos(0.5 * math.pi * self.quarter_turns))
         s = round(math.sin(0.5 * math.pi * self.quarter_turns))
@@ -37,15 +40,15 @@ class Symmetry:
         return turn @ mirror
 
     @property
-    def determinant(self):
+    def determinant(self) -> float:
         return -1.0 if self.mirrored else 1.0
 
-    def inverse(self):
+    def inverse(self) -> 'Symmetry':
         if self.mirrored:
             return self  # a mirror followed by a turn is itself a reflection: an involution
         return Symmetry((-self.quarter_turns) % 4, False)
 
-    def beam_map(self):
+    def beam_map(self) -> dict[int, int]:
         """Dict beam -> image beam."""
         G = self.matrix[:2, :2]
         out = {}
@@ -57,20 +60,20 @@ class Symmetry:
                 beam_position_angle_rad(b) - image_angle, 2 * math.pi)))
         return out
 
-    def apply_vector(self, v):
+    def apply_vector(self, v: ArrayLike) -> NDArray[np.float64]:
         """Image of inertial vectors, shape (3,) or (3, n)."""
         return self.matrix @ np.asarray(v, dtype=float)
 
-    def apply_direction(self, angle_rad):
+    def apply_direction(self, angle_rad: float) -> float:
         """Image of a polar angle in the x-y plane."""
         G = self.matrix[:2, :2]
         image = G @ np.array([math.cos(angle_rad), math.sin(angle_rad)])
         return math.atan2(image[1], image[0])
 
-    def apply_programme(self, programme):
+    def apply_programme(self, programme: PulseProgramme) -> PulseProgramme:
         return programme.mirrored(self.beam_map())
 
-    def apply_state(self, model, x):
+    def apply_state(self, model: Model, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Image of a full model state (all four beams present)."""
         if tuple(model.beams) != BEAMS:
             raise ValueError('state symmetry needs all four beams in order')
@@ -98,11 +101,11 @@ class Symmetry:
         return y
 
 
-def all_symmetries():
+def all_symmetries() -> tuple[Symmetry, ...]:
     return tuple(Symmetry(q, m) for m, q in itertools.product((False, True), range(4)))
 
 
-def kick_axis_mirror(direction_rad):
+def kick_axis_mirror(direction_rad: float) -> Symmetry:
     """The mirror at the line through the centre along ``direction_rad`` (a multiple of 45 deg).
 
     A mirror at the x axis followed by q quarter turns is the mirror at the line at q x 45 deg.

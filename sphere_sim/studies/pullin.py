@@ -6,14 +6,18 @@ and the *quasi-static* one (the voltage where the static equilibrium branch from
 """
 
 import dataclasses
+from collections.abc import Callable, Iterable
 
 import numpy as np
+from numpy.typing import NDArray
 
 from msg_defs.device import VOLTAGE_LIMIT_V
-from sphere_sim.integrate.solve import simulate
-from sphere_sim.model.assembly import assemble
+from sphere_sim.integrate.solve import Trajectory, simulate
+from sphere_sim.model.assembly import Model, assemble
 from sphere_sim.model.initial_state import RestError, polish_equilibrium, rest_state
+from sphere_sim.model.parameters import ParameterSet
 from sphere_sim.model.programme import Pulse, PulseProgramme
+from sphere_sim.model.scene import Scene
 
 PULSE_WIDTH_S = 5e-3  # Fig. 4
 BRACKET_V = (20.0, VOLTAGE_LIMIT_V)
@@ -29,11 +33,13 @@ class PullInResult:
     n_simulations: int
 
 
-def all_beams_pulse(model, amplitude_v, width_s=PULSE_WIDTH_S):
+def all_beams_pulse(model: Model, amplitude_v: float,
+                    width_s: float = PULSE_WIDTH_S) -> PulseProgramme:
     return PulseProgramme(tuple(Pulse(b, amplitude_v, 0.0, width_s) for b in model.beams))
 
 
-def pulls_in(model, x_rest, amplitude_v, width_s=PULSE_WIDTH_S, rtol=1e-6):
+def pulls_in(model: Model, x_rest: NDArray[np.float64], amplitude_v: float,
+             width_s: float = PULSE_WIDTH_S, rtol: float = 1e-6) -> bool:
     """Whether a pulse of ``amplitude_v`` on all beams brings a rear end onto the ground."""
     traj = simulate(model, x_rest, width_s, all_beams_pulse(model, amplitude_v, width_s),
                     rtol=rtol, sample_period_s=width_s / 200)
@@ -41,8 +47,11 @@ def pulls_in(model, x_rest, amplitude_v, width_s=PULSE_WIDTH_S, rtol=1e-6):
     return bool(np.min(rear) <= PULL_IN_GAP_M)
 
 
-def dynamic_threshold(model, x_rest, bracket_v=BRACKET_V, resolution_v=RESOLUTION_V,
-                      progress=None):
+def dynamic_threshold(model: Model, x_rest: NDArray[np.float64],
+                      bracket_v: tuple[float, float] = BRACKET_V,
+                      resolution_v: float = RESOLUTION_V,
+                      progress: Callable[[float, float], object] | None = None,
+                      ) -> tuple[float, int]:
     """Bisection on the pulse amplitude to ``resolution_v``; returns (threshold_v, n_runs)."""
     lo, hi = bracket_v
     runs = 0
@@ -61,13 +70,16 @@ def dynamic_threshold(model, x_rest, bracket_v=BRACKET_V, resolution_v=RESOLUTIO
     return 0.5 * (lo + hi), runs
 
 
-def static_state(model, x_guess, voltage_v):
+def static_state(model: Model, x_guess: NDArray[np.float64],
+                 voltage_v: float) -> NDArray[np.float64]:
     """Static equilibrium under a constant voltage on all beams, from a nearby guess."""
     return polish_equilibrium(model, x_guess, np.full(model.n_beams, voltage_v))
 
 
-def quasi_static_threshold(model, x_rest, resolution_v=RESOLUTION_V,
-                           step_v=QUASI_STATIC_STEP_V, max_v=BRACKET_V[1]):
+def quasi_static_threshold(model: Model, x_rest: NDArray[np.float64],
+                           resolution_v: float = RESOLUTION_V,
+                           step_v: float = QUASI_STATIC_STEP_V,
+                           max_v: float = BRACKET_V[1]) -> float:
     """End of the static branch from rest, by continuation in the voltage.
 
     The step halves whenever Newton fails or the beams are pulled in, which happens both at
@@ -91,7 +103,8 @@ def quasi_static_threshold(model, x_rest, resolution_v=RESOLUTION_V,
     return v_ok + step_v
 
 
-def pull_in(scene, params=None, progress=None):
+def pull_in(scene: Scene, params: ParameterSet | None = None,
+            progress: Callable[[float, float], object] | None = None) -> PullInResult:
     """Both thresholds for the scene's beams and sphere."""
     model = assemble(scene, params)
     x_rest = rest_state(model)
@@ -100,8 +113,9 @@ def pull_in(scene, params=None, progress=None):
     return PullInResult(dynamic, static, runs)
 
 
-def pulse_sweep(model, x_rest, voltages_v, width_s=PULSE_WIDTH_S, after_s=10e-3, rtol=1e-6,
-                progress=None):
+def pulse_sweep(model: Model, x_rest: NDArray[np.float64], voltages_v: Iterable[float],
+                width_s: float = PULSE_WIDTH_S, after_s: float = 10e-3, rtol: float = 1e-6,
+                progress: Callable[[float], object] | None = None) -> list[Trajectory]:
     """Fig. 4: trajectories of a pulse on all beams for each amplitude, list of Trajectory."""
     out = []
     for v in voltages_v:

@@ -6,11 +6,13 @@ returns rows; ``sphere-twin bench regularisation`` writes them.
 """
 
 import math
+from collections.abc import Callable, Mapping, Sequence
 
 from msg_defs.device import KICK_WINDOW_S
 from sphere_sim.integrate.solve import simulate
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import rest_state
+from sphere_sim.model.programme import PulseProgramme
 from sphere_sim.model.scene import load_scene
 
 ONSET_VALUES_M = (1e-7, 3e-8, 1e-8, 3e-9, 1e-9, 3e-10, 1e-10, 1e-11, 0.0)
@@ -21,7 +23,10 @@ STUDY_RTOLS = (1e-7, 1e-9)  # each value run at two tolerances: the numerics mus
 SAMPLE_PERIOD_S = 1e-3
 
 
-def regularisation_rows(programmes, direction_rad, rtols=STUDY_RTOLS, progress=None):
+def regularisation_rows(programmes: Mapping[str, PulseProgramme], direction_rad: float,
+                        rtols: Sequence[float] = STUDY_RTOLS,
+                        progress: Callable[[], object] | None = None,
+                        ) -> list[dict[str, str | float | int]]:
     """One row per (parameter, value, kick, rtol): the final normal after the kick window
     and its projection on ``direction_rad`` (deg), with the steps and wall time.
 

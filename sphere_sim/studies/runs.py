@@ -1,14 +1,16 @@
 """Running a scene end to end and summarising the outcome in the paper's terms."""
 
 import dataclasses
+from typing import Any
 
 import numpy as np
 
-from sphere_sim.integrate.solve import simulate
+from sphere_sim.integrate.solve import Trajectory, simulate
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import initial_state
+from sphere_sim.model.parameters import ParameterSet
 from sphere_sim.model.rotations import quat_to_cardan
-from sphere_sim.model.scene import load_scene
+from sphere_sim.model.scene import Scene, load_scene
 
 DEFAULT_RTOL = 1e-6
 
@@ -26,20 +28,21 @@ class KickOutcome:
     scene: str
     parameter_set: str
     duration_s: float
-    cardan_deg: tuple
-    surface_normal: tuple
+    cardan_deg: tuple[float, ...]
+    surface_normal: tuple[float, ...]
     rotation_deg: float
     direction_deg: float
-    sphere_position_m: tuple
+    sphere_position_m: tuple[float, ...]
     max_tilt_change_deg: float
     airborne_s: float
     wall_time_s: float
 
-    def to_dict(self):
+    def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
 
-def run_scene(scene, params=None, rtol=DEFAULT_RTOL, sample_period_s=1e-4, method='fast'):
+def run_scene(scene: Scene, params: ParameterSet | None = None, rtol: float = DEFAULT_RTOL,
+              sample_period_s: float = 1e-4, method: str = 'fast') -> Trajectory:
     """Simulate a scene from its initial state for its duration; returns the Trajectory."""
     model = assemble(scene, params)
     x0 = initial_state(model)
@@ -47,7 +50,7 @@ def run_scene(scene, params=None, rtol=DEFAULT_RTOL, sample_period_s=1e-4, metho
                     method=method)
 
 
-def summarize(traj):
+def summarize(traj: Trajectory) -> KickOutcome:
     """The :class:`KickOutcome` of a trajectory with a sphere."""
     model = traj.model
     if not model.has_sphere:
@@ -80,7 +83,7 @@ def summarize(traj):
 LITERAL_KICK_SCENE = 'literal_kick'
 
 
-def literal_kick(params=None, rtol=DEFAULT_RTOL):
+def literal_kick(params: ParameterSet | None = None, rtol: float = DEFAULT_RTOL) -> KickOutcome:
     """The :class:`KickOutcome` of the paper's kick read literally (35 V on beams 1-2, 80 V on
     beams 3-4, §4.1; the ``literal_kick`` scene) on ``params`` (default: the scene's set)."""
     scene = load_scene(LITERAL_KICK_SCENE)

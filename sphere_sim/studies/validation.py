@@ -2,14 +2,17 @@
 
 import dataclasses
 import math
+from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import NDArray
 
 from msg_defs.device import BEAM_COUNT
 from sphere_sim.integrate.solve import simulate
-from sphere_sim.model.assembly import assemble
+from sphere_sim.model.assembly import Model, assemble
 from sphere_sim.model.energy import energy_balance
 from sphere_sim.model.initial_state import rest_state
+from sphere_sim.model.parameters import ParameterSet
 from sphere_sim.model.programme import Pulse, PulseProgramme
 from sphere_sim.model.rotations import angle_between
 from sphere_sim.model.scene import load_scene
@@ -20,7 +23,7 @@ MIRROR_XZ_BEAMS = {1: 1, 2: 4, 3: 3, 4: 2}  # mirroring at the x-z plane swaps b
 MIRROR_XZ_NORMAL = np.array([[1.0], [-1.0], [1.0]])
 
 
-def rest_model(params=None, **effects):
+def rest_model(params: ParameterSet | None = None, **effects: bool) -> Model:
     """The shipped rest scene's model with a parameter set (default: the default set) and some
     effects switched."""
     scene = load_scene('rest')
@@ -29,12 +32,13 @@ def rest_model(params=None, **effects):
     return assemble(scene, params)
 
 
-def all_beams(amplitudes_v, width_s, start_s=0.0):
+def all_beams(amplitudes_v: Sequence[float], width_s: float,
+              start_s: float = 0.0) -> PulseProgramme:
     return PulseProgramme(tuple(Pulse(b, float(a), start_s, width_s)
                                 for b, a in zip((1, 2, 3, 4), amplitudes_v, strict=True) if a))
 
 
-def tilt_rad(normals):
+def tilt_rad(normals: NDArray[np.float64]) -> NDArray[np.float64]:
     """Angle of each normal (shape (3, n)) from the vertical."""
     return np.arccos(np.clip(normals[2], -1.0, 1.0))
 
@@ -42,14 +46,14 @@ def tilt_rad(normals):
 @dataclasses.dataclass(frozen=True)
 class RestReport:
     force_imbalance: float  # largest, relative to the weight per tip
-    front_gaps_m: np.ndarray
-    rear_gaps_m: np.ndarray
+    front_gaps_m: NDArray[np.float64]
+    rear_gaps_m: NDArray[np.float64]
     tilt_drift_rad: float
     position_drift_m: float
     duration_s: float
 
 
-def force_imbalance(model, x):
+def force_imbalance(model: Model, x: NDArray[np.float64]) -> float:
     """Largest force (or torque over beam length) left on a beam or the sphere's centre at
     ``x`` with no voltage, relative to the weight per tip."""
     dxdt = model.rhs(0.0, x, np.zeros(model.n_beams))
@@ -61,7 +65,7 @@ def force_imbalance(model, x):
     return float(np.max(np.abs(forces)) / (s.mass_kg * model.params.gravity_m_per_s2 / 4.0))
 
 
-def rest_report(params=None, duration_s=1.0):
+def rest_report(params: ParameterSet | None = None, duration_s: float = 1.0) -> RestReport:
     """Rest equilibrium and how far the sphere moves from it in ``duration_s``."""
     model = rest_model(params)
     x0 = rest_state(model)
@@ -77,8 +81,9 @@ def rest_report(params=None, duration_s=1.0):
         duration_s=duration_s)
 
 
-def symmetric_pulse_tilt(amplitude_v=50.0, width_s=5e-3, duration_s=0.02,
-                         params=None):
+def symmetric_pulse_tilt(amplitude_v: float = 50.0, width_s: float = 5e-3,
+                         duration_s: float = 0.02,
+                         params: ParameterSet | None = None) -> tuple[float, float]:
     """Largest tilt (rad) after equal pulses on all beams from rest, and the sphere's lift (m)."""
     model = rest_model(params)
     x0 = rest_state(model)
@@ -88,8 +93,9 @@ def symmetric_pulse_tilt(amplitude_v=50.0, width_s=5e-3, duration_s=0.02,
     return float(np.max(tilt_rad(traj.surface_normal()))), lift
 
 
-def mirror_mismatch(amplitudes_v=(35, 35, 80, 80), width_s=4e-3, duration_s=0.01,
-                    params=None):
+def mirror_mismatch(amplitudes_v: Sequence[float] = (35, 35, 80, 80), width_s: float = 4e-3,
+                    duration_s: float = 0.01,
+                    params: ParameterSet | None = None) -> tuple[float, float]:
     """Largest normal difference between a programme's run and its mirror image's, mirrored back.
 
     Returns (mismatch, largest normal x-y excursion) so that a zero motion cannot pass.
@@ -104,8 +110,9 @@ def mirror_mismatch(amplitudes_v=(35, 35, 80, 80), width_s=4e-3, duration_s=0.01
     return float(np.max(np.abs(nb - na * MIRROR_XZ_NORMAL))), float(np.max(np.abs(na[:2])))
 
 
-def lossless_drop(lift_m=5e-6, duration_s=2.5e-3, spin_rad_per_s=(50.0, -30.0, 10.0),
-                  params=None):
+def lossless_drop(lift_m: float = 5e-6, duration_s: float = 2.5e-3,
+                  spin_rad_per_s: Sequence[float] = (50.0, -30.0, 10.0),
+                  params: ParameterSet | None = None) -> tuple[float, int]:
     """Energy surplus of a spinning sphere dropped onto the tips without any loss.
 
     Returns (largest |surplus| relative to m g lift, number of impacts).
@@ -123,8 +130,9 @@ def lossless_drop(lift_m=5e-6, duration_s=2.5e-3, spin_rad_per_s=(50.0, -30.0, 1
     return float(np.max(np.abs(energy_balance(traj).surplus_j)) / drop), impacts
 
 
-def lossless_pulse(amplitudes_v=(40, 40, 45, 45), width_s=0.6e-3, duration_s=1e-3,
-                   params=None):
+def lossless_pulse(amplitudes_v: Sequence[float] = (40, 40, 45, 45), width_s: float = 0.6e-3,
+                   duration_s: float = 1e-3,
+                   params: ParameterSet | None = None) -> tuple[float, float]:
     """Energy surplus relative to the electrical work without losses; and the final work (J)."""
     model = rest_model(params, **LOSSLESS)
     traj = simulate(model, rest_state(model), duration_s, all_beams(amplitudes_v, width_s),
@@ -134,8 +142,8 @@ def lossless_pulse(amplitudes_v=(40, 40, 45, 45), width_s=0.6e-3, duration_s=1e-
     return float(np.max(np.abs(balance.surplus_j)) / work), float(balance.electrical_work_j[-1])
 
 
-def lossy_kick(amplitudes_v=(35, 35, 80, 80), width_s=3e-3, duration_s=0.01,
-               params=None):
+def lossy_kick(amplitudes_v: Sequence[float] = (35, 35, 80, 80), width_s: float = 3e-3,
+               duration_s: float = 0.01, params: ParameterSet | None = None) -> tuple[float, float]:
     """With all losses: (largest surplus, final surplus) relative to the largest electrical work.
 
     The mechanical energy includes what the friction bristles hold (``Model.bristle_energy``).
@@ -148,7 +156,8 @@ def lossy_kick(amplitudes_v=(35, 35, 80, 80), width_s=3e-3, duration_s=0.01,
     return float(np.max(balance.surplus_j) / work), float(balance.surplus_j[-1] / work)
 
 
-def tilted_creep_rate(tilt_deg=20.0, duration_s=1.0, params=None):
+def tilted_creep_rate(tilt_deg: float = 20.0, duration_s: float = 1.0,
+                      params: ParameterSet | None = None) -> float:
     """How fast a tilted sphere released at rest turns back towards zero tilt (rad/s).
 
     The centre of gravity below the full-sphere centre gives a restoring torque of
@@ -168,7 +177,8 @@ def tilted_creep_rate(tilt_deg=20.0, duration_s=1.0, params=None):
 TILTED_REST_DEG = (5.0, 10.0, 20.0, 35.0)
 
 
-def tilted_rests(tilts_deg=TILTED_REST_DEG, params=None):
+def tilted_rests(tilts_deg: Sequence[float] = TILTED_REST_DEG,
+                 params: ParameterSet | None = None) -> list[tuple[float, float, float]]:
     """The solved rest at each tilt (about x): (tilt, largest force imbalance relative to the
     weight per tip, how far the normal ended from the tilt asked for in rad). ``rest_state``
     raises RestError where it finds none."""

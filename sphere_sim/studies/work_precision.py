@@ -12,18 +12,23 @@ import dataclasses
 import math
 import statistics
 import time
+from collections.abc import Callable, Sequence
+from typing import Any, Protocol, Self
 
 import numpy as np
+from numpy.typing import NDArray
 
 from msg_defs.device import BEAM_IDS, KICK_WINDOW_S, VOLTAGE_LIMIT_V
 from sphere_sim.integrate.kernel_replay import RecordingModel, replay_wall_s
+from sphere_sim.integrate.segment import SolverError
 from sphere_sim.integrate.solve import (
     DEFAULT_METHOD,
     DEFAULT_RTOL,
     SCIPY_METHODS,
-    SolverError,
+    Trajectory,
     simulate,
 )
+from sphere_sim.model.assembly import Model
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.programme import Pulse, PulseProgramme
 from sphere_sim.model.rotations import angle_between
@@ -80,13 +85,14 @@ class BenchScene:
 
     name: str
     description: str
-    model: object
-    x0: np.ndarray
+    model: Model
+    x0: NDArray[np.float64]
     programme: PulseProgramme
     duration_s: float
 
 
-def all_beams_programme(amplitude_v=ALL_BEAMS_V, width_s=ALL_BEAMS_WIDTH_S):
+def all_beams_programme(amplitude_v: float = ALL_BEAMS_V,
+                        width_s: float = ALL_BEAMS_WIDTH_S) -> PulseProgramme:
     return PulseProgramme(tuple(Pulse(b, amplitude_v, 0.0, width_s) for b in BEAM_IDS))
 
 
@@ -94,22 +100,32 @@ def all_beams_programme(amplitude_v=ALL_BEAMS_V, width_s=ALL_BEAMS_WIDTH_S):
 class Plan:
     """What one benchmark run covers: the full one, or the quick one (< 1 min)."""
 
-    tolerances: tuple
-    methods: tuple
+    tolerances: tuple[float, ...]
+    methods: tuple[str, ...]
     repeats: int
     budget_s: float
-    reference_methods: tuple
+    reference_methods: tuple[str, ...]
     reference_rtol: float
     rtf_repeats: int
     quick: bool
 
     @classmethod
-    def of(cls, quick):
+    def of(cls, quick: bool) -> Self:
         if quick:
             return cls(QUICK_TOLERANCES, QUICK_METHODS, QUICK_REPEATS, QUICK_RUN_BUDGET_S,
                        QUICK_REFERENCE_METHODS, QUICK_REFERENCE_RTOL, QUICK_REPEATS, True)
         return cls(TOLERANCES, METHODS, REPEATS, RUN_BUDGET_S, REFERENCE_METHODS,
                    min(TOLERANCES), RTF_REPEATS, False)
+
+
+class ProgressBar(Protocol):
+    """What :func:`work_precision` uses of a progress bar (tqdm's)."""
+
+    n: int
+    total: int
+
+    def update(self, n: int = 1) -> object: ...
+    def set_postfix_str(self, text: str) -> object: ...
 
 
 class _NoBar:
@@ -118,14 +134,14 @@ class _NoBar:
     n = 0
     total = 0
 
-    def update(self, n=1):
+    def update(self, n: int = 1) -> None:
         self.n += n
 
-    def set_postfix_str(self, text):
+    def set_postfix_str(self, text: str) -> None:
         pass
 
 
-def bench_scenes(model, kick, kick_label):
+def bench_scenes(model: Model, kick: PulseProgramme, kick_label: str) -> list[BenchScene]:
     """The three scenes: ``kick`` (a PulseProgramme) from rest and from a 35 deg tilt, and the
     80 V pulse on all beams from rest, on ``model``."""
     return [
@@ -142,7 +158,9 @@ def bench_scenes(model, kick, kick_label):
     ]
 
 
-def work_precision(scenes, plan, bar=None, report=print):
+def work_precision(scenes: Sequence[BenchScene], plan: Plan, bar: ProgressBar | None = None,
+                   report: Callable[[str], object] = print,
+                   ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Run the benchmark on ``scenes`` (only the first if ``plan.quick``).
 
     ``bar`` is a tqdm-like progress bar, ``report`` takes each line worth printing.
@@ -185,7 +203,8 @@ def work_precision(scenes, plan, bar=None, report=print):
     return rows, summary
 
 
-def _first_runs(scene, reference, plan, bar):
+def _first_runs(scene: BenchScene, reference: Trajectory, plan: Plan,
+                bar: ProgressBar) -> list[dict[str, Any]]:
     """Each method's rows on ``scene``, loosest tolerance first; after a failure (the budget),
     the method's tighter tolerances are skipped."""
     rows = []
@@ -200,7 +219,8 @@ def _first_runs(scene, reference, plan, bar):
     return rows
 
 
-def _repeat_runs(rows, scenes, plan, bar):
+def _repeat_runs(rows: list[dict[str, Any]], scenes: Sequence[BenchScene], plan: Plan,
+                 bar: ProgressBar) -> None:
     """The further timed runs, then each row's median wall time.
 
     They go in passes over every point, not back to back: a burst of load on a shared
@@ -226,7 +246,8 @@ def _repeat_runs(rows, scenes, plan, bar):
             row['note'] = f'{len(times)} timed run(s)'
 
 
-def run_once(scene, method, rtol, max_wall_s):
+def run_once(scene: BenchScene, method: str, rtol: float,
+             max_wall_s: float) -> tuple[Trajectory, float]:
     """One timed run; returns (trajectory, wall time in s)."""
     started = time.perf_counter()
     traj = simulate(scene.model, scene.x0, scene.duration_s, scene.programme, rtol=rtol,
@@ -234,7 +255,8 @@ def run_once(scene, method, rtol, max_wall_s):
     return traj, time.perf_counter() - started
 
 
-def errors(scene, traj, reference):
+def errors(scene: BenchScene, traj: Trajectory,
+           reference: Trajectory) -> tuple[float, float, float]:
     """Errors of ``traj`` against ``reference`` (same sample grid).
 
     Returns
@@ -257,7 +279,8 @@ def errors(scene, traj, reference):
     return max(angles), state, last
 
 
-def reference_runs(scene, methods, rtol, budget_s):
+def reference_runs(scene: BenchScene, methods: Sequence[str], rtol: float, budget_s: float,
+                   ) -> tuple[Trajectory, Trajectory, tuple[float, float, float]]:
     """Two reference trajectories and their agreement (angle rad, scaled state)."""
     a, _ = run_once(scene, methods[0], rtol, budget_s * 10)
     b, _ = run_once(scene, methods[1], rtol, budget_s * 10)
@@ -267,14 +290,15 @@ def reference_runs(scene, methods, rtol, budget_s):
 REFERENCE_NOTE = 'the reference run itself: error 0 by construction'
 
 
-def mark_reference(rows, method, rtol):
+def mark_reference(rows: list[dict[str, Any]], method: str, rtol: float) -> None:
     """Note on the rows that repeat the reference run: their zero error is by construction."""
     for row in rows:
         if row['method'] == method and row['rtol'] == rtol:
             row['note'] = '; '.join(filter(None, (row.get('note'), REFERENCE_NOTE)))
 
 
-def _measure(scene, method, rtol, reference, budget_s):
+def _measure(scene: BenchScene, method: str, rtol: float, reference: Trajectory,
+             budget_s: float) -> dict[str, Any]:
     """One point: its errors and its first timed run (``times``; work_precision adds the
     others and replaces them by their median ``wall_s``)."""
     row = {'scene': scene.name, 'method': method, 'rtol': rtol}
@@ -293,7 +317,8 @@ def _measure(scene, method, rtol, reference, budget_s):
             'steps': -1 if s.n_steps is None else s.n_steps, 'nfev': s.nfev, 'njev': s.njev}
 
 
-def time_at_error(rows, scene, method, target, key='angle_error_rad'):
+def time_at_error(rows: Sequence[dict[str, Any]], scene: str, method: str, target: float,
+                  key: str = 'angle_error_rad') -> float:
     """Wall time (s) of ``method`` at final-angle error ``target`` (the rows' ``key``).
 
     Interpolated linearly in log(error)-log(time) between the two tolerances, loosest first,
@@ -313,21 +338,24 @@ def time_at_error(rows, scene, method, target, key='angle_error_rad'):
     return math.nan
 
 
-def run_reaching(rows, scene, method, target, key='angle_error_rad'):
+def run_reaching(rows: Sequence[dict[str, Any]], scene: str, method: str, target: float,
+                 key: str = 'angle_error_rad') -> tuple[float, float, float]:
     """(rtol, error, wall time) of the loosest run of ``method`` that reaches ``target``, the
     run that bounds :func:`time_at_error`'s interpolation from below; NaNs if none does."""
     return next((pt for pt in _points(rows, scene, method, key) if pt[1] <= target),
                 (math.nan,) * 3)
 
 
-def _points(rows, scene, method, key):
+def _points(rows: Sequence[dict[str, Any]], scene: str, method: str,
+            key: str) -> list[tuple[float, float, float]]:
     """(rtol, error, wall time) of the method's successful runs on the scene, loosest first."""
     return sorted(((r['rtol'], r[key], r['wall_s']) for r in rows
                    if r['scene'] == scene and r['method'] == method and r['status'] == 'ok'),
                   reverse=True)
 
 
-def kernel_evaluations_s(scene, method, rtol, repeats=KERNEL_REPLAY_REPEATS):
+def kernel_evaluations_s(scene: BenchScene, method: str, rtol: float,
+                         repeats: int = KERNEL_REPLAY_REPEATS) -> float:
     """Wall time (s) of the model's kernel evaluations alone in one run of ``method``.
 
     The run records every state its solver evaluates the right-hand side and the Jacobian
@@ -340,7 +368,9 @@ def kernel_evaluations_s(scene, method, rtol, repeats=KERNEL_REPLAY_REPEATS):
     return replay_wall_s(scene.model, recording, repeats)
 
 
-def add_kernel_evaluations(summary, rows, scenes, report):
+def add_kernel_evaluations(summary: dict[str, Any], rows: Sequence[dict[str, Any]],
+                           scenes: Sequence[BenchScene],
+                           report: Callable[[str], object]) -> None:
     """Time the best library method's bare kernel evaluations on each scene, at the tolerance
     where it reaches the target, into ``summary['per_scene']``; report a line per scene."""
     for scene in scenes:
@@ -359,7 +389,7 @@ def add_kernel_evaluations(summary, rows, scenes, report):
                     for k in ('kernels_rtol', 'kernels_s', 'kernels_run_s')})
 
 
-def summarise(rows, scene):
+def summarise(rows: Sequence[dict[str, Any]], scene: str) -> dict[str, Any]:
     """Speedup of 'fast' over the best scipy method at TARGET_ANGLE_ERROR_RAD, on ``scene``
     and on each scene (``per_scene``), by the final-angle error and (``last_sample``) by the
     last sample's."""
@@ -370,23 +400,24 @@ def summarise(rows, scene):
     return {'scene': scene, **per_scene[scene], 'per_scene': per_scene}
 
 
-def _speedup(rows, scene, key):
+def _speedup(rows: Sequence[dict[str, Any]], scene: str, key: str) -> dict[str, Any]:
     fast = time_at_error(rows, scene, 'fast', TARGET_ANGLE_ERROR_RAD, key)
     scipy_times = {m: time_at_error(rows, scene, m, TARGET_ANGLE_ERROR_RAD, key)
                    for m in SCIPY_METHODS}
-    finite = {m: t for m, t in scipy_times.items() if math.isfinite(t)}
-    best = min(finite, key=finite.get) if finite else None
+    finite: dict[str | None, float] = {m: t for m, t in scipy_times.items() if math.isfinite(t)}
+    best = min(finite, key=finite.__getitem__) if finite else None
     return {'fast_s': fast, 'best_scipy': best, 'best_scipy_s': finite.get(best, math.nan),
             'speedup': finite[best] / fast if best and math.isfinite(fast) else math.nan,
             'scipy_s': scipy_times}
 
 
-def real_time_factors(repeats, scenes):
+def real_time_factors(repeats: int, scenes: Sequence[BenchScene],
+                      ) -> dict[str, tuple[float, float]]:
     """Simulated seconds per wall second of each scene's programme from its start state over
     RTF_DURATION_S at the defaults of ``solve`` (integration only; the start state is computed
     beforehand): ``{name: (factor, median wall s)}``. The runs go in passes over the scenes,
     so that a burst of load slows one run of each, which the median drops."""
-    times = {scene.name: [] for scene in scenes}
+    times: dict[str, list[float]] = {scene.name: [] for scene in scenes}
     for _ in range(max(3, repeats)):
         for scene in scenes:
             traj = simulate(scene.model, scene.x0, RTF_DURATION_S, scene.programme,

@@ -2,11 +2,26 @@
 
 # The physics is imported inside the functions: the node modules import this one for
 # PLANT_KINDS and must start (and install their signal handlers) before numba and the tables load.
+# The imports for the annotations below are for the type checker only.
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+    from sphere_sim.kicks.lookup_table import ProgrammedKickPlant
+    from sphere_sim.kicks.plants import ContinuousPlant, DiscretePlant
 
 PLANT_KINDS = ('discrete', 'continuous')
 
 
-def build_plant(kind, scene_name='rest', table_paths=(), params_name=''):
+def build_plant(kind: str, scene_name: str = 'rest', table_paths: Iterable[str | Path] = (),
+                params_name: str = '') -> ContinuousPlant | DiscretePlant:
     """The plant of ``kind`` for the scene's parameters and initial tilt.
 
     ``params_name`` (a shipped set or a YAML file) replaces the scene's parameter set; '' keeps
@@ -41,7 +56,7 @@ def build_plant(kind, scene_name='rest', table_paths=(), params_name=''):
                           normal_from_cardan(alpha, beta))
 
 
-def discrete_plant(kicks, normal0):
+def discrete_plant(kicks: ProgrammedKickPlant, normal0: NDArray[np.float64]) -> DiscretePlant:
     """The discrete plant of the kick model ``kicks``, resting at ``normal0``."""
     from sphere_sim.kicks.discrete import kick_period_s
     from sphere_sim.kicks.plants import DiscretePlant

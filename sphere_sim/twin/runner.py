@@ -13,13 +13,15 @@ import dataclasses
 import threading
 import time
 import typing
+from collections.abc import Iterable
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from msg_defs.device import VOLTAGE_LIMIT_V
 from msg_defs.programme_events import ProgrammeEvent, ProgrammeState
 from msg_defs.voltage_rules import VoltageRuleError, check_voltages
-from sphere_sim.kicks.plants import TIME_TOL_S, PlantError
+from sphere_sim.kicks.plants import TIME_TOL_S, PlantError, PlantSnapshot, TwinPlant
 from sphere_sim.model.programme import ProgrammeError, PulseProgramme
 
 # A programme may start at most this far after the simulated now. Stamps are simulated time;
@@ -39,7 +41,7 @@ class _Queued(typing.NamedTuple):
 
     start_s: float
     kind: str  # 'hold' or 'programme'
-    payload: object
+    payload: NDArray[np.float64] | PulseProgramme  # the voltages held, or the programme
     asked_s: float
     arrival_wall_s: float
     number: int = 0  # programmes: the runner's count of those received
@@ -62,9 +64,9 @@ class Sample:
     """One published instant: the true snapshot, the measured (noisy) normal, and the
     arrival times (wall s) of the programmes that this sample is the first to show."""
 
-    snapshot: object
-    measured_normal: np.ndarray
-    acted_arrivals_wall_s: tuple = ()
+    snapshot: PlantSnapshot
+    measured_normal: NDArray[np.float64]
+    acted_arrivals_wall_s: tuple[float, ...] = ()
 
 
 @dataclasses.dataclass
@@ -88,20 +90,20 @@ class TwinTimings:
     """
 
     integrating_s: float = 0.0
-    latencies_wall_s: collections.deque = dataclasses.field(
+    latencies_wall_s: collections.deque[float] = dataclasses.field(
         default_factory=lambda: collections.deque(maxlen=LATENCY_HISTORY))
-    delays_sim_s: collections.deque = dataclasses.field(
+    delays_sim_s: collections.deque[float] = dataclasses.field(
         default_factory=lambda: collections.deque(maxlen=LATENCY_HISTORY))
     _lock: threading.Lock = dataclasses.field(default_factory=threading.Lock, repr=False)
 
-    def record_published(self, sample, published_wall_s):
+    def record_published(self, sample: Sample, published_wall_s: float) -> None:
         """Book the latencies of the programmes ``sample`` is the first to show, now that it
         is out (``published_wall_s``, ``time.perf_counter()``)."""
         with self._lock:
             self.latencies_wall_s.extend(published_wall_s - arrival
                                          for arrival in sample.acted_arrivals_wall_s)
 
-    def latency_summary(self):
+    def latency_summary(self) -> tuple[float, float]:
         """(median, largest) wall latency in s; NaNs before the first programme."""
         with self._lock:
             latencies = list(self.latencies_wall_s)
@@ -109,7 +111,7 @@ class TwinTimings:
             return float('nan'), float('nan')
         return float(np.median(latencies)), float(max(latencies))
 
-    def delay_median_s(self):
+    def delay_median_s(self) -> float:
         """Median simulated delay of a programme's start after the start it asked for (s)."""
         return float(np.median(self.delays_sim_s)) if self.delays_sim_s else float('nan')
 
@@ -133,8 +135,9 @@ class TwinRunner:
     voltage_limit_v : float
     """
 
-    def __init__(self, plant, period_s, noise_std_rad=0.0, seed=0, lockstep=False,
-                 voltage_limit_v=VOLTAGE_LIMIT_V):
+    def __init__(self, plant: TwinPlant, period_s: float, noise_std_rad: float = 0.0,
+                 seed: int = 0, lockstep: bool = False,
+                 voltage_limit_v: float = VOLTAGE_LIMIT_V) -> None:
         if not (np.isfinite(period_s) and period_s > 0):
             raise ValueError(f'period_s must be a positive number, got {period_s}')
         if not (np.isfinite(noise_std_rad) and noise_std_rad >= 0):
@@ -147,20 +150,22 @@ class TwinRunner:
         self.voltage_limit_v = voltage_limit_v
         self.counters = TwinCounters()
         self.timings = TwinTimings()
-        self._queued = []  # _Queued, in start order, applied at the sample boundary they are due
-        self._acted = []  # (arrival_wall_s) of programmes applied in this tick
-        self._running = None  # _Running, until its end is reported or it is cut
+        # In start order, applied at the sample boundary they are due.
+        self._queued: list[_Queued] = []
+        self._acted: list[float] = []  # (arrival_wall_s) of programmes applied in this tick
+        # Until its end is reported or it is cut.
+        self._running: _Running | None = None
         self._received = 0  # programmes received, refused ones included
-        self._events = []  # ProgrammeEvent not yet taken by take_events()
+        self._events: list[ProgrammeEvent] = []  # not yet taken by take_events()
         self._step = 0
         self._idle_published = False
 
     @property
-    def time_s(self):
+    def time_s(self) -> float:
         return self._step * self.period_s
 
     # --- commands ----------------------------------------------------------------------
-    def command_voltages(self, voltages_v):
+    def command_voltages(self, voltages_v: ArrayLike) -> str | None:
         """Queue voltages to hold from the next sample on.
 
         A hold replaces whatever the beams were given from then on, so it cuts a programme that
@@ -187,7 +192,7 @@ class TwinRunner:
         self._queue(self.time_s, 'hold', volts, self.time_s)
         return cut
 
-    def _cut_by_hold(self):
+    def _cut_by_hold(self) -> str | None:
         """What a hold now overrides: the running programme and the queued ones (counted,
         reported as cut, and said, or None)."""
         queued = [item for item in self._queued if item.kind == 'programme']
@@ -197,6 +202,7 @@ class TwinRunner:
         self.counters.cut += len(queued) + running
         what = []
         if running:
+            assert self._running is not None  # for the type checker: ``running`` says so
             what.append(f'the programme running until t = {self._running.end_s:.4f} s')
             self._cut(self._running.asked_s, self._running.number, 'a voltage command')
         for item in queued:
@@ -206,21 +212,22 @@ class TwinRunner:
         return (f'a voltage command at t = {self.time_s:.4f} s cut {" and ".join(what)}: the '
                 'latest command holds the beams')
 
-    def _cut(self, asked_s, number, by):
+    def _cut(self, asked_s: float, number: int, by: str) -> None:
         if self._running is not None and self._running.number == number:
             self._running = None
         self._event(ProgrammeState.CUT, asked_s, number, f'cut by {by} at t = '
                     f'{self.time_s:.4f} s')
 
-    def _event(self, state, asked_s, number, text):
+    def _event(self, state: ProgrammeState, asked_s: float, number: int, text: str) -> None:
         self._events.append(ProgrammeEvent(state, asked_s, number, self.time_s, text))
 
-    def take_events(self):
+    def take_events(self) -> list[ProgrammeEvent]:
         """The programme events since the last call, oldest first (for the node to echo)."""
         events, self._events = self._events, []
         return events
 
-    def command_programme(self, times_s, voltages_v, start_s=0.0):
+    def command_programme(self, times_s: ArrayLike, voltages_v: Iterable[ArrayLike],
+                          start_s: float = 0.0) -> None:
         """Queue a programme (segments relative to its start) starting at ``start_s``
         (simulated s; 0 or a past time: at the next sample).
 
@@ -245,13 +252,14 @@ class TwinRunner:
             self._event(ProgrammeState.REFUSED, start_s, self._received, str(error))
             raise CommandRejectedError(str(error)) from None
 
-    def refuse_programme(self, asked_s, reason):
+    def refuse_programme(self, asked_s: float, reason: str) -> None:
         """Book a programme refused before it reached the runner (a message that breaks the
         contract): numbered, and reported to its sender like any other refusal."""
         self._received += 1
         self._event(ProgrammeState.REFUSED, asked_s, self._received, reason)
 
-    def _queue(self, start_s, kind, payload, asked_s, number=0):
+    def _queue(self, start_s: float, kind: str, payload: NDArray[np.float64] | PulseProgramme,
+               asked_s: float, number: int = 0) -> None:
         if len(self._queued) >= MAX_QUEUED_COMMANDS:
             raise CommandRejectedError(f'{MAX_QUEUED_COMMANDS} commands are already waiting '
                                        'for their start; this one is refused')
@@ -260,16 +268,16 @@ class TwinRunner:
         self._queued.sort(key=lambda item: item.start_s)
         self._idle_published = False
 
-    def _apply_due(self):
+    def _apply_due(self) -> list[str]:
         """Apply queued commands due now; returns the reasons of those the plant refused."""
         refused = []
         while self._queued and self._queued[0].start_s <= self.time_s + TIME_TOL_S:
             item = self._queued.pop(0)
             try:
                 if item.kind == 'hold':
-                    self.plant.hold(item.payload)
+                    self.plant.hold(typing.cast(NDArray[np.float64], item.payload))
                 else:
-                    self.plant.run_programme(item.payload)
+                    self.plant.run_programme(typing.cast(PulseProgramme, item.payload))
                     self._started(item)
                 self.counters.accepted += 1
             except (PlantError, ProgrammeError) as error:
@@ -279,12 +287,12 @@ class TwinRunner:
                     self._event(ProgrammeState.REFUSED, item.asked_s, item.number, str(error))
         return refused
 
-    def _started(self, item):
+    def _started(self, item: _Queued) -> None:
         """Book a programme the plant took: the one it replaced is cut; its start is reported
         and its end watched for."""
         if self._running is not None:
             self._cut(self._running.asked_s, self._running.number, 'a later programme')
-        end_s = self.time_s + item.payload.duration_s
+        end_s = self.time_s + typing.cast(PulseProgramme, item.payload).duration_s
         self._running = _Running(item.asked_s, item.number, end_s)
         self.counters.programmes += 1
         self._acted.append(item.arrival_wall_s)
@@ -295,7 +303,7 @@ class TwinRunner:
                     f'started at t = {self.time_s:.4f} s{delay}; its segments end at '
                     f't = {end_s:.4f} s')
 
-    def _report_end(self):
+    def _report_end(self) -> None:
         """Report the running programme's end once simulated time has reached it; the event
         carries the end itself, not the sample that shows it."""
         running = self._running
@@ -306,12 +314,12 @@ class TwinRunner:
                                                f'ended at t = {running.end_s:.4f} s'))
 
     # --- time ----------------------------------------------------------------------------
-    def idle(self):
+    def idle(self) -> bool:
         """In lockstep: nothing in effect or queued, and the settled sample already out."""
         return (self.lockstep and not self._queued and self._idle_published
                 and self.plant.time_s >= self.plant.busy_until_s - TIME_TOL_S)
 
-    def tick(self):
+    def tick(self) -> tuple[Sample | None, list[str]]:
         """Advance one period unless idle; returns (Sample or None, refused reasons).
 
         The first tick publishes the initial state without advancing.
@@ -334,7 +342,7 @@ class TwinRunner:
         acted, self._acted = tuple(self._acted), []
         return Sample(snapshot, self.measure(snapshot.normal), acted), refused
 
-    def measure(self, normal):
+    def measure(self, normal: NDArray[np.float64]) -> NDArray[np.float64]:
         """The sensor's reading: the normal tilted by seeded Gaussian noise."""
         if self.noise_std_rad == 0.0:
             return np.array(normal, dtype=float)

@@ -29,7 +29,9 @@ import importlib.util
 import os
 import re
 import sys
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import yaml
 
@@ -77,16 +79,16 @@ class MessageDefinitionNotFoundError(FileNotFoundError):
 class _RosbagYamlDumper(yaml.SafeDumper):
     """Block style like yaml-cpp: sequences inside mappings indented, '' as "", None as ~."""
 
-    def increase_indent(self, flow=False, indentless=False):
+    def increase_indent(self, flow: bool = False, indentless: bool = False) -> None:
         return super().increase_indent(flow, False)
 
 
-def _represent_str(dumper, value):
+def _represent_str(dumper: _RosbagYamlDumper, value: str) -> yaml.ScalarNode:
     style = '"' if value == '' else None
     return dumper.represent_scalar('tag:yaml.org,2002:str', value, style=style)
 
 
-def _represent_none(dumper, _value):
+def _represent_none(dumper: _RosbagYamlDumper, _value: None) -> yaml.ScalarNode:
     return dumper.represent_scalar('tag:yaml.org,2002:null', '~')
 
 
@@ -94,7 +96,7 @@ _RosbagYamlDumper.add_representer(str, _represent_str)
 _RosbagYamlDumper.add_representer(type(None), _represent_none)
 
 
-def dump_yaml(data):
+def dump_yaml(data: Any) -> str:
     """YAML text of ``data`` in yaml-cpp's block layout, key order kept, no final newline."""
     text = yaml.dump(data, Dumper=_RosbagYamlDumper, sort_keys=False,
                      default_flow_style=False, allow_unicode=True, width=2**16)
@@ -103,12 +105,12 @@ def dump_yaml(data):
 
 # --- QoS ---------------------------------------------------------------------------------
 
-def _time_dict(duration):
+def _time_dict(duration: Any) -> dict[str, int]:
     ns = int(duration.nanoseconds)
     return {'sec': ns // NS_PER_S, 'nsec': ns % NS_PER_S}
 
 
-def qos_to_dict(profile):
+def qos_to_dict(profile: Any) -> dict[str, Any]:
     """A QoS profile as rosbag2 metadata version 9 records it.
 
     Parameters
@@ -138,7 +140,7 @@ def qos_to_dict(profile):
     }
 
 
-def offered_qos_yaml(qos_dicts):
+def offered_qos_yaml(qos_dicts: Sequence[Mapping[str, Any]]) -> str:
     """The ``offered_qos_profiles`` text of an MCAP channel: the same list as YAML.
 
     Parameters
@@ -156,7 +158,7 @@ def offered_qos_yaml(qos_dicts):
     return dump_yaml([dict(d) for d in qos_dicts])
 
 
-def parse_offered_qos_yaml(text):
+def parse_offered_qos_yaml(text: str) -> list[Any]:
     """Inverse of :func:`offered_qos_yaml`: the list of QoS mappings ('' gives [])."""
     if not text:
         return []
@@ -168,13 +170,14 @@ def parse_offered_qos_yaml(text):
 
 # --- topics and metadata -------------------------------------------------------------------
 
-def type_name_of(msg_type):
+def type_name_of(msg_type: type) -> str:
     """``pkg/msg/Type`` of a generated message class (e.g. ``nav_msgs/msg/Odometry``)."""
     package, namespace = msg_type.__module__.split('.')[:2]
     return f'{package}/{namespace}/{msg_type.__name__}'
 
 
-def topic_metadata(name, type_name, qos_dicts, type_description_hash=''):
+def topic_metadata(name: str, type_name: str, qos_dicts: Iterable[Mapping[str, Any]],
+                   type_description_hash: str = '') -> dict[str, Any]:
     """The ``topic_metadata`` mapping of one topic in metadata.yaml (version 9).
 
     Parameters
@@ -197,7 +200,8 @@ def topic_metadata(name, type_name, qos_dicts, type_description_hash=''):
     }
 
 
-def channel_metadata(qos_dicts, type_description_hash=''):
+def channel_metadata(qos_dicts: Sequence[Mapping[str, Any]],
+                     type_description_hash: str = '') -> dict[str, str]:
     """The metadata of a topic's MCAP channel, as rosbag2_storage_mcap writes it."""
     return {
         'offered_qos_profiles': offered_qos_yaml(qos_dicts),
@@ -205,8 +209,9 @@ def channel_metadata(qos_dicts, type_description_hash=''):
     }
 
 
-def bag_metadata(topics, relative_file_path, starting_time_ns, duration_ns, ros_distro=None,
-                 custom_data=None):
+def bag_metadata(topics: Sequence[tuple[Mapping[str, Any], int]], relative_file_path: str,
+                 starting_time_ns: int | None, duration_ns: int, ros_distro: str | None = None,
+                 custom_data: Mapping[str, str] | None = None) -> dict[str, Any]:
     """The ``rosbag2_bagfile_information`` mapping of a single-file MCAP bag.
 
     Parameters
@@ -259,14 +264,14 @@ def bag_metadata(topics, relative_file_path, starting_time_ns, duration_ns, ros_
     }
 
 
-def metadata_yaml_text(metadata):
+def metadata_yaml_text(metadata: Mapping[str, Any]) -> str:
     """Text of ``metadata.yaml`` for a :func:`bag_metadata` mapping (ends with a newline)."""
     return dump_yaml({'rosbag2_bagfile_information': metadata}) + '\n'
 
 
 # --- message definitions -------------------------------------------------------------------
 
-def _split_type_name(type_name):
+def _split_type_name(type_name: str) -> tuple[str, str, str]:
     """``(package, namespace, name)`` of ``pkg/Type`` (namespace ``msg``) or ``pkg/ns/Type``."""
     match = _TYPE_WITHOUT_NAMESPACE.match(type_name)
     if match:
@@ -277,7 +282,7 @@ def _split_type_name(type_name):
     raise ValueError(f'not a message type name (pkg/msg/Type or pkg/Type): {type_name!r}')
 
 
-def package_share_candidates(package):
+def package_share_candidates(package: str) -> list[Path]:
     """Directories that may be ``share/<package>``, most authoritative first.
 
     The ament index (``AMENT_PREFIX_PATH``, set by sourcing a ROS installation), then the
@@ -286,7 +291,7 @@ def package_share_candidates(package):
     this covers a virtual environment with ROS from PyPI wheels), then
     ``<sys.prefix>/share/<package>``.
     """
-    candidates = []
+    candidates: list[Path] = []
     if os.environ.get('AMENT_PREFIX_PATH'):
         try:
             from ament_index_python.packages import get_package_share_directory
@@ -303,14 +308,14 @@ def package_share_candidates(package):
         if module_dir.parent.name in ('site-packages', 'dist-packages'):
             candidates.append(module_dir.parents[3] / 'share' / package)
     candidates.append(Path(sys.prefix) / 'share' / package)
-    unique = []
+    unique: list[Path] = []
     for candidate in candidates:
         if candidate not in unique:
             unique.append(candidate)
     return unique
 
 
-def find_msg_file(type_name):
+def find_msg_file(type_name: str) -> Path:
     """Path of the ``.msg`` file defining ``type_name`` (``pkg/msg/Type`` or ``pkg/Type``).
 
     Raises
@@ -321,7 +326,7 @@ def find_msg_file(type_name):
         If ``type_name`` is not a message type name.
     """
     package, namespace, name = _split_type_name(type_name)
-    tried = []
+    tried: list[str] = []
     for share in package_share_candidates(package):
         path = share / namespace / f'{name}.msg'
         if path.is_file():
@@ -332,13 +337,13 @@ def find_msg_file(type_name):
         f'{package} package (or source the ROS installation that has it).')
 
 
-def msg_dependencies(text, package):
+def msg_dependencies(text: str, package: str) -> list[str]:
     """Types a ``.msg`` text refers to, as rosbag2 finds them (sorted, as a std::set).
 
     A type without a package (``Pose`` in a geometry_msgs file) is prefixed with
     ``package``; others are kept as written (``std_msgs/Header``).
     """
-    dependencies = set()
+    dependencies: set[str] = set()
     for match in _MSG_FIELD_TYPE.finditer(text):
         field_type = match[1]
         if field_type in _PRIMITIVE_TYPES:
@@ -348,11 +353,11 @@ def msg_dependencies(text, package):
 
 
 @functools.cache
-def _msg_text(type_name):
+def _msg_text(type_name: str) -> str:
     return find_msg_file(type_name).read_text(encoding='utf-8')
 
 
-def message_definition(type_name):
+def message_definition(type_name: str) -> str:
     """Full ``ros2msg`` definition of ``type_name`` with its dependencies, as rosbag2 writes it.
 
     Parameters
@@ -373,9 +378,9 @@ def message_definition(type_name):
     MessageDefinitionNotFoundError
         If the ``.msg`` file of the type or of any dependency is missing.
     """
-    seen = set()
+    seen: set[str] = set()
 
-    def append_recursive(name):
+    def append_recursive(name: str) -> str:
         text = _msg_text(name)
         result = text
         for dependency in msg_dependencies(text, _split_type_name(name)[0]):

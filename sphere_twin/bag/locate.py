@@ -7,6 +7,7 @@ file without metadata.yaml, or the name of a bag installed with the package (``e
 
 import atexit
 import dataclasses
+import os
 import shutil
 import tempfile
 from pathlib import Path
@@ -40,10 +41,10 @@ class BagLocation:
     directory: Path
     name: str
     output_dir: Path
-    note: str = None
+    note: str | None = None
 
 
-def lists_file(bag_dir, file_name):
+def lists_file(bag_dir: str | os.PathLike[str], file_name: str) -> bool:
     """Whether the bag directory's metadata.yaml lists ``file_name`` (False without one)."""
     try:
         listed = read_metadata(bag_dir).get('relative_file_paths') or []
@@ -52,7 +53,7 @@ def lists_file(bag_dir, file_name):
     return file_name in [Path(p).name for p in listed]
 
 
-def _installed(name):
+def _installed(name: str) -> Path | None:
     """A bag of that name installed with the package (``share/sphere_twin/bags``) or in the
     source tree, or None."""
     if not name or '/' in name or name.endswith(MCAP_SUFFIX):
@@ -64,7 +65,7 @@ def _installed(name):
     return None
 
 
-def write_placeholder_metadata(bag_dir, file_name):
+def write_placeholder_metadata(bag_dir: str | os.PathLike[str], file_name: str) -> None:
     """Write a metadata.yaml into ``bag_dir`` that lists ``file_name`` and nothing else;
     ``repair_bag`` then fills in the rest from the file's records."""
     (Path(bag_dir) / bag_format.METADATA_FILENAME).write_text(yaml.safe_dump(
@@ -75,7 +76,7 @@ def write_placeholder_metadata(bag_dir, file_name):
             'topics_with_message_count': []}}))
 
 
-def _read_bare_mcap(path):
+def _read_bare_mcap(path: Path) -> tuple[Path, str]:
     """A bag directory (temporary, removed at exit) that holds a link to the bare MCAP file
     and the metadata recovered from its records."""
     from sphere_twin.bag.repair import repair_bag
@@ -92,7 +93,7 @@ def _read_bare_mcap(path):
                   f'{state})')
 
 
-def locate_bag(given):
+def locate_bag(given: str | os.PathLike[str]) -> BagLocation:
     """The bag that ``given`` (a path or an installed bag's name) names.
 
     Raises

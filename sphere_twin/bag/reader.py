@@ -21,21 +21,24 @@ one-line message.
 import dataclasses
 import importlib
 import io
+import os
 import struct
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
+from typing import IO, Any
 
 import yaml
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, Footer, Header, Message, Metadata, Schema
+from mcap.records import Channel, Chunk, Footer, Header, McapRecord, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
 try:
     from zstandard import ZstdError
 except ImportError:  # mcap then cannot read zstd chunks at all
-    ZstdError = McapError
+    ZstdError = McapError  # type: ignore[misc, assignment]  # the stand-in for a missing class
 
 from sphere_twin.bag import format as bag_format
 
@@ -47,8 +50,9 @@ FOOTER_SIZE = RECORD_PREFIX.size + 20
 # Records longer than this are taken as corruption rather than allocated.
 MAX_RECORD_BYTES = 4 * 2**30
 COMPRESSION_NAMES = {'': 'none', 'zstd': 'zstd', 'lz4': 'lz4'}
-_RECORD_CLASSES = {Opcode.HEADER: Header, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel,
-                   Opcode.CHUNK: Chunk, Opcode.METADATA: Metadata, Opcode.FOOTER: Footer}
+_RECORD_CLASSES: dict[int, type[McapRecord]] = {
+    Opcode.HEADER: Header, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel,
+    Opcode.CHUNK: Chunk, Opcode.METADATA: Metadata, Opcode.FOOTER: Footer}
 # Exceptions the mcap record parsers and decompressors raise on damaged bytes (lz4 raises
 # RuntimeError).
 _DAMAGE = (McapError, ZstdError, ValueError, struct.error, EOFError, IndexError, KeyError,
@@ -114,23 +118,23 @@ class McapScan:
 
     path: Path
     profile: str = ''
-    schemas: dict = dataclasses.field(default_factory=dict)
-    channels: dict = dataclasses.field(default_factory=dict)
-    messages: list = dataclasses.field(default_factory=list)
-    metadata: list = dataclasses.field(default_factory=list)
-    compressions: set = dataclasses.field(default_factory=set)
+    schemas: dict[int, Schema] = dataclasses.field(default_factory=dict)
+    channels: dict[int, Channel] = dataclasses.field(default_factory=dict)
+    messages: list[Message] = dataclasses.field(default_factory=list)
+    metadata: list[Metadata] = dataclasses.field(default_factory=list)
+    compressions: set[str] = dataclasses.field(default_factory=set)
     chunk_count: int = 0
     complete: bool = False
     readable_bytes: int = 0
     file_size: int = 0
     stop_reason: str | None = None
 
-    def type_name(self, channel_id):
+    def type_name(self, channel_id: int) -> str:
         """``pkg/msg/Type`` of a channel ('' if it has no schema)."""
         schema = self.schemas.get(self.channels[channel_id].schema_id)
         return schema.name if schema else ''
 
-    def message_counts(self):
+    def message_counts(self) -> dict[int, int]:
         """Readable messages per channel id."""
         counts = dict.fromkeys(self.channels, 0)
         for message in self.messages:
@@ -138,7 +142,7 @@ class McapScan:
         return counts
 
 
-def read_metadata(bag_dir):
+def read_metadata(bag_dir: str | os.PathLike[str]) -> dict[str, Any]:
     """The ``rosbag2_bagfile_information`` mapping of a bag's metadata.yaml.
 
     Raises
@@ -165,7 +169,7 @@ def read_metadata(bag_dir):
     return document['rosbag2_bagfile_information']
 
 
-def storage_files(bag_dir):
+def storage_files(bag_dir: str | os.PathLike[str]) -> list[Path]:
     """Paths of the bag's MCAP files, as metadata.yaml lists them.
 
     Raises
@@ -188,11 +192,11 @@ def storage_files(bag_dir):
 
 # --- scanning an MCAP file record by record ----------------------------------------------
 
-def _parse(record_class, body):
+def _parse(record_class: Any, body: bytes) -> Any:
     return record_class.read(ReadDataStream(io.BytesIO(body)))
 
 
-def _check_start(path, stream, file_size):
+def _check_start(path: Path, stream: IO[bytes], file_size: int) -> Header:
     """Read the magic and the header record; BagError unless this is the start of an MCAP."""
     if file_size == 0:
         raise BagError(f'{path} is empty: no MCAP header was ever written')
@@ -216,7 +220,7 @@ def _check_start(path, stream, file_size):
         raise BagError(f'{path} is not a valid MCAP file: its header is corrupt') from None
 
 
-def scan_mcap(path):
+def scan_mcap(path: str | os.PathLike[str]) -> McapScan:
     """Read every complete record of an MCAP file from its start, without its summary.
 
     Reading stops at the footer, or cleanly at the first record that is cut off by the end
@@ -275,7 +279,7 @@ def scan_mcap(path):
     return scan
 
 
-def _take_record(scan, opcode, body, offset):
+def _take_record(scan: McapScan, opcode: int, body: bytes, offset: int) -> str | None:
     """Add one record's contents to ``scan``; the reason to stop if it is damaged."""
     record_class = _RECORD_CLASSES.get(opcode)
     if record_class is None:
@@ -298,7 +302,7 @@ def _take_record(scan, opcode, body, offset):
     return None
 
 
-def _take_plain_record(scan, record):
+def _take_plain_record(scan: McapScan, record: McapRecord) -> None:
     if isinstance(record, Schema):
         scan.schemas.setdefault(record.id, record)
     elif isinstance(record, Channel):
@@ -307,7 +311,7 @@ def _take_plain_record(scan, record):
         scan.messages.append(record)
 
 
-def has_footer(path):
+def has_footer(path: str | os.PathLike[str]) -> bool:
     """Whether an MCAP file ends with a footer and the magic, as a cleanly closed file does."""
     path = Path(path)
     try:
@@ -322,7 +326,8 @@ def has_footer(path):
     return tail[0] == Opcode.FOOTER and tail.endswith(MCAP_MAGIC)
 
 
-def check_ros2(path, schemas, channels):
+def check_ros2(path: str | os.PathLike[str], schemas: Mapping[int, Schema],
+               channels: Mapping[int, Channel]) -> None:
     """BagError unless every channel carries CDR messages with ``ros2msg`` schemas."""
     for channel in channels.values():
         if channel.message_encoding != bag_format.SERIALIZATION_FORMAT:
@@ -338,7 +343,7 @@ def check_ros2(path, schemas, channels):
 
 # --- messages ----------------------------------------------------------------------------
 
-def _indexed_messages(path, wanted):
+def _indexed_messages(path: Path, wanted: list[str] | None) -> Iterator[RecordedMessage]:
     """Messages of a complete file through its summary and chunk indexes."""
     with open(path, 'rb') as stream:
         reader = make_reader(stream)
@@ -351,7 +356,7 @@ def _indexed_messages(path, wanted):
                                   message.log_time, message.publish_time, message.data)
 
 
-def _scanned_messages(path, wanted):
+def _scanned_messages(path: Path, wanted: list[str] | None) -> Iterator[RecordedMessage]:
     """Messages of a file without a usable summary, read by :func:`scan_mcap`."""
     scan = scan_mcap(path)
     check_ros2(path, scan.schemas, scan.channels)
@@ -364,7 +369,8 @@ def _scanned_messages(path, wanted):
                               message.publish_time, message.data)
 
 
-def read_messages(bag_dir, topics=None):
+def read_messages(bag_dir: str | os.PathLike[str],
+                  topics: Iterable[str] | None = None) -> Iterator[RecordedMessage]:
     """Iterate over a bag's messages in log-time order.
 
     A file closed cleanly is read through its index; one without a footer (a recorder that
@@ -401,13 +407,13 @@ def read_messages(bag_dir, topics=None):
                            f'{bag_dir}`') from None
 
 
-def message_class(type_name):
+def message_class(type_name: str) -> type[Any]:
     """The generated Python class of ``pkg/msg/Type`` (the package must be installed)."""
     package, namespace, name = type_name.split('/')
     return getattr(importlib.import_module(f'{package}.{namespace}'), name)
 
 
-def deserialize(message):
+def deserialize(message: RecordedMessage) -> Any:
     """The message object of a :class:`RecordedMessage` (needs rclpy, not a ROS graph)."""
     from rclpy.serialization import deserialize_message
 

@@ -14,12 +14,22 @@ Nothing here needs ROS: ``sphere-twin bag repair`` calls it directly.
 import dataclasses
 import os
 import shutil
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import yaml
+from mcap.records import Channel
 
 from sphere_twin.bag import format as bag_format
-from sphere_twin.bag.reader import BagError, check_ros2, read_metadata, scan_mcap, storage_files
+from sphere_twin.bag.reader import (
+    BagError,
+    McapScan,
+    check_ros2,
+    read_metadata,
+    scan_mcap,
+    storage_files,
+)
 from sphere_twin.bag.writer import COMPRESSIONS, DEFAULT_COMPRESSION, BagWriter
 
 BACKUP_SUFFIX = '.bak'
@@ -58,13 +68,13 @@ class RepairResult:
     was_complete: bool
     rewritten: bool
     message_count: int
-    topic_counts: dict
+    topic_counts: dict[str, int]
     listed_count: int
     chunk_count: int
     stop_reason: str | None
     backup: Path | None
 
-    def summary(self):
+    def summary(self) -> str:
         """One line for the command line."""
         topics = len(self.topic_counts)
         if not self.rewritten:
@@ -80,7 +90,7 @@ class RepairResult:
                 f'{self.listed_count}; {self.stop_reason}){kept}')
 
 
-def _qos_of(channel, listed_topics):
+def _qos_of(channel: Channel, listed_topics: Mapping[str, Mapping[str, Any]]) -> list[Any]:
     """Offered QoS mappings of a channel: its own metadata, else metadata.yaml's entry."""
     try:
         return bag_format.parse_offered_qos_yaml(
@@ -91,22 +101,23 @@ def _qos_of(channel, listed_topics):
         return profiles if isinstance(profiles, list) else []
 
 
-def _topic_counts(scan):
-    counts = {}
+def _topic_counts(scan: McapScan) -> dict[str, int]:
+    counts: dict[str, int] = {}
     for channel_id, count in scan.message_counts().items():
         topic = scan.channels[channel_id].topic
         counts[topic] = counts.get(topic, 0) + count
     return counts
 
 
-def _metadata_agrees(metadata, counts):
+def _metadata_agrees(metadata: Mapping[str, Any], counts: Mapping[str, int]) -> bool:
     listed = {t['topic_metadata']['name']: t.get('message_count')
               for t in metadata.get('topics_with_message_count') or []
               if isinstance(t, dict) and isinstance(t.get('topic_metadata'), dict)}
     return listed == counts and metadata.get('message_count') == sum(counts.values())
 
 
-def _write_bag(scan, work_dir, file_name, metadata):
+def _write_bag(scan: McapScan, work_dir: Path, file_name: str,
+               metadata: Mapping[str, Any]) -> BagWriter:
     """Write the scanned records as a complete bag in ``work_dir``."""
     listed_topics = {t['topic_metadata']['name']: t['topic_metadata']
                      for t in metadata.get('topics_with_message_count') or []
@@ -133,7 +144,7 @@ def _write_bag(scan, work_dir, file_name, metadata):
     return writer
 
 
-def repair_bag(bag_dir, backup=True):
+def repair_bag(bag_dir: str | os.PathLike[str], backup: bool = True) -> RepairResult:
     """Make a bag whose recorder died readable by every rosbag2 reader.
 
     Parameters
@@ -173,7 +184,7 @@ def repair_bag(bag_dir, backup=True):
         shutil.rmtree(work_dir)
     try:
         _write_bag(scan, work_dir, path.name, metadata)
-        backup_path = None
+        backup_path: Path | None = None
         if not scan.complete:
             if backup:
                 backup_path = path.with_name(path.name + BACKUP_SUFFIX)

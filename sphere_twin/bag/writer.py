@@ -10,14 +10,21 @@ Examples
 ...     bag.write('/sphere/surface_normal', cdr_bytes, log_time_ns, publish_time_ns)
 """
 
+from __future__ import annotations
+
 import dataclasses
 import importlib.metadata
 import os
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, Self
 
 from mcap.writer import CompressionType, Writer
 
 from sphere_twin.bag import format as bag_format
+
+if TYPE_CHECKING:
+    from msg_defs.topics import Topic
 
 COMPRESSIONS = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
                 'none': CompressionType.NONE}
@@ -26,8 +33,8 @@ DEFAULT_COMPRESSION = 'zstd'
 DEFAULT_CHUNK_SIZE_BYTES = 768 * 1024
 
 
-def _library_string():
-    versions = []
+def _library_string() -> str:
+    versions: list[str] = []
     for distribution in ('sphere_twin', 'mcap'):
         try:
             versions.append(f'{distribution} {importlib.metadata.version(distribution)}')
@@ -36,14 +43,14 @@ def _library_string():
     return '; '.join(versions)
 
 
-def mcap_file_name(bag_dir):
+def mcap_file_name(bag_dir: str | os.PathLike[str]) -> str:
     """``<name>_0.mcap``, the bag's only storage file, for a bag directory named ``name``."""
     return f'{Path(bag_dir).name}_0.mcap'
 
 
 @dataclasses.dataclass
 class _TopicRecord:
-    metadata: dict
+    metadata: dict[str, Any]
     channel_id: int
     message_count: int = 0
     sequence: int = 0
@@ -80,9 +87,10 @@ class BagWriter:
         For an unknown compression or a non-positive chunk size.
     """
 
-    def __init__(self, path, compression=DEFAULT_COMPRESSION,
-                 chunk_size_bytes=DEFAULT_CHUNK_SIZE_BYTES, ros_distro=None, file_name=None,
-                 custom_data=None):
+    def __init__(self, path: str | os.PathLike[str], compression: str = DEFAULT_COMPRESSION,
+                 chunk_size_bytes: int = DEFAULT_CHUNK_SIZE_BYTES, ros_distro: str | None = None,
+                 file_name: str | None = None,
+                 custom_data: Mapping[str, str] | None = None) -> None:
         if compression not in COMPRESSIONS:
             raise ValueError(f'unknown compression {compression!r}; '
                              f'choose one of {", ".join(COMPRESSIONS)}')
@@ -96,10 +104,10 @@ class BagWriter:
         self.compression = compression
         self.ros_distro = ros_distro
         self.custom_data = dict(custom_data or {})
-        self._topics = {}
-        self._schema_ids = {}
-        self._start_ns = None
-        self._end_ns = None
+        self._topics: dict[str, _TopicRecord] = {}
+        self._schema_ids: dict[str, int] = {}
+        self._start_ns: int | None = None
+        self._end_ns: int | None = None
         self._closed = False
         # Stays open until close(); flush() pushes everything written so far to the file.
         self._stream = open(self.path / self.file_name, 'wb')  # noqa: SIM115
@@ -114,41 +122,43 @@ class BagWriter:
     # --- state ------------------------------------------------------------------------
 
     @property
-    def message_count(self):
+    def message_count(self) -> int:
         """Messages written so far."""
         return sum(t.message_count for t in self._topics.values())
 
     @property
-    def topic_count(self):
+    def topic_count(self) -> int:
         """Topics added so far."""
         return len(self._topics)
 
     @property
-    def closed(self):
+    def closed(self) -> bool:
         """Whether :meth:`close` has run."""
         return self._closed
 
-    def has_topic(self, name):
+    def has_topic(self, name: str) -> bool:
         """Whether ``name`` has been added."""
         return name in self._topics
 
-    def metadata(self):
+    def metadata(self) -> dict[str, Any]:
         """The bag metadata as metadata.yaml holds it (see :func:`format.bag_metadata`)."""
         topics = [(t.metadata, t.message_count) for t in self._topics.values()]
-        duration = 0 if self._start_ns is None else self._end_ns - self._start_ns
+        duration = (0 if self._start_ns is None or self._end_ns is None  # set together
+                    else self._end_ns - self._start_ns)
         return bag_format.bag_metadata(topics, self.file_name, self._start_ns, duration,
                                        self.ros_distro, self.custom_data)
 
     # --- writing ----------------------------------------------------------------------
 
-    def add_contract_topic(self, topic):
+    def add_contract_topic(self, topic: Topic) -> None:
         """Add a topic of the contract (:class:`msg_defs.topics.Topic`) with the QoS the
         contract gives it: what a bag written without live publishers offers."""
         self.add_topic(topic.name, bag_format.type_name_of(topic.msg_type),
                        [bag_format.qos_to_dict(topic.qos.to_profile())])
 
-    def add_topic(self, name, type_name, qos_dicts, type_description_hash='',
-                  message_definition=None):
+    def add_topic(self, name: str, type_name: str, qos_dicts: Sequence[Mapping[str, Any]],
+                  type_description_hash: str = '', message_definition: str | None = None,
+                  ) -> None:
         """Add a topic: its schema (once per type), its channel and its metadata.yaml entry.
 
         Parameters
@@ -190,7 +200,8 @@ class BagWriter:
             channel_id)
         self._write_metadata_file()
 
-    def write(self, topic, data, log_time_ns, publish_time_ns=None, sequence=None):
+    def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int | None = None,
+              sequence: int | None = None) -> None:
         """Write one serialized message.
 
         Parameters
@@ -216,19 +227,19 @@ class BagWriter:
             publish_time=int(log_time_ns if publish_time_ns is None else publish_time_ns),
             sequence=record.sequence if sequence is None else int(sequence))
         record.message_count += 1
-        if self._start_ns is None:
+        if self._start_ns is None or self._end_ns is None:  # set together
             self._start_ns = self._end_ns = int(log_time_ns)
         else:
             self._start_ns = min(self._start_ns, int(log_time_ns))
             self._end_ns = max(self._end_ns, int(log_time_ns))
 
-    def flush(self):
+    def flush(self) -> None:
         """Complete the current chunk (if it has messages) and hand everything written so far
         to the operating system, so that it survives the end of this process."""
         self._check_open()
         self._mcap.flush()
 
-    def close(self):
+    def close(self) -> None:
         """Finish the MCAP file (last chunk, rosbag2 metadata record, summary, footer) and
         write the final metadata.yaml. Does nothing if already closed."""
         if self._closed:
@@ -243,19 +254,19 @@ class BagWriter:
             self._stream.close()
             self._write_metadata_file()
 
-    def __enter__(self):
+    def __enter__(self) -> Self:
         return self
 
-    def __exit__(self, *exc_info):
+    def __exit__(self, *exc_info: object) -> None:
         self.close()
 
     # --- internals --------------------------------------------------------------------
 
-    def _check_open(self):
+    def _check_open(self) -> None:
         if self._closed:
             raise ValueError(f'bag {self.path} is closed')
 
-    def _write_metadata_file(self):
+    def _write_metadata_file(self) -> None:
         # Replace atomically, so a reader (or a crash) never sees a half-written file.
         target = self.path / bag_format.METADATA_FILENAME
         partial = target.with_name(target.name + '.tmp')

@@ -1,5 +1,9 @@
 """``sphere-twin bag info|repair BAG``: inspect a bag, or rebuild one whose recorder died."""
 
+from __future__ import annotations
+
+import argparse
+import os
 from pathlib import Path
 
 from msg_defs.device import NS_PER_S
@@ -8,7 +12,7 @@ BAG_HELP = ('bag directory, one of its .mcap files, a bare .mcap file (its summa
             'the name of an installed bag (example)')
 
 
-def register(subparsers):
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
         'bag', help='inspect a bag, or repair one whose recorder was killed',
         description='Bag maintenance without ROS: `info` lists what a bag holds and whether '
@@ -28,7 +32,7 @@ def register(subparsers):
     repair.set_defaults(func=run_repair)
 
 
-def info_lines(bag_dir):
+def info_lines(bag_dir: str | os.PathLike[str]) -> list[str]:
     """The lines ``bag info`` prints.
 
     Raises
@@ -57,7 +61,7 @@ def info_lines(bag_dir):
     return lines
 
 
-def run_info(args):
+def run_info(args: argparse.Namespace) -> int:
     from sphere_twin.bag.locate import locate_bag
 
     bag = locate_bag(args.bag)
@@ -67,7 +71,7 @@ def run_info(args):
     return 0
 
 
-def run_repair(args):
+def run_repair(args: argparse.Namespace) -> int:
     from sphere_twin.bag.repair import repair_bag
 
     bag_dir = args.bag
@@ -77,7 +81,7 @@ def run_repair(args):
     return 0
 
 
-def _bag_dir_of_file(path):
+def _bag_dir_of_file(path: Path) -> Path:
     """The directory of an MCAP file to repair, with a metadata.yaml that lists it (written,
     and said, when there was none)."""
     from sphere_twin.bag import format as bag_format

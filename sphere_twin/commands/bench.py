@@ -19,12 +19,17 @@ on as many processes, and writes ``bench/results/throughput.{json,md}``. Its las
 ``throughput vs bare integration: <a> table build, <b> optimisation``.
 """
 
+from __future__ import annotations
+
+import argparse
 import csv
 import json
 import math
 import os
 import sys
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any, TextIO
 
 from tqdm import tqdm
 
@@ -40,6 +45,7 @@ from sphere_sim.studies.work_precision import (
     REFERENCE_NOTE,
     RTF_DURATION_S,
     TARGET_ANGLE_ERROR_RAD,
+    BenchScene,
     Plan,
     work_precision,
 )
@@ -48,7 +54,10 @@ from sphere_twin.commands.bench_scenes import optimised_design, scenes_of_this_t
 from sphere_twin.commands.options import worker_counts
 
 RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
-def run_work_precision_bench(quick=False, out_dir=RESULTS_DIR, stream=sys.stdout):
+def run_work_precision_bench(quick: bool = False,
+                             out_dir: str | os.PathLike[str] = RESULTS_DIR,
+                             stream: TextIO = sys.stdout,
+                             ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Run the benchmark with a progress bar, write its results; returns (rows, summary)."""
     scenes = scenes_of_this_tree()
     with tqdm(desc='work-precision', unit='run', file=sys.stderr) as bar:
@@ -64,7 +73,8 @@ COLUMNS = ('scene', 'method', 'rtol', 'status', 'wall_s', 'angle_error_rad',
            'last_sample_angle_error_rad', 'state_error', 'steps', 'nfev', 'njev', 'note')
 
 
-def write_results(rows, summary, scenes, out_dir):
+def write_results(rows: Sequence[Mapping[str, Any]], summary: Mapping[str, Any],
+                  scenes: Sequence[BenchScene], out_dir: str | os.PathLike[str]) -> None:
     # A quick run writes beside the full results, never over them.
     stem = 'work_precision_quick' if summary['quick'] else 'work_precision'
     out_dir = Path(out_dir)
@@ -79,7 +89,8 @@ def write_results(rows, summary, scenes, out_dir):
     plot(rows, scenes, out_dir / f'{stem}.png')
 
 
-def markdown(rows, summary, scenes):
+def markdown(rows: Sequence[Mapping[str, Any]], summary: Mapping[str, Any],
+             scenes: Sequence[BenchScene]) -> str:
     lines = ['# Work-precision of the integrators', '',
              'Written by `sphere-twin bench work-precision'
              + (' --quick' if summary['quick'] else '') + '`; see docs/numerics.md.', '',
@@ -143,7 +154,7 @@ def markdown(rows, summary, scenes):
     return '\n'.join(lines)
 
 
-def plot(rows, scenes, path):
+def plot(rows: Sequence[Mapping[str, Any]], scenes: Sequence[BenchScene], path: Path) -> None:
     import matplotlib
 
     matplotlib.use('Agg')
@@ -177,7 +188,8 @@ def plot(rows, scenes, path):
 
 
 # --- regularisation study ------------------------------------------------------------------
-def run_regularisation_study(quick=False, out_dir=RESULTS_DIR, stream=sys.stdout):
+def run_regularisation_study(quick: bool = False, out_dir: str | os.PathLike[str] = RESULTS_DIR,
+                             stream: TextIO = sys.stdout) -> list[dict[str, Any]]:
     """The study with a progress bar; writes regularisation.{csv,md} and returns the rows."""
     design, _ = optimised_design()
     programmes = {'diagonal_kick': design.programme(),
@@ -210,7 +222,7 @@ def run_regularisation_study(quick=False, out_dir=RESULTS_DIR, stream=sys.stdout
     return rows
 
 
-def register(subparsers):
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
         'bench', help='integrator benchmarks (work-precision, regularisation study)',
         description='Benchmarks of the numerics; results go to bench/results.')
@@ -246,12 +258,12 @@ def register(subparsers):
     bench_levers.register(sub)
 
 
-def run_work_precision(args):
+def run_work_precision(args: argparse.Namespace) -> int:
     run_work_precision_bench(quick=args.quick, out_dir=args.out)
     return 0
 
 
-def run_regularisation(args):
+def run_regularisation(args: argparse.Namespace) -> int:
     run_regularisation_study(quick=args.quick, out_dir=args.out)
     return 0
 
@@ -261,23 +273,24 @@ WORKLOAD_LABELS = {'table': 'table build', 'optimisation': 'optimisation',
                    'calibration': 'calibration'}
 
 
-def engine_label(engine, workers):
+def engine_label(engine: str, workers: int) -> str:
     return {'serial': '1 worker', 'pool': f'{workers}-process pool',
             'dask': f'{workers} Dask workers'}[engine]
 
 
-def run_throughput(args):
+def run_throughput(args: argparse.Namespace) -> int:
     run_throughput_bench(quick=args.quick, out_dir=args.out, worker_counts=args.workers)
     return 0
 
 
-def run_throughput_bench(quick=False, out_dir=RESULTS_DIR, stream=sys.stdout, **kwargs):
+def run_throughput_bench(quick: bool = False, out_dir: str | os.PathLike[str] = RESULTS_DIR,
+                         stream: TextIO = sys.stdout, **kwargs: Any) -> tp.Summary:
     """The throughput study with a progress bar; writes throughput{,_quick}.{json,md}."""
     engines = kwargs.get('engines', tp.ENGINES)
     counts = kwargs.get('worker_counts', tp.DEFAULT_WORKER_COUNTS)
     n_runs = len(kwargs.get('workloads', tp.WORKLOADS)) * (1 + (len(engines) - 1) * len(counts))
     with tqdm(total=n_runs, desc='throughput', unit='run', file=sys.stderr) as bar:
-        def progress(workload, engine, done):
+        def progress(workload: str, engine: str, done: int) -> None:
             bar.set_postfix_str(f'{workload} on {engine}')
             bar.update(done - bar.n)
 
@@ -293,7 +306,7 @@ def run_throughput_bench(quick=False, out_dir=RESULTS_DIR, stream=sys.stdout, **
     return summary
 
 
-def throughput_lines(summary):
+def throughput_lines(summary: tp.Summary) -> list[str]:
     """The table of runs, the scaling, and the summary line last."""
     lines = [f"{'workload':<13} {'engine':<15} {'kicks':>5} {'wall (s)':>8} "
              f"{'start-up (s)':>12} {'kicks/s/core':>12} {'vs bare':>7} {'CPU s/kick':>10} "
@@ -329,16 +342,16 @@ def throughput_lines(summary):
     return lines
 
 
-def _worst_of_loop(summary, workers):
+def _worst_of_loop(summary: tp.Summary, workers: int) -> float:
     return min(summary.of_loop(r.workload, r.engine, workers)
                for r in summary.parallel_runs() if r.workers == workers)
 
 
-def _ratio_text(summary, workload):
+def _ratio_text(summary: tp.Summary, workload: str) -> str:
     return f'{summary.ratio(workload):.2f}' if workload in summary.bare_kicks_per_s else 'n/a'
 
 
-def throughput_markdown(summary, lines):
+def throughput_markdown(summary: tp.Summary, lines: Sequence[str]) -> str:
     return '\n'.join([
         '# Throughput of the kick workloads', '',
         'Written by `sphere-twin bench throughput' + (' --quick' if summary.quick else '')

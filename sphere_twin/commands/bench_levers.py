@@ -16,15 +16,24 @@ differences, 1e4 times more accurate, did not (docs/numerics.md, "Jacobian").
     sphere-twin bench levers      # about 5 minutes; writes bench/results/fast_costs.md
 """
 
+from __future__ import annotations
+
+import argparse
 import json
 import os
 import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from sphere_sim.integrate.solve import Trajectory
+    from sphere_sim.studies.work_precision import BenchScene
 
 RESULTS = Path(__file__).resolve().parents[2] / 'bench' / 'results' / 'fast_costs.md'
 RTOLS = (1e-3, 3e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6)
@@ -34,12 +43,12 @@ REPLAY_REPEATS = 7
 VARIANTS = ('as is', 'newton<=4', 'newton<=3', 'newton<=2')
 
 
-def _scenes():
+def _scenes() -> list[BenchScene]:
     from sphere_twin.commands.bench_scenes import scenes_of_this_tree
     return scenes_of_this_tree()
 
 
-def _cpu_s(run):
+def _cpu_s(run: Callable[..., object]) -> float:
     best = np.inf
     for _ in range(REPEATS):
         started = time.process_time()
@@ -48,14 +57,14 @@ def _cpu_s(run):
     return best
 
 
-def _measure(variant):
+def _measure(variant: str) -> None:
     """One JSON line per (scene, rtol) of ``variant``, run in this process."""
     from sphere_sim.integrate import radau_compiled, solve
     from sphere_sim.studies import work_precision as wp
     if variant.startswith('newton<='):
         radau_compiled.NEWTON_MAXITER = int(variant.removeprefix('newton<='))
     for scene in _scenes():
-        def run(rtol, scene=scene):
+        def run(rtol: float, scene: BenchScene = scene) -> Trajectory:
             return solve.simulate(scene.model, scene.x0, scene.duration_s, scene.programme,
                                   rtol=rtol, method='fast', sample_period_s=wp.SAMPLE_PERIOD_S)
         reference = run(REFERENCE_RTOL)
@@ -70,16 +79,16 @@ def _measure(variant):
                 'newton_failed': s.n_newton_failed}), flush=True)
 
 
-def _kernel_costs():
+def _kernel_costs() -> dict[str, tuple[float, ...]]:
     """{scene: (right-hand side s, Jacobian s)} per call, at the states odeint evaluates."""
     from sphere_sim.integrate.kernel_replay import RecordingModel, replay
     from sphere_sim.integrate.solve import simulate
-    costs = {}
+    costs: dict[str, tuple[float, ...]] = {}
     for scene in _scenes():
         recording = RecordingModel(scene.model)
         simulate(recording, scene.x0, scene.duration_s, scene.programme, rtol=1e-5,
                  method='odeint', sample_period_s=1e-3)
-        per_call = []
+        per_call: list[float] = []
         for calls, jacobian in ((recording.rhs_calls, False), (recording.jac_calls, True)):
             replay(scene.model, calls[:1], jacobian)
             best = min(replay(scene.model, calls, jacobian)[1] for _ in range(REPLAY_REPEATS))
@@ -88,7 +97,7 @@ def _kernel_costs():
     return costs
 
 
-def _run_variant(variant):
+def _run_variant(variant: str) -> list[dict[str, Any]]:
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ)
         if variant.startswith('newton<='):
@@ -98,13 +107,14 @@ def _run_variant(variant):
     return [json.loads(line) for line in out.splitlines() if line.startswith('{')]
 
 
-def _time_at_error(rows, scene, variant):
+def _time_at_error(rows: Sequence[dict[str, Any]], scene: str, variant: str) -> float:
     from sphere_sim.studies.work_precision import TARGET_ANGLE_ERROR_RAD, time_at_error
     rows = [{**r, 'method': r['variant'], 'status': 'ok', 'wall_s': r['cpu_s']} for r in rows]
     return time_at_error(rows, scene, variant, TARGET_ANGLE_ERROR_RAD)
 
 
-def _reaching(rows, scene, variant):
+def _reaching(rows: Sequence[dict[str, Any]], scene: str,
+              variant: str) -> dict[str, Any]:
     """The loosest run of ``variant`` that reaches 1e-6 rad (the benchmark's bound)."""
     from sphere_sim.studies.work_precision import TARGET_ANGLE_ERROR_RAD
     runs = sorted((r for r in rows if r['scene'] == scene and r['variant'] == variant),
@@ -112,7 +122,8 @@ def _reaching(rows, scene, variant):
     return next(r for r in runs if r['angle_error_rad'] <= TARGET_ANGLE_ERROR_RAD)
 
 
-def _shares(run, rhs_s, jac_s):
+def _shares(run: Mapping[str, Any], rhs_s: float,
+            jac_s: float) -> tuple[float, float, float, float]:
     """Fractions of ``run``'s CPU time in right-hand sides, in Jacobians, and in the
     right-hand sides of Newton iterations beyond the first of each attempted step."""
     attempts = run['steps'] + run['rejected']
@@ -123,7 +134,8 @@ def _shares(run, rhs_s, jac_s):
             beyond_first, iterations / attempts)
 
 
-def _per_step_lines(rows, costs):
+def _per_step_lines(rows: Sequence[dict[str, Any]],
+                    costs: Mapping[str, tuple[float, ...]]) -> list[str]:
     lines = ['| scene | rtol | CPU (ms) | steps | rejected | f per step | Newton iterations per '
              'attempt | Jacobians | f: µs per call, share | Jacobian: µs per call, share | '
              'f of iterations beyond the first | rest |', '|---|' * 12]
@@ -138,7 +150,8 @@ def _per_step_lines(rows, costs):
     return lines
 
 
-def _time_lines(rows, scenes, costs):
+def _time_lines(rows: Sequence[dict[str, Any]], scenes: Sequence[str],
+                costs: Mapping[str, tuple[float, ...]]) -> list[str]:
     lines = ['| variant | ' + ' | '.join(scenes) + ' |', '|---|' + '---|' * len(scenes)]
     base = {s: _time_at_error(rows, s, 'as is') for s in scenes}
     for variant in VARIANTS:
@@ -157,7 +170,7 @@ def _time_lines(rows, scenes, costs):
     return lines
 
 
-def register(sub):
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add ``levers`` to the ``bench`` subcommands."""
     parser = sub.add_parser(
         'levers', help='what a cheaper Jacobian, fewer Newton iterations or fewer right-hand '
@@ -168,12 +181,12 @@ def register(sub):
     parser.set_defaults(func=run)
 
 
-def run(_args):
+def run(_args: argparse.Namespace) -> int:
     main()
     return 0
 
 
-def main():
+def main() -> None:
     rows = [row for variant in VARIANTS for row in _run_variant(variant)]
     costs = _kernel_costs()
     scenes = list(costs)

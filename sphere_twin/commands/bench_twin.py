@@ -1,6 +1,9 @@
 """``sphere-twin bench twin``: the live twin's real-time factor over DDS, where it goes, and
 the node loop's kick cycle."""
 
+from __future__ import annotations
+
+import argparse
 import json
 import os
 import sys
@@ -15,7 +18,7 @@ from sphere_twin.twin_bench import DEFAULT_DURATION_S, BenchError, run_twin_benc
 RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
 
 
-def register(sub):
+def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add ``twin`` to the ``bench`` subcommands."""
     parser = sub.add_parser(
         'twin', help='the live twin\'s real-time factor and kick cycle over DDS',
@@ -36,12 +39,12 @@ def register(sub):
     parser.set_defaults(func=run)
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     # The machine's load beside the figures: an unpaced real-time factor moves with it.
     load_before = os.getloadavg()[0]
     with tqdm(total=args.duration_s, desc=f'bench twin ({args.plant})', unit='sim s',
               file=sys.stderr, bar_format='{l_bar}{bar}| {n:.1f}/{total:g} sim s') as bar:
-        def progress(simulated_s):
+        def progress(simulated_s: float) -> None:
             bar.update(min(simulated_s, args.duration_s) - bar.n)
 
         try:

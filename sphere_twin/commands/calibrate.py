@@ -1,7 +1,11 @@
 """``sphere-twin calibrate``: fit the declared-uncertain parameters jointly to Fig. 4's pull-in."""
 
+from __future__ import annotations
+
+import argparse
 import math
 import textwrap
+from collections.abc import Sequence
 
 import yaml
 from tqdm import tqdm
@@ -11,6 +15,7 @@ from sphere_sim.kicks.calibration import (
     FIT_TOLERANCE_V,
     LITERAL_SET,
     TARGET_THRESHOLD_V,
+    Fit,
     calibrate,
     evaluate,
     threshold_v,
@@ -20,13 +25,15 @@ from sphere_sim.model.parameters import (
     CALIBRATION_TARGETS,
     ESTIMATE_TARGET,
     PARAMS_DIR,
+    ParameterSet,
+    UncertainParameter,
     load_parameter_set,
 )
 from sphere_sim.studies.runs import literal_kick
 from sphere_twin.commands.options import CommandError
 
 
-def register(subparsers):
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
         'calibrate', help="fit the calibrated set's uncertain parameters to Fig. 4's pull-in",
         description='Fit the parameters that the calibrated set declares uncertain jointly, '
@@ -40,7 +47,7 @@ def register(subparsers):
     parser.set_defaults(func=run)
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     calibrated = load_parameter_set(CALIBRATED_SET)
     base = load_parameter_set(LITERAL_SET)
     specs = [s for s in calibrated.uncertain if args.target is None or s.target in args.target]
@@ -48,7 +55,7 @@ def run(args):
         raise CommandError('the calibrated set declares no uncertain parameter for that target')
     print_ranges(specs)
     with tqdm(desc='calibrate', unit='eval', leave=False) as bar:
-        def progress(value, observed):
+        def progress(value: float, observed: float) -> None:
             bar.set_postfix_str(f'{value:.4g} -> {observed:.4g}')
             bar.update()
 
@@ -64,7 +71,7 @@ def run(args):
     return 0
 
 
-def print_ranges(specs):
+def print_ranges(specs: Sequence[UncertainParameter]) -> None:
     """Each uncertain parameter's range and the physical reason for it."""
     for spec in specs:
         tied = f' (with {", ".join(spec.tied)})' if spec.tied else ''
@@ -73,7 +80,7 @@ def print_ranges(specs):
                             subsequent_indent='  '))
 
 
-def print_fits(fits):
+def print_fits(fits: Sequence[Fit]) -> None:
     """The joint fit's values, what it reached, and every evaluation on the way."""
     if not fits:
         return
@@ -94,7 +101,7 @@ def print_fits(fits):
         print(f'  {values}{fits[0].history[i][1]:>8.2f} V')
 
 
-def print_estimate_sensitivity(params, spec):
+def print_estimate_sensitivity(params: ParameterSet, spec: UncertainParameter) -> None:
     """What Fig. 4's threshold and the paper's literal kick do across an estimate's range."""
     print(f'{spec.path} (a physical estimate, not fitted):')
     print(f'{"value":>12} {"threshold":>10} {"literal kick":>13} {"towards":>9}')
@@ -105,7 +112,8 @@ def print_estimate_sensitivity(params, spec):
               f'{kick.rotation_deg:>9.4f} deg {kick.direction_deg:>7.1f} deg')
 
 
-def print_threshold_hypotheses(params, base, spec):
+def print_threshold_hypotheses(params: ParameterSet, base: ParameterSet,
+                               spec: UncertainParameter) -> None:
     """Thresholds with and without the sphere, and the rest contact, across the range."""
     candidates = sorted({base.get(spec.path), spec.low, spec.high, params.get(spec.path)})
     print(f'{spec.path}:')
@@ -118,7 +126,7 @@ def print_threshold_hypotheses(params, base, spec):
               f'{raises!s:>14}')
 
 
-def write_overrides(params, specs):
+def write_overrides(params: ParameterSet, specs: Sequence[UncertainParameter]) -> None:
     """Rewrite the fitted values in calibrated.yaml's ``overrides`` block, nothing else (the
     reasons and comments are written by hand)."""
     path = PARAMS_DIR / 'calibrated.yaml'

@@ -1,15 +1,19 @@
 """``sphere-twin capacitance``: the closed form of eq. (8) against the RBF net of eq. (12).
 
 Fits the net the model would use for a parameter set, prints the largest differences between
-the two over the net's centre box (see :func:`sphere_sim.model.capacitance.compare_models`) and
+the two over the net's centre box (see :func:`sphere_sim.model.capacitance_rbf.compare_models`) and
 optionally plots both along a few slices.
 """
 
+from __future__ import annotations
+
+import argparse
 import time
 
 import numpy as np
 
 from sphere_sim.model import capacitance as cap
+from sphere_sim.model import capacitance_rbf as rbf
 from sphere_twin.commands.options import add_params_option, positive_float
 
 # Gaps g = z_S - z_G of the plotted slices (m): from near the contact (d_Iso = 1.5 um) to the
@@ -18,7 +22,7 @@ PLOT_GAPS_M = (2.0e-6, 5.0e-6, 10.0e-6)
 PLOT_POINTS = 400  # per slice
 
 
-def register(subparsers):
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``capacitance`` subcommand to an argparse ``subparsers`` object."""
     parser = subparsers.add_parser(
         'capacitance',
@@ -39,7 +43,7 @@ def register(subparsers):
     parser.set_defaults(func=run)
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     """Print the comparison table (and write the plot); returns the exit status 0."""
     params = args.params
     beam = params.beam
@@ -49,9 +53,9 @@ def run(args):
     geometry = (beam.electrode_length_m, beam.electrode_width_m, beam.ground_z_m)
 
     start = time.perf_counter()
-    fit = cap.RbfCapacitance.fit(*geometry, angle, include_fringe)
+    fit = rbf.RbfCapacitance.fit(*geometry, angle, include_fringe)
     fit_s = time.perf_counter() - start
-    differences = cap.compare_models(*geometry, angle, include_fringe, fit=fit)
+    differences = rbf.compare_models(*geometry, angle, include_fringe, fit=fit)
 
     (z_lo, z_hi), (phi_lo, phi_hi) = fit.centre_box
     fringe = f'on, theta_f = {angle:g} rad' if include_fringe else 'off'
@@ -60,13 +64,13 @@ def run(args):
     print(f'RBF net: {fit.weights.shape[0]} x {fit.weights.shape[1]} centres, '
           f'z_S in [{z_lo:.4g}, {z_hi:.4g}] m, phi in [{phi_lo:.4g}, {phi_hi:.4g}] rad, '
           f'sigma_z = {fit.sigma_z_m:g} m, sigma_phi = {fit.sigma_phi_rad:g} rad')
-    print(f'fit: both gaps >= {cap.FIT_MIN_GAP_M:g} m, ridge {fit.ridge:g}, '
+    print(f'fit: both gaps >= {rbf.FIT_MIN_GAP_M:g} m, ridge {fit.ridge:g}, '
           f'condition number {fit.condition_number:.3g}, {fit_s:.2f} s')
     print()
-    print(cap.format_comparison(differences))
+    print(rbf.format_comparison(differences))
     print()
     print("rel. to max = max |RBF - closed| / max |closed| over the region; pointwise = max "
-          f"|RBF - closed| / |closed| where |closed| >= {cap.POINTWISE_FLOOR:g} max |closed|.")
+          f"|RBF - closed| / |closed| where |closed| >= {rbf.POINTWISE_FLOOR:g} max |closed|.")
     print('box = centre box with both gaps >= the fit floor; interior = one sigma inside it.')
     if args.plot:
         _plot(args.plot, fit, geometry, angle, include_fringe)
@@ -74,7 +78,8 @@ def run(args):
     return 0
 
 
-def _plot(path, fit, geometry, fringe_angle_rad, include_fringe):
+def _plot(path: str, fit: rbf.RbfCapacitance, geometry: tuple[float, float, float],
+          fringe_angle_rad: float, include_fringe: bool) -> None:
     """C and dC/dphi along phi at the gaps PLOT_GAPS_M, closed form (solid) and RBF (dashed)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -89,7 +94,7 @@ def _plot(path, fit, geometry, fringe_angle_rad, include_fringe):
         closed = cap.closed_form_array(gap, phi, length_m, width_m, fringe_angle_rad,
                                        include_fringe)
         net = fit.evaluate(z_ground_m + gap, phi)
-        fitted = np.minimum(gap, gap + length_m * np.sin(phi)) >= cap.FIT_MIN_GAP_M
+        fitted = np.minimum(gap, gap + length_m * np.sin(phi)) >= rbf.FIT_MIN_GAP_M
         colour = f'C{k}'
         for ax, index, scale in ((ax_c, 0, 1e12), (ax_d, 2, 1e9)):
             ax.plot(phi * 1e3, np.where(fitted, closed[index], np.nan) * scale, color=colour,

@@ -10,20 +10,32 @@ is set beside the offline closed loop's on the same controller, plant, reference
 period (:func:`sphere_twin.scenario.offline_loop`): the ROS loop should track as well.
 """
 
+from __future__ import annotations
+
+import argparse
 import datetime
 import math
 import os
 import re
 import sys
 import time
+from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from sphere_sim.twin.plant_setup import PLANT_KINDS
 from sphere_twin.commands.options import positive_float
 from sphere_twin.node_runtime.ros_env import DISCOVERY_RANGE_VAR
-from sphere_twin.processes import NodeSpec, fresh_domain_id, parameter_args, running_nodes
+from sphere_twin.processes import (
+    NodeProcess,
+    NodeSpec,
+    fresh_domain_id,
+    parameter_args,
+    running_nodes,
+)
 from sphere_twin.scenario import (
     SETPOINT_XY,
     TRAJECTORY_OFFSET_S,
@@ -58,15 +70,17 @@ REAL_TIME_FACTOR_PATTERN = re.compile(r'real-time factor (\S+?);?(?:\s|$)')
 LATE_PATTERN = re.compile(r'\((\d+) late\)')
 
 
-def demo_nodes(bag_dir, setpoint_s, real_time_factor, seed, plant=DEFAULT_PLANT):
+def demo_nodes(bag_dir: str | os.PathLike[str], setpoint_s: float, real_time_factor: float,
+               seed: int, plant: str = DEFAULT_PLANT) -> tuple[NodeSpec, ...]:
     """What the demo starts, in start order (stopped in reverse: the recorder last)."""
     return (NodeSpec('recorder', tuple(parameter_args(output_dir=str(bag_dir)))),
             *scenario_nodes(setpoint_s, plant, real_time_factor, seed,
                             DEMO_NORMAL_SUBSCRIBERS, DEMO_CLOCK_SUBSCRIBERS))
 
 
-def run_demo(setpoint_s=DEFAULT_SETPOINT_S, trajectory_s=DEFAULT_TRAJECTORY_S,
-             real_time_factor=None, bags_dir='bags', seed=0, out=None, plant=DEFAULT_PLANT):
+def run_demo(setpoint_s: float = DEFAULT_SETPOINT_S, trajectory_s: float = DEFAULT_TRAJECTORY_S,
+             real_time_factor: float | None = None, bags_dir: str | os.PathLike[str] = 'bags',
+             seed: int = 0, out: TextIO | None = None, plant: str = DEFAULT_PLANT) -> int:
     """Run the scenario; returns 0 if the loop ran and every node exited cleanly, else 1.
 
     ``real_time_factor`` defaults to the plant's (:data:`DEFAULT_REAL_TIME_FACTOR`).
@@ -78,7 +92,7 @@ def run_demo(setpoint_s=DEFAULT_SETPOINT_S, trajectory_s=DEFAULT_TRAJECTORY_S,
     if real_time_factor is None:
         real_time_factor = DEFAULT_REAL_TIME_FACTOR[plant]
 
-    def say(line):
+    def say(line: str) -> None:
         print(line, file=out, flush=True)
 
     domain_id = fresh_domain_id()
@@ -91,7 +105,7 @@ def run_demo(setpoint_s=DEFAULT_SETPOINT_S, trajectory_s=DEFAULT_TRAJECTORY_S,
         f'(A_max 0.44, f1 0.02 Hz, from t = {TRAJECTORY_OFFSET_S:g} s, where it passes the '
         f'centre) for {trajectory_s:g} s of simulated time, {plant} plant, paced at '
         f'{real_time_factor:g}x real time')
-    problems = []
+    problems: list[str] = []
     *others, simulator = demo_nodes(bag_dir, setpoint_s, real_time_factor, seed, plant)
     with running_nodes(*others, domain_id=domain_id) as group:
         for process in group.processes:
@@ -137,9 +151,9 @@ def run_demo(setpoint_s=DEFAULT_SETPOINT_S, trajectory_s=DEFAULT_TRAJECTORY_S,
     return 0
 
 
-def _report_exits(processes, say):
+def _report_exits(processes: Iterable[NodeProcess], say: Callable[[str], None]) -> list[str]:
     """Each node's last lines and exit code; the problems (non-zero exits)."""
-    problems = []
+    problems: list[str] = []
     for process in processes:
         for line in (process.stderr_text() + process.stdout_text()).splitlines()[-3:]:
             say(f'  {process.name:>10} | {line}')
@@ -149,7 +163,7 @@ def _report_exits(processes, say):
     return problems
 
 
-def _report_pace(processes, say):
+def _report_pace(processes: Iterable[NodeProcess], say: Callable[[str], None]) -> None:
     """Say the real-time factor each node saw and the late programmes (those that started
     later than the controller asked: the simulator fell behind), from their farewell lines."""
     factors, late = [], None
@@ -164,14 +178,15 @@ def _report_pace(processes, say):
         f'{"unknown" if late is None else late}')
 
 
-def _trajectory_rms_rad(times_s, errors_rad, setpoint_s):
+def _trajectory_rms_rad(times_s: ArrayLike, errors_rad: ArrayLike, setpoint_s: float) -> float:
     """RMS of the errors from the trajectory's start on (rad); NaN before it."""
     tracking = np.asarray(times_s) >= setpoint_s
     return (math.sqrt(float(np.mean(np.asarray(errors_rad)[tracking] ** 2))) if tracking.any()
             else math.nan)
 
 
-def _report_bag(bag_dir, setpoint_s, log, wall_s, say, offline_rms_rad):
+def _report_bag(bag_dir: Path, setpoint_s: float, log: RunLog, wall_s: float,
+                say: Callable[[str], None], offline_rms_rad: float) -> list[str]:
     """What the run did, read back from its own bag as `sphere-twin report` reads it, beside
     the offline loop's trajectory RMS error, and a plot; the problems (an unreadable bag, no
     normal recorded)."""
@@ -196,7 +211,8 @@ def _report_bag(bag_dir, setpoint_s, log, wall_s, say, offline_rms_rad):
         say(f'demo: setpoint: final error {math.degrees(errors[on_setpoint][-1]):.4f} deg')
     # Like for like: the error where the loop decided (settled states), as the offline loop
     # records it; and over every sample, kicks in flight included.
-    rms_rad = _trajectory_rms_rad(*errors_at_decisions_rad(recorded), setpoint_s)
+    decided_t_s, decided_errors_rad = errors_at_decisions_rad(recorded)
+    rms_rad = _trajectory_rms_rad(decided_t_s, decided_errors_rad, setpoint_s)
     if math.isfinite(rms_rad):
         say(f'demo: trajectory RMS error {math.degrees(rms_rad):.3f} deg (offline loop: '
             f'{math.degrees(offline_rms_rad):.3f} deg)')
@@ -207,7 +223,7 @@ def _report_bag(bag_dir, setpoint_s, log, wall_s, say, offline_rms_rad):
     return []
 
 
-def register(subparsers):
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``demo`` subcommand to the ``sphere-twin`` parser."""
     parser = subparsers.add_parser(
         'demo', help='the closed loop as separate processes, recorded to a bag',
@@ -231,7 +247,7 @@ def register(subparsers):
     parser.set_defaults(func=run)
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     """Entry point of the subcommand; returns the exit code."""
     return run_demo(args.setpoint_s, args.trajectory_s, args.real_time_factor, args.bags_dir,
                     args.seed, plant=args.plant)

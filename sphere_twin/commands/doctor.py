@@ -6,12 +6,17 @@ ROS is probed in a child Python process: a broken RMW can then only fail its che
 crash the doctor, and the CLI itself never imports rclpy.
 """
 
+from __future__ import annotations
+
+import argparse
 import dataclasses
 import importlib.metadata
 import json
 import os
 import subprocess
 import sys
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any, TextIO
 
 from sphere_twin.node_runtime.ros_env import (
     DEFAULT_DISCOVERY_RANGE,
@@ -55,7 +60,7 @@ class CheckResult:
     detail: str
 
 
-def _run_probe(code):
+def _run_probe(code: str) -> tuple[bool, str]:
     """Run ``code`` in a child Python: ``(ok, last line of stdout, or of stderr if it failed)``."""
     try:
         result = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
@@ -69,7 +74,7 @@ def _run_probe(code):
     return True, lines[-1] if lines else ''
 
 
-def check_rclpy():
+def check_rclpy() -> tuple[bool, str]:
     """rclpy imports."""
     ok, detail = _run_probe(_RCLPY_PROBE)
     if not ok:
@@ -77,7 +82,7 @@ def check_rclpy():
     return True, f'rclpy {_version("ros-jazzy-rclpy") or "(version unknown)"} from {detail}'
 
 
-def check_rmw():
+def check_rmw() -> tuple[bool, str]:
     """The RMW implementation loads and can create a node (then shuts down)."""
     ok, detail = _run_probe(_RMW_PROBE)
     if not ok:
@@ -86,7 +91,7 @@ def check_rmw():
     return True, f'{identifier}: created and destroyed a node on domain {domain_id}'
 
 
-def check_discovery_range():
+def check_discovery_range() -> tuple[bool, str]:
     """DDS discovery is limited to this machine."""
     value = os.environ.get(DISCOVERY_RANGE_VAR)
     if value == DEFAULT_DISCOVERY_RANGE:
@@ -95,7 +100,7 @@ def check_discovery_range():
     return False, f'{shown}; the twin expects {DEFAULT_DISCOVERY_RANGE}'
 
 
-def check_domain_id():
+def check_domain_id() -> tuple[bool, str]:
     """ROS_DOMAIN_ID is unset or a valid domain id."""
     value = os.environ.get(DOMAIN_ID_VAR)
     if value is None:
@@ -105,7 +110,7 @@ def check_domain_id():
     return False, f'{value!r} is not an integer in 0..{MAX_DOMAIN_ID}'
 
 
-def check_packages():
+def check_packages() -> tuple[bool, str]:
     """The key packages are installed."""
     versions = package_versions()
     missing = [name for name, version in versions.items() if version is None]
@@ -114,14 +119,14 @@ def check_packages():
     return True, ', '.join(f'{name} {version}' for name, version in versions.items())
 
 
-def check_numba():
+def check_numba() -> tuple[bool, str]:
     """numba compiles and runs a function."""
     # Imported here so that a missing or broken numba fails this check instead of the doctor.
     import numba
     import numpy as np
 
     @numba.njit(cache=False)
-    def sum_of_squares(values):
+    def sum_of_squares(values):  # type: ignore[no-untyped-def]  # numba types it from its call
         total = 0.0
         for value in values:
             total += value * value
@@ -145,21 +150,22 @@ CHECKS = (
 )
 
 
-def _version(distribution):
+def _version(distribution: str) -> str | None:
     try:
         return importlib.metadata.version(distribution)
     except importlib.metadata.PackageNotFoundError:
         return None
 
 
-def package_versions(names=KEY_PACKAGES):
+def package_versions(names: Iterable[str] = KEY_PACKAGES) -> dict[str, str | None]:
     """Installed version of each distribution, None where missing."""
     return {name: _version(name) for name in names}
 
 
-def run_checks(checks=CHECKS):
+def run_checks(checks: Iterable[tuple[str, Callable[[], tuple[bool, str]]]] = CHECKS,
+               ) -> list[CheckResult]:
     """Run ``checks`` (pairs of name and function); an exception fails its check only."""
-    results = []
+    results: list[CheckResult] = []
     for name, check in checks:
         try:
             ok, detail = check()
@@ -169,7 +175,7 @@ def run_checks(checks=CHECKS):
     return results
 
 
-def summary(results):
+def summary(results: Sequence[CheckResult]) -> str:
     """The final line: all passed, or which checks failed and why."""
     failed = [r for r in results if not r.ok]
     if not failed:
@@ -178,7 +184,7 @@ def summary(results):
     return f'doctor: {len(failed)} of {len(results)} checks failed: {reasons}'
 
 
-def report(results):
+def report(results: Sequence[CheckResult]) -> dict[str, Any]:
     """The JSON document of ``--json``."""
     return {
         'ok': all(r.ok for r in results),
@@ -192,7 +198,8 @@ def report(results):
     }
 
 
-def doctor(checks=CHECKS, as_json=False, out=None):
+def doctor(checks: Iterable[tuple[str, Callable[[], tuple[bool, str]]]] = CHECKS,
+           as_json: bool = False, out: TextIO | None = None) -> int:
     """Run the checks, print the report, return the exit code.
 
     Parameters
@@ -222,7 +229,7 @@ def doctor(checks=CHECKS, as_json=False, out=None):
     return 0 if all(r.ok for r in results) else 1
 
 
-def register(subparsers):
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``doctor`` subcommand to the ``sphere-twin`` parser."""
     parser = subparsers.add_parser(
         'doctor', help='check that ROS 2, the RMW and the compiled parts work here',
@@ -232,6 +239,6 @@ def register(subparsers):
     parser.set_defaults(func=run)
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     """Entry point of the subcommand; returns the exit code."""
     return doctor(as_json=args.json)

@@ -9,27 +9,37 @@ full kick's settle time): ``trajectory MSE extended/basic without preview: <rati
 ``trajectory MSE extended/basic: <ratio>`` with preview, the default.
 """
 
+from __future__ import annotations
+
+import argparse
 import dataclasses
 import enum
 import json
 import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 from sphere_control.controllers import ControllerKind
-from sphere_control.evaluation import (
-    LEVEL_NORMAL,
+from sphere_control.evaluation import evaluate
+from sphere_control.kick_plants import AnalyticKickPlant
+from sphere_control.studies import (
     PAPER_PHI_MIN_RAD,
     PAPER_SETUP,
     EvaluationConfig,
     PlantUnderTest,
-    evaluate,
 )
-from sphere_control.kick_plants import AnalyticKickPlant
-from sphere_sim.kicks.discrete import PAPER_FULL_KICK_RAD
+from sphere_sim.kicks.discrete import LEVEL_NORMAL, PAPER_FULL_KICK_RAD
 from sphere_sim.kicks.lookup_table import AXIS_TABLE_PATH
 from sphere_twin.commands.options import positive_float
+
+if TYPE_CHECKING:
+    from sphere_control.closed_loop import LoopHistory
+    from sphere_control.evaluation import EvaluationReport
+    from sphere_control.studies import TrackingResult
+    from sphere_sim.kicks.lookup_table import CombinedKickPlant, LookupTable
 
 RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
 # The analytic stand-in for the paper's plant: the 0.54 deg kick with a convex intensity
@@ -44,11 +54,11 @@ class PlantChoice(enum.Enum):
     TABLE = 'table'
     ANALYTIC = 'analytic'
 
-    def __str__(self):  # what --help and a usage error show
+    def __str__(self) -> str:  # what --help and a usage error show
         return self.value
 
 
-def register(subparsers):
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
         'evaluate', help='closed-loop studies of §5 (Figs. 13-15) beside the paper\'s findings',
         description='Basic, extended and pre-learned extended controllers on the discrete '
@@ -71,7 +81,7 @@ def register(subparsers):
 
 
 
-def load_table(path):
+def load_table(path: Path | None) -> tuple[LookupTable, str]:
     """(table, note); TableError for a missing or stale table."""
     from sphere_sim.kicks.lookup_table import DEFAULT_TABLE_PATH, LookupTable
 
@@ -79,7 +89,7 @@ def load_table(path):
     return LookupTable.load_current(path), f'table {path}'
 
 
-def load_eight_directions(table, axis_path):
+def load_eight_directions(table: LookupTable, axis_path: Path) -> tuple[CombinedKickPlant, str]:
     """The diagonal table with the axis-parallel one, and a note."""
     from sphere_sim.kicks.lookup_table import CombinedKickPlant, LookupTable
 
@@ -87,7 +97,7 @@ def load_eight_directions(table, axis_path):
     return CombinedKickPlant([table, axis]), f'eight directions: {axis_path} added'
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     config = EvaluationConfig.quick() if args.quick else EvaluationConfig()
     table = None
     if args.plant is PlantChoice.TABLE:
@@ -107,7 +117,8 @@ def run(args):
     how = ('as given' if args.kick_period_s is not None else
            f'the full kick settles in {put.settle_time_s * 1e3:.1f} ms, rounded up'
            if put.settle_time_s > 0 else 'the kick window: the plant reports no settle time')
-    print(f'kick period {config.kick_period_s * 1e3:.0f} ms ({how})')
+    # for_plant() resolved the period (a float from here on).
+    print(f'kick period {cast(float, config.kick_period_s) * 1e3:.0f} ms ({how})')
     report = evaluate(put, config, table=table, progress=lambda m: print(m, flush=True),
                       eight_plant=eight)
     args.out.mkdir(parents=True, exist_ok=True)
@@ -124,13 +135,13 @@ def run(args):
     return 0
 
 
-def _jsonable(value):
+def _jsonable(value: object) -> object:
     if isinstance(value, np.generic):
         return value.item()
     raise TypeError(f'{type(value)} is not JSON-able')
 
 
-def print_table(rows):
+def print_table(rows: Sequence[Mapping[str, Any]]) -> None:
     widths = [max(len(str(r[k])) for r in rows) for k in ('quantity', 'paper', 'ours')]
     widths[0] = max(widths[0], len('quantity'))
     widths[1] = min(max(widths[1], len('paper')), 80)
@@ -145,7 +156,7 @@ def print_table(rows):
         print(f'{r["quantity"]:<{widths[0]}}  {r["paper"]:<{widths[1]}}  {r["ours"]}')
 
 
-def write_figures(report, put, out):
+def write_figures(report: EvaluationReport, put: PlantUnderTest, out: Path) -> list[Path]:
     import matplotlib
 
     matplotlib.use('Agg')
@@ -156,7 +167,8 @@ def write_figures(report, put, out):
                            ('fig14', 'Fig. 14: setpoint, 12 deg direction mismatch')):
         fig, axes = plt.subplots(2, 2, figsize=(11, 8.5))
         for row, index in enumerate((0, 1)):
-            runs = report.histories[(fig_key, PAPER_SETUP, index)]
+            runs = cast('dict[ControllerKind, LoopHistory]',
+                        report.histories[(fig_key, PAPER_SETUP, index)])
             phi = math.degrees(PAPER_PHI_MIN_RAD[index])
             ax_xy, ax_err = axes[row]
             for kind, h in runs.items():
@@ -184,7 +196,7 @@ def write_figures(report, put, out):
         plt.close(fig)
         paths.append(path)
 
-    result = report.histories[('fig15', PAPER_SETUP, True)]
+    result = cast('TrackingResult', report.histories[('fig15', PAPER_SETUP, True)])
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.8))
     best = f'basic (best Phi_min {math.degrees(result.basic_phi_min_rad):.4f} deg)'
     for ax, h, name in ((axes[0], result.basic, best), (axes[1], result.extended, 'extended')):

@@ -6,23 +6,35 @@ writes a parameter file (``base:`` + ``overrides:``, with an ``identification:``
 values, intervals and per-kick residuals) and a plot of recorded against fitted normals.
 """
 
+from __future__ import annotations
+
+import argparse
 import dataclasses
 import math
+import os
 import time
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
+from numpy.typing import NDArray
 from tqdm import tqdm
 
 from sphere_sim.kicks.identification import START_PARAMETER_SET
 from sphere_twin.commands.bag import BAG_HELP
 from sphere_twin.commands.options import CommandError, add_params_option, positive_int
 
+if TYPE_CHECKING:
+    from sphere_sim.kicks.identification import Evaluator, IdentificationResult
+    from sphere_sim.kicks.observations import Observations
+    from sphere_sim.model.parameters import ParameterSet
+
 TRUTH_FILE = 'truth.yaml'
 
 
-def register(subparsers):
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
         'identify', help='fit the twin to recordings of one device',
         description='Fit the parameters the set declares uncertain (or those named with --fit) '
@@ -51,9 +63,9 @@ def register(subparsers):
     parser.set_defaults(func=run)
 
 
-def read_observations(bag_dir):
+def read_observations(bag_dir: str | os.PathLike[str]) -> Observations:
     """The kicks of one bag, from the device's topics only."""
-    from sphere_sim.kicks.identification import SETTLE_S, observations_from_samples
+    from sphere_sim.kicks.observations import SETTLE_S, observations_from_samples
     from sphere_twin.run_analysis import DEVICE_TOPICS, load_run
 
     run = load_run(bag_dir, DEVICE_TOPICS)
@@ -61,13 +73,9 @@ def read_observations(bag_dir):
                                      SETTLE_S)
 
 
-def run(args):
-    from sphere_sim.kicks.identification import (
-        IdentificationError,
-        fit_parameters,
-        identify,
-        merge_observations,
-    )
+def run(args: argparse.Namespace) -> int:
+    from sphere_sim.kicks.identification import fit_parameters, identify
+    from sphere_sim.kicks.observations import IdentificationError, merge_observations
     from sphere_sim.model.parameters import ParameterError, load_parameter_set
     from sphere_twin.bag.locate import locate_bag
 
@@ -90,7 +98,7 @@ def run(args):
               f'start {base.get(fit.path):.4g}, {where} [{fit.low:.4g}, {fit.high:.4g}]')
     started = time.perf_counter()
     with tqdm(desc='identify', unit='kick') as bar:
-        def progress(evaluator):
+        def progress(evaluator: Evaluator) -> None:
             bar.n = evaluator.simulated
             bar.set_postfix_str(f'{len(evaluator.cache)} evaluations')
             bar.refresh()
@@ -118,7 +126,7 @@ def run(args):
     return 0
 
 
-def print_result(result, wall_s):
+def print_result(result: IdentificationResult, wall_s: float) -> None:
     print(f'{result.evaluations} evaluations, {result.simulated_kicks} kicks simulated '
           f'({result.resumed_evaluations} evaluations read back from the checkpoint) in '
           f'{wall_s:.1f} s; optimiser: {result.converged}')
@@ -136,16 +144,16 @@ def print_result(result, wall_s):
             print(f'{p.path}: {p.status}, {p.note}')
 
 
-def interval_text(interval):
+def interval_text(interval: Sequence[float]) -> str:
     low, high = interval
     return f'[{low:.4g}, {high:.4g}]'
 
 
-def _rms(values):
+def _rms(values: Sequence[float] | NDArray[np.float64]) -> float:
     return float(np.sqrt(np.mean(np.square(values)))) if len(values) else 0.0
 
 
-def base_reference(params, path):
+def base_reference(params: ParameterSet, path: Path) -> str:
     """What a fitted file's ``base:`` names: the shipped set ``params`` is, or else a file
     beside ``path`` holding ``params`` whole (a start given as a file of its own)."""
     from sphere_sim.model.parameters import available_parameter_sets, load_parameter_set
@@ -158,7 +166,7 @@ def base_reference(params, path):
     return str(start.resolve())
 
 
-def json_safe(data):
+def json_safe(data: Any) -> Any:
     """Tuples as lists, for yaml.safe_dump."""
     if isinstance(data, dict):
         return {k: json_safe(v) for k, v in data.items()}
@@ -167,9 +175,10 @@ def json_safe(data):
     return data
 
 
-def write_fitted(path, params, result, obs, bags, wall_s):
+def write_fitted(path: Path, params: ParameterSet, result: IdentificationResult,
+                 obs: Observations, bags: Sequence[str], wall_s: float) -> Path:
     """The fitted parameter file: ``base:`` + ``overrides:``, and what the fit found."""
-    overrides = {}
+    overrides: dict[str, float] = {}
     for p in result.parameters:
         if p.fitted:
             for q in (p.path, *p.tied):
@@ -206,7 +215,7 @@ def write_fitted(path, params, result, obs, bags, wall_s):
     return path
 
 
-def plot_fit(path, obs, result, title):
+def plot_fit(path: Path, obs: Observations, result: IdentificationResult, title: str) -> Path:
     """Each kick's displacement of the resting normal, recorded against the model's at the
     start values and fitted, and the residual per kick."""
     from sphere_twin.plots import plt
@@ -245,7 +254,8 @@ def plot_fit(path, obs, result, title):
     return path
 
 
-def report_truth(result, truth, fitted):
+def report_truth(result: IdentificationResult, truth: ParameterSet,
+                 fitted: ParameterSet) -> None:
     """Each parameter against the bag's ``truth.yaml``, and the count that the issue asks."""
     from sphere_sim.kicks.identification import within_truth
 

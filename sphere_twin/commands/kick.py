@@ -1,5 +1,8 @@
 """``sphere-twin kick SCENE``: simulate one scene and print the sphere's final state."""
 
+from __future__ import annotations
+
+import argparse
 import json
 
 from sphere_sim.model.scene import load_scene
@@ -7,7 +10,7 @@ from sphere_sim.studies.runs import DEFAULT_RTOL, run_scene, summarize
 from sphere_twin.commands.options import add_params_option, positive_float
 
 
-def register(subparsers):
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
         'kick', help='simulate one scene and print the final sphere state',
         description='Simulate a scene (a shipped name or a YAML path) from its initial state '
@@ -22,7 +25,7 @@ def register(subparsers):
     parser.set_defaults(func=run)
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)
     # The scene's own set unless --params names another; the scene's perturbation either way.
     outcome = summarize(run_scene(scene, scene.parameters(args.params), rtol=args.rtol))

@@ -1,5 +1,8 @@
 """``sphere-twin optimize-kick``: the optimised hind-left kick of §4.1, saved as JSON."""
 
+from __future__ import annotations
+
+import argparse
 import dataclasses
 import json
 import math
@@ -28,7 +31,7 @@ TEMPLATES = {
 LAYOUTS = ('paper', 'swapped')
 
 
-def template(kick, layout='paper'):
+def template(kick: str, layout: str = 'paper') -> KickDesign:
     """The design the search starts from: ``kick``'s template in ``layout``."""
     design = TEMPLATES[kick]
     if layout == 'swapped':
@@ -37,7 +40,7 @@ def template(kick, layout='paper'):
     return design
 
 
-def register(subparsers):
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
         'optimize-kick', help='optimise the hind-left kick by differential evolution',
         description='Maximise the rotation of the hind-left kick (35 V on beams 1-2, 80 V on '
@@ -59,9 +62,9 @@ def register(subparsers):
     parser.set_defaults(func=run)
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     with tqdm(total=args.maxiter, desc='generations', unit='gen') as bar:
-        def progress(best):
+        def progress(best: float) -> None:
             bar.set_postfix(best_deg=f'{math.degrees(best):.4f}')
             bar.update()
 

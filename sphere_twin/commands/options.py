@@ -1,10 +1,21 @@
 """Options that several subcommands share, defined once, and the commands' own error."""
 
+from __future__ import annotations
+
 import argparse
 import math
+from collections.abc import Callable
+from typing import TypeVar
 
 from msg_defs.device import DEFAULT_PARAMETER_SET
-from sphere_sim.model.parameters import ParameterError, available_parameter_sets, load_parameter_set
+from sphere_sim.model.parameters import (
+    ParameterError,
+    ParameterSet,
+    available_parameter_sets,
+    load_parameter_set,
+)
+
+_T = TypeVar('_T')
 
 
 class CommandError(Exception):
@@ -12,10 +23,11 @@ class CommandError(Exception):
     message on one line and exits with status 2)."""
 
 
-def _checked_number(convert, kind, accept, requirement):
+def _checked_number(convert: Callable[[str], _T], kind: str, accept: Callable[[_T], bool],
+                    requirement: str) -> Callable[[str], _T]:
     """An argparse type: ``convert`` the text, then ``accept`` the value or say the
     ``requirement``."""
-    def parse(text):
+    def parse(text: str) -> _T:
         try:
             value = convert(text)
         except ValueError:
@@ -36,7 +48,7 @@ unit_interval = _checked_number(float, 'a number', lambda v: 0.0 <= v <= 1.0,
                                 'must lie in [0, 1]')  # an intensity u_K
 
 
-def worker_counts(text):
+def worker_counts(text: str) -> tuple[int, ...]:
     """argparse type: comma-separated worker counts of 2 or more (``2,4,8``); a 1 is dropped,
     since one worker always runs beside them."""
     try:
@@ -49,7 +61,7 @@ def worker_counts(text):
     return tuple(counts)
 
 
-def parameter_set(text):
+def parameter_set(text: str) -> ParameterSet:
     """argparse type: a parameter set's name or YAML file, loaded and checked once, here."""
     try:
         return load_parameter_set(text)
@@ -57,7 +69,8 @@ def parameter_set(text):
         raise argparse.ArgumentTypeError(str(exc)) from exc
 
 
-def add_params_option(parser, default=DEFAULT_PARAMETER_SET, help=None):
+def add_params_option(parser: argparse.ArgumentParser, default: str | None = DEFAULT_PARAMETER_SET,
+                      help: str | None = None) -> None:
     """``--params NAME|FILE``: the parameter set the command runs on, as a ParameterSet.
 
     Every command takes the set this way and passes the loaded set down; a bad name or file

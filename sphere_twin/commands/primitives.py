@@ -1,5 +1,8 @@
 """``sphere-twin primitives width|offsets``: the kick's characteristics of §4 (Fig. 8 and 10)."""
 
+from __future__ import annotations
+
+import argparse
 import json
 import math
 from pathlib import Path
@@ -22,7 +25,7 @@ RESULTS = Path('bench/results')
 DEFAULT_OFFSETS = RESULTS / 'voltage_offsets.json'
 
 
-def register(subparsers):
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
         'primitives', help="a kick's rotation width and voltage offsets (Fig. 10, Fig. 8)",
         description="Characteristics of the optimised kick: the resting normal's displacement "
@@ -48,7 +51,7 @@ def register(subparsers):
     offsets.set_defaults(func=run_offsets)
 
 
-def run_width(args):
+def run_width(args: argparse.Namespace) -> int:
     from sphere_twin.plots import plot_lines
 
     design = KickDesign.load(args.design)
@@ -80,7 +83,7 @@ def run_width(args):
     return 0
 
 
-def run_offsets(args):
+def run_offsets(args: argparse.Namespace) -> int:
     from sphere_twin.plots import plot_offsets
 
     design = KickDesign.load(args.design)

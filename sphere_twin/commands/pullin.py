@@ -1,5 +1,8 @@
 """``sphere-twin pullin``: the Fig. 4 pull-in threshold of the model, and its figure."""
 
+from __future__ import annotations
+
+import argparse
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +18,7 @@ from sphere_twin.plots import plot_pulse_sweep
 SWEEP_V = (30.0, 35.0, 40.0, 45.0, 50.0, 55.0, 60.0, 65.0, 70.0)  # Fig. 4's range
 
 
-def register(subparsers):
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
         'pullin', help='find the pull-in threshold of 5 ms pulses (Fig. 4)',
         description='Bisection to 0.1 V on the amplitude of a 5 ms pulse on all four beams that '
@@ -29,7 +32,7 @@ def register(subparsers):
     parser.set_defaults(func=run)
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     scene = load_scene('four_beam_pulse').replace(sphere=not args.no_sphere)
     model = assemble(scene, args.params)
     x_rest = rest_state(model)

@@ -1,18 +1,31 @@
 """``sphere-twin replay-check BAG``: the bag's commands replayed open loop through the twin."""
 
+from __future__ import annotations
+
+import argparse
 import json
 import math
+from collections.abc import Iterable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from msg_defs.device import DEFAULT_PARAMETER_SET, KICK_WINDOW_S
 from sphere_twin.commands.bag import BAG_HELP
 from sphere_twin.commands.options import CommandError, add_params_option, parameter_set
 
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+    from sphere_sim.kicks.plants import TwinPlant
+    from sphere_sim.model.parameters import ParameterSet
+    from sphere_twin.run_analysis import RecordedRun, ReplayResult
+
 # Resting samples that differ by more than this are a noisy sensor's, not rounding.
 SCATTER_RAD = 1e-12
 
 
-def register(subparsers):
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
         'replay-check', help='replay a bag\'s commands open loop and compare the normals',
         description='Feed the recorded voltage commands and pulse programmes into the '
@@ -37,7 +50,8 @@ def register(subparsers):
     parser.set_defaults(func=run)
 
 
-def build_replay_plant(kind, normal0, time0_s, params, tables=()):
+def build_replay_plant(kind: str, normal0: NDArray[np.float64], time0_s: float,
+                       params: ParameterSet, tables: Iterable[str | Path] = ()) -> TwinPlant:
     """A plant of parameter set ``params`` resting at ``normal0`` at ``time0_s``."""
     from sphere_sim.kicks.design import cardan_of_normal
     from sphere_sim.kicks.discrete import kick_period_s
@@ -47,7 +61,7 @@ def build_replay_plant(kind, normal0, time0_s, params, tables=()):
     from sphere_sim.twin.plant_setup import discrete_plant
 
     if kind == 'discrete':
-        plant = discrete_plant(load_kick_model(tables, params), normal0)
+        plant: TwinPlant = discrete_plant(load_kick_model(tables, params), normal0)
     else:
         from sphere_sim.model.assembly import assemble
         from sphere_sim.model.initial_state import rest_state
@@ -59,7 +73,7 @@ def build_replay_plant(kind, normal0, time0_s, params, tables=()):
     return plant
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     from sphere_sim.model.parameters import load_parameter_set
     from sphere_twin.bag.locate import locate_bag
     from sphere_twin.plots import plot_lines
@@ -118,7 +132,8 @@ def run(args):
     return 0
 
 
-def _replay(recorded, start, plant, params, tables):
+def _replay(recorded: RecordedRun, start: int, plant: str, params: ParameterSet,
+            tables: Iterable[str | Path]) -> ReplayResult:
     from sphere_twin.run_analysis import replay
 
     replay_plant = build_replay_plant(plant, resting_start(recorded, start),
@@ -126,7 +141,7 @@ def _replay(recorded, start, plant, params, tables):
     return replay(recorded, replay_plant, start)
 
 
-def resting_start(recorded, start):
+def resting_start(recorded: RecordedRun, start: int) -> NDArray[np.float64]:
     """The normal the replay starts from: the sample at ``start``, or, where the samples until
     the first command scatter by more than rounding (a noisy sensor), their mean: the sphere
     rests there, and the mean beats the noise. (A noiseless recording keeps its first sample:

@@ -1,5 +1,8 @@
 """``sphere-twin report BAG``: error against run time, kicks and statistics of a recorded run."""
 
+from __future__ import annotations
+
+import argparse
 import json
 import math
 from pathlib import Path
@@ -8,7 +11,7 @@ from sphere_twin.commands.bag import BAG_HELP
 from sphere_twin.commands.options import positive_float
 
 
-def register(subparsers):
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
         'report', help='error against run time and statistics of a recorded bag',
         description='Surface-normal error against time with the kicks marked, the path in the '
@@ -22,7 +25,7 @@ def register(subparsers):
     parser.set_defaults(func=run)
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     from sphere_twin.bag.locate import locate_bag
     from sphere_twin.run_analysis import load_run, plot_report, statistics
 

@@ -1,11 +1,17 @@
 """``sphere-twin synthetic record|study``: recordings of synthetic devices, and the
 identification study on them (bench/results/identification.md)."""
 
+from __future__ import annotations
+
+import argparse
 import json
 import math
+import os
 import tempfile
 import time
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from tqdm import tqdm
 
@@ -13,11 +19,18 @@ from sphere_twin.commands.identify import interval_text
 from sphere_twin.commands.options import CommandError, positive_int
 from sphere_twin.synthetic_device import PUBLISH_RATE_HZ
 
+if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+    from sphere_sim.kicks.identification import Evaluator
+    from sphere_twin.synthetic_device import SyntheticDevice
+
 DEFAULT_STUDY = Path('bench/results/identification.md')
 DEFAULT_KICKS = 40
 
 
-def register(subparsers):
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
         'synthetic', help='record synthetic devices; the identification study on them',
         description='A synthetic device is the continuous twin with some parameters changed; '
@@ -47,7 +60,7 @@ def register(subparsers):
     study.set_defaults(func=run_study)
 
 
-def _device(name):
+def _device(name: str) -> SyntheticDevice:
     from sphere_twin.synthetic_device import DEVICES
 
     for device in DEVICES:
@@ -57,7 +70,8 @@ def _device(name):
                        f'{", ".join(d.name for d in DEVICES)}')
 
 
-def record(device, out, kicks, seed=None):
+def record(device: SyntheticDevice, out: str | os.PathLike[str], kicks: int,
+           seed: int | None = None) -> int:
     """Record ``device`` into the bag ``out`` with its truth.yaml; returns the sample count."""
     from sphere_sim.kicks.identification import START_PARAMETER_SET
     from sphere_sim.model.parameters import load_parameter_set
@@ -74,7 +88,7 @@ def record(device, out, kicks, seed=None):
     return samples
 
 
-def run_record(args):
+def run_record(args: argparse.Namespace) -> int:
     device = _device(args.device)
     samples = record(device, args.out, args.kicks, args.seed)
     print(f'wrote {args.out}: {args.kicks} kicks of {device.name} '
@@ -82,7 +96,7 @@ def run_record(args):
     return 0
 
 
-def run_study(args):
+def run_study(args: argparse.Namespace) -> int:
     from sphere_sim.kicks.engine import engine_of
     from sphere_sim.kicks.identification import (
         START_PARAMETER_SET,
@@ -96,7 +110,7 @@ def run_study(args):
 
     base = load_parameter_set(START_PARAMETER_SET)
     devices = [_device(name) for name in args.devices] if args.devices else DEVICES
-    rows = []
+    rows: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory() as tmp, engine_of(args.workers, args.scheduler) as eng:
         for device in devices:
             bag = Path(tmp) / device.name
@@ -105,7 +119,7 @@ def run_study(args):
             fits = fit_parameters(base, device.fit)
             started = time.perf_counter()
             with tqdm(desc=f'identify {device.name}', unit='kick', leave=False) as bar:
-                def progress(ev, bar=bar):
+                def progress(ev: Evaluator, bar: tqdm = bar) -> None:
                     bar.n = ev.simulated
                     bar.refresh()
 
@@ -135,11 +149,11 @@ def run_study(args):
     return 0
 
 
-def _rms(values):
+def _rms(values: Sequence[float] | NDArray[np.float64]) -> float:
     return math.sqrt(sum(v * v for v in values) / len(values)) if len(values) else 0.0
 
 
-def _print_device(row):
+def _print_device(row: Mapping[str, Any]) -> None:
     print(f'{row["device"]}: {row["kicks"]} kicks, {row["wall_s"]:.0f} s '
           f'({row["simulated_kicks"]} kicks simulated), residual RMS '
           f'{row["residual_rms_start_rad"]:.3g} -> {row["residual_rms_fitted_rad"]:.3g} rad')
@@ -147,7 +161,7 @@ def _print_device(row):
         print('  ' + _parameter_line(p))
 
 
-def _parameter_line(p):
+def _parameter_line(p: Mapping[str, Any]) -> str:
     if p['interval']:
         got = f'{p["value"]:.4g} in {interval_text(p["interval"])}'
         if p['status'] != 'fitted':
@@ -158,7 +172,7 @@ def _parameter_line(p):
             f'{"within" if p["within"] else "OUTSIDE"}')
 
 
-def _markdown(rows, args, noise):
+def _markdown(rows: Sequence[Mapping[str, Any]], args: argparse.Namespace, noise: float) -> str:
     only = ''.join(f' --device {name}' for name in args.devices or ())
     lines = ['# Identification of synthetic devices', '',
              f'Made by `sphere-twin synthetic study --kicks {args.kicks} --workers '

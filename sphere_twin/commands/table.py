@@ -1,5 +1,8 @@
 """``sphere-twin table build|check``: the discrete kick model as a lookup table."""
 
+from __future__ import annotations
+
+import argparse
 import dataclasses
 import math
 import time
@@ -22,7 +25,7 @@ from sphere_twin.commands.options import (
 from sphere_twin.commands.primitives import DEFAULT_OFFSETS
 
 
-def register(subparsers):
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser('table', help='build or check the discrete kick table',
                                    description='The discrete model x_{t+1} = f(x_t, a_t, u_K) '
                                                'as a linearly interpolated lookup table.')
@@ -58,7 +61,7 @@ def register(subparsers):
     check.set_defaults(func=run_check)
 
 
-def run_build(args):
+def run_build(args: argparse.Namespace) -> int:
     spec = TableSpec(grid_step=args.grid_step, intensities=tuple(args.intensities),
                      window_s=args.window_s, parameter_set=args.params.name)
     if args.design:
@@ -72,9 +75,9 @@ def run_build(args):
     output = Path(args.output)
     partial = output.with_suffix('.partial.jsonl')
     started = time.perf_counter()
-    first_done = []
+    first_done: list[int] = []
     with tqdm(desc='kicks', unit='kick') as bar:
-        def progress(done, total):
+        def progress(done: int, total: int) -> None:
             if not first_done:
                 first_done.append(done)
             bar.total = total
@@ -96,7 +99,7 @@ def run_build(args):
     return 0
 
 
-def print_direction_errors(table):
+def print_direction_errors(table: LookupTable) -> None:
     """How far the full kicks stray from their nominal direction over the cone (§4.1)."""
     errors = np.degrees(table.direction_errors_rad(1.0))
     offsets = 'with' if table.spec.offsets else 'without'
@@ -104,7 +107,7 @@ def print_direction_errors(table):
           f'deg, max {errors.max():.2f} deg over {errors.size} states')
 
 
-def run_check(args):
+def run_check(args: argparse.Namespace) -> int:
     table = LookupTable.load_current(args.table)
     with tqdm(total=args.points, desc='direct kicks', unit='kick') as bar:
         worst, errors = check_table(table, args.points, args.seed,

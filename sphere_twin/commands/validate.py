@@ -1,5 +1,8 @@
 """``sphere-twin validate``: the continuous model's rest, symmetry and energy figures."""
 
+from __future__ import annotations
+
+import argparse
 import math
 from pathlib import Path
 
@@ -11,7 +14,7 @@ from sphere_twin.commands.options import CommandError, add_params_option
 DEFAULT_DESIGN = Path('bench/results/kick_optimization.json')
 
 
-def register(subparsers):
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
         'validate', help='print the rest, symmetry and energy figures of the physics model',
         description='Rest equilibrium (§4.1), symmetry of equal and mirrored pulses, and the '
@@ -25,7 +28,7 @@ def register(subparsers):
     parser.set_defaults(func=run)
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     rest = validation.rest_report(args.params)
     on_edge = 'yes' if (rest.front_gaps_m < 0).all() else 'no'
     front_nm = rest.front_gaps_m.min() * 1e9
@@ -65,7 +68,7 @@ def run(args):
     return 0
 
 
-def _design(path):
+def _design(path: Path | None) -> KickDesign:
     """The kick the hold and width figures use: ``path``, the committed optimised kick, or the
     paper's template."""
     if path is None:

@@ -1,6 +1,7 @@
 """How fast a node's simulated time ran against the wall clock, as the node saw it."""
 
 import time
+from collections.abc import Callable
 
 
 class PaceMeter:
@@ -11,22 +12,24 @@ class PaceMeter:
     latest note.
     """
 
-    def __init__(self, clock=time.monotonic):
+    def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
         self._clock = clock
-        self._first = None  # (simulated s, wall s)
-        self._latest = None
+        self._first: tuple[float, float] | None = None  # (simulated s, wall s)
+        self._latest: tuple[float, float] | None = None
 
-    def note(self, simulated_s):
+    def note(self, simulated_s: float) -> None:
         entry = (float(simulated_s), self._clock())
         if self._first is None:
             self._first = entry
         self._latest = entry
 
-    def real_time_factor(self):
+    def real_time_factor(self) -> float:
         """Simulated over wall seconds; NaN before two notes a wall instant apart."""
-        if self._first is None or self._latest[1] <= self._first[1]:
+        first, latest = self._first, self._latest
+        if first is None or latest is None or latest[1] <= first[1]:
             return float('nan')
-        return (self._latest[0] - self._first[0]) / (self._latest[1] - self._first[1])
+        return (latest[0] - first[0]) / (latest[1] - first[1])
 
-    def simulated_span_s(self):
-        return 0.0 if self._first is None else self._latest[0] - self._first[0]
+    def simulated_span_s(self) -> float:
+        first, latest = self._first, self._latest
+        return 0.0 if first is None or latest is None else latest[0] - first[0]

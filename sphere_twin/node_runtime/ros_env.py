@@ -4,9 +4,19 @@ DDS discovery must never leave this machine, so every entry point limits it to l
 unless the user chose a range explicitly.
 """
 
+from __future__ import annotations
+
+import dataclasses
+import enum
 import os
 import signal
 import sys
+from collections.abc import Callable, Iterable, MutableMapping
+from types import FrameType
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from rcl_interfaces.msg import ParameterDescriptor
 
 DISCOVERY_RANGE_VAR = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
 DEFAULT_DISCOVERY_RANGE = 'LOCALHOST'
@@ -15,7 +25,7 @@ DOMAIN_ID_VAR = 'ROS_DOMAIN_ID'
 DEFAULT_DOMAIN_ID = 0
 
 
-def ensure_localhost_discovery(environ=None):
+def ensure_localhost_discovery(environ: MutableMapping[str, str] | None = None) -> str:
     """Set ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` unless already set.
 
     Must run before ``rclpy.init()``: the RMW reads the variable when the context starts.
@@ -40,15 +50,15 @@ def ensure_localhost_discovery(environ=None):
 # can land inside a C extension's call (rclpy's take_message, a numba kernel), which then
 # reports it as its own error (RuntimeError "Unable to convert call argument", SystemError);
 # after a shutdown signal such an error is the shutdown, not a bug.
-_shutdown_signal = []
+_shutdown_signal: list[str] = []
 
 
-def _raise_keyboard_interrupt(signum, frame):
+def _raise_keyboard_interrupt(signum: int, frame: FrameType | None) -> None:
     _shutdown_signal.append(signal.Signals(signum).name)
     raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
-def _unraisable_after_shutdown(unraisable):
+def _unraisable_after_shutdown(unraisable: Any) -> None:
     """``sys.unraisablehook``: an error in a finaliser (``__del__``) after a shutdown signal is
     an object the KeyboardInterrupt cut mid-construction being collected (rclpy's
     ``Task.__init__`` interrupted before it set ``_exception``, whose ``__del__`` then fails),
@@ -58,12 +68,12 @@ def _unraisable_after_shutdown(unraisable):
     sys.__unraisablehook__(unraisable)
 
 
-def shutdown_requested():
+def shutdown_requested() -> bool:
     """True once SIGINT or SIGTERM reached a process that installed the handlers below."""
     return bool(_shutdown_signal)
 
 
-def install_shutdown_signal_handlers():
+def install_shutdown_signal_handlers() -> None:
     """Make SIGINT and SIGTERM both end a node with ``KeyboardInterrupt``.
 
     A process started in the background by a non-interactive shell inherits SIGINT as
@@ -90,7 +100,7 @@ class StartupError(ValueError):
     """A node cannot start with the parameters or files it was given."""
 
 
-def startup_error_line(node_name, error):
+def startup_error_line(node_name: str, error: BaseException) -> str:
     """The one line a node prints when it cannot start, naming what to fix."""
     if isinstance(error, ModuleNotFoundError):
         module = (error.name or '').split('.')[0]
@@ -100,38 +110,98 @@ def startup_error_line(node_name, error):
     return f'{node_name}: error: {str(error).splitlines()[0] if str(error) else error!r}'
 
 
-def _startup_errors():
+def _startup_errors() -> tuple[type[BaseException], ...]:
     """What a node's start-up raises for a bad parameter, file or installation (not a bug)."""
     from rclpy.exceptions import ParameterException
 
     return (ValueError, OSError, ModuleNotFoundError, ParameterException)
 
 
-def declare_node_parameters(node, specs):
+class ParameterType(enum.Enum):
+    """The ROS type of a parameter (the names of ``rclpy.parameter.Parameter.Type``)."""
+
+    BOOL = 'bool'
+    INTEGER = 'integer'
+    DOUBLE = 'double'
+    STRING = 'string'
+    DOUBLE_ARRAY = 'double_array'
+    STRING_ARRAY = 'string_array'
+
+
+# What a parameter's default may be; arrays are tuples here and lists once declared.
+ParameterValue = bool | int | float | str | tuple[float, ...] | tuple[str, ...]
+
+
+@dataclasses.dataclass(frozen=True)
+class ParameterSpec:
+    """One parameter of a node, without ROS: what :func:`declare_node_parameters` declares.
+
+    Attributes
+    ----------
+    name : str
+    type : ParameterType
+    default : bool, int, float, str, tuple or None
+        None declares the parameter by its type alone (its value is None until it is set).
+    description : str
+    range : (low, high), optional
+        Inclusive bounds of an integer or double parameter.
+    choices : tuple of str, optional
+        The values a string parameter takes (said in ``description``; the node checks them).
+    read_only : bool
+    """
+
+    name: str
+    type: ParameterType
+    default: ParameterValue | None
+    description: str
+    range: tuple[float, float] | None = None
+    choices: tuple[str, ...] | None = None
+    read_only: bool = True
+
+
+def spec_descriptor(spec: ParameterSpec) -> ParameterDescriptor:
+    """The ``ParameterDescriptor`` of ``spec``: description, range, read-only."""
+    bounds = spec.range
+    return parameter_descriptor(
+        spec.description,
+        float_range=bounds if spec.type is ParameterType.DOUBLE else None,
+        int_range=((int(bounds[0]), int(bounds[1]))
+                   if bounds is not None and spec.type is ParameterType.INTEGER else None),
+        read_only=spec.read_only)
+
+
+def declare_node_parameters(node: Any, specs: Iterable[ParameterSpec]) -> dict[str, Any]:
     """Declare every parameter of ``specs`` on ``node``; returns {name: value}.
 
-    ``specs`` maps a name to (default, ParameterDescriptor). A parameter whose default is a
-    float also takes an integer (``-p publish_rate_hz:=50``, what a ROS user writes), returned
-    as a float and checked against the descriptor's range here, since ROS checks the range of
-    a double only.
+    A parameter whose default is a float also takes an integer (``-p publish_rate_hz:=50``,
+    what a ROS user writes), returned as a float and checked against the descriptor's range
+    here, since ROS checks the range of a double only.
 
     Raises
     ------
     StartupError
         For a value of the wrong type or out of range, naming the parameter.
     """
+    from rclpy.parameter import Parameter
+
     values = {}
-    for name, (default, descriptor) in specs.items():
+    for spec in specs:
+        descriptor = spec_descriptor(spec)
+        default: Any = spec.default
+        if default is None:
+            default = Parameter.Type[spec.type.name]
+        elif isinstance(default, tuple):
+            default = list(default)
         if isinstance(default, float):
             descriptor.dynamic_typing = True
-        value = node.declare_parameter(name, default, descriptor).value
+        value = node.declare_parameter(spec.name, default, descriptor).value
         if isinstance(default, float):
-            value = _as_float(name, value, descriptor)
-        values[name] = value
+            value = _as_float(spec.name, value, descriptor)
+        values[spec.name] = value
     return values
 
 
-def _as_float(name, value, descriptor):
+def _as_float(name: str, value: Any, descriptor: ParameterDescriptor) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise StartupError(f'parameter {name} must be a number, got {value!r}')
     value = float(value)
@@ -142,7 +212,9 @@ def _as_float(name, value, descriptor):
     return value
 
 
-def run_node(build, args=None, spin=None, farewell=None, name=None):
+def run_node(build: Callable[[], Any], args: list[str] | None = None,
+             spin: Callable[[Any], object] | None = None,
+             farewell: Callable[[Any], str] | None = None, name: str | None = None) -> int:
     """The ``main()`` of every executable: hygiene, init, build, spin, clean shutdown.
 
     Follows ros2/demos: the node is built inside the ``try`` so that a signal during start-up
@@ -203,7 +275,9 @@ def run_node(build, args=None, spin=None, farewell=None, name=None):
     return 0
 
 
-def parameter_descriptor(description, float_range=None, int_range=None, read_only=True):
+def parameter_descriptor(description: str, float_range: tuple[float, float] | None = None,
+                         int_range: tuple[int, int] | None = None,
+                         read_only: bool = True) -> ParameterDescriptor:
     """A ``ParameterDescriptor`` with a description, an optional range, read-only by default.
 
     Parameters

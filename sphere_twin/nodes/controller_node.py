@@ -10,9 +10,12 @@ why: chosen action, Phi, Theta, learned directions and widths, and the kicks sen
 cut, refused and unanswered; when the state is stale it holds, sends nothing, and says so.
 """
 
+from __future__ import annotations
+
 import math
 import sys
 import time
+from typing import TYPE_CHECKING, Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
@@ -35,10 +38,14 @@ from msg_defs.topics import (
     SURFACE_NORMAL,
     VOLTAGE_COMMAND,
 )
-from sphere_control.controllers import CONTROLLER_KINDS, DEFAULT_PHI_MIN_RAD, controller_for
+from sphere_control.controllers import controller_for
 from sphere_control.kick_cycle import KickCycle, Phase
 from sphere_twin.node_runtime.pace import PaceMeter
-from sphere_twin.node_runtime.ros_env import declare_node_parameters, parameter_descriptor, run_node
+from sphere_twin.node_runtime.ros_env import declare_node_parameters, run_node
+from sphere_twin.nodes.parameters import CONTROLLER_PARAMETERS
+
+if TYPE_CHECKING:
+    from sphere_control.kick_cycle import Decision
 
 STALE_CHECK_PERIOD_S = 0.25
 
@@ -47,7 +54,7 @@ STALE_CHECK_PERIOD_S = 0.25
 class ControllerNode(Node):
     """Thin adapter of :class:`sphere_control.kick_cycle.KickCycle` onto the topics."""
 
-    def __init__(self, **node_kwargs):
+    def __init__(self, **node_kwargs: Any) -> None:
         # Physics and tables load here rather than at import, so main() installs its signal
         # handlers first and a SIGINT during start-up is a clean shutdown.
         from sphere_control.intensity_calibration import calibrated
@@ -55,28 +62,7 @@ class ControllerNode(Node):
         from sphere_sim.kicks.lookup_table import load_kick_model
 
         super().__init__('controller', **node_kwargs)
-        p = declare_node_parameters(self, {
-                 'controller': ('extended', parameter_descriptor(
-                     f'Control law: {" or ".join(CONTROLLER_KINDS)} (§4.2).')),
-                 'phi_min_deg': (math.degrees(DEFAULT_PHI_MIN_RAD), parameter_descriptor(
-                     'Resting band Phi_min (deg): no kick while the error is below it.',
-                     (0.0, 10.0))),
-                 'tables': ([''], parameter_descriptor(
-                     'Kick tables (.npz): the kicks it may send and its initial model of them; '
-                     '[""] for the shipped default (4 diagonal kicks).')),
-                 'stale_timeout_s': (1.0, parameter_descriptor(
-                     'Wall time without a sample after which the state is stale (s).',
-                     (0.05, 60.0))),
-                 'kick_period_s': (0.0, parameter_descriptor(
-                     'Time from a kick\'s reported start until it is over and the next is '
-                     'decided (s); 0: the settle time of the tables\' full kick, rounded up to '
-                     '10 ms (40 ms for the shipped table), as in the offline loop.',
-                     (0.0, 10.0))),
-                 'preview': (True, parameter_descriptor(
-                     'Aim where the reference will be when the kick has settled, estimated '
-                     'from its recent samples (a jump is not extrapolated), not at its newest '
-                     'sample (the paper; docs/control.md).')),
-             })
+        p = declare_node_parameters(self, CONTROLLER_PARAMETERS)
         # The controller's intensities are calibrated on the tables' own level-state width
         # curves, as in the offline studies (sphere_control.intensity_calibration).
         table = calibrated(load_kick_model([t for t in p['tables'] if t]))
@@ -102,7 +88,7 @@ class ControllerNode(Node):
         self.create_subscription(PROGRAMME_STATUS.msg_type, PROGRAMME_STATUS.name,
                                  self.on_programme_status, PROGRAMME_STATUS.qos.to_profile())
         self.create_timer(STALE_CHECK_PERIOD_S, self.on_stale_check)
-        self._last_phase = None
+        self._last_phase: Phase | None = None
         self._hold_sent_at_s = -1.0
         self.pace = PaceMeter()
         self.get_logger().info(f'{self.controller_kind} controller, Phi_min '
@@ -110,14 +96,14 @@ class ControllerNode(Node):
                                f'kick period {self.kick_period_s * 1e3:.0f} ms, preview '
                                f'{"on" if p["preview"] else "off"}')
 
-    def on_reference(self, msg):
+    def on_reference(self, msg: Any) -> None:
         try:
             self.cycle.on_reference(surface_normal_from_msg(msg),
                                     ns_from_time(msg.header.stamp) / NS_PER_S)
         except ValueError as error:
             self.get_logger().error(f'ignored {SPHERE_REFERENCE.name}: {error}')
 
-    def on_normal(self, msg):
+    def on_normal(self, msg: Any) -> None:
         try:
             normal = surface_normal_from_msg(msg)
         except ValueError as error:
@@ -127,7 +113,7 @@ class ControllerNode(Node):
         self.pace.note(sample_s)
         self._act(self.cycle.on_sample(sample_s, normal, time.monotonic()))
 
-    def on_programme_status(self, msg):
+    def on_programme_status(self, msg: Any) -> None:
         try:
             events = programme_events_from_msg(msg)
         except ValueError as error:
@@ -142,12 +128,13 @@ class ControllerNode(Node):
             if decision is not None:
                 self._act(decision)
 
-    def _act(self, decision):
+    def _act(self, decision: Decision) -> None:
         """Send what the decision asks for and say so; stamped with the deciding sample's
         (simulated) time."""
         sample_s = self.cycle.latest[0] if self.cycle.latest is not None else 0.0
         stamp = time_from_ns(round(sample_s * NS_PER_S))
         if decision.command is not None:
+            assert self.cycle.latest is not None  # a kick is decided on a sample
             programme = self.kicks.programme(decision.command.action,
                                              decision.command.intensity, self.cycle.latest[1])
             start = time_from_ns(round(decision.start_s * NS_PER_S))
@@ -159,14 +146,14 @@ class ControllerNode(Node):
             self._voltage_pub.publish(voltages_to_msg([0.0] * BEAM_COUNT, stamp))
         self._publish_status(decision, stamp)
 
-    def on_stale_check(self):
+    def on_stale_check(self) -> None:
         decision = self.cycle.check_stale(time.monotonic())
         if decision is not None:
             # Stamped with the newest sample's time (0 before one): the node's own clock
             # would be the wall's unless use_sim_time, and every stamp is simulated time.
             self._act(decision)
 
-    def _publish_status(self, decision, stamp):
+    def _publish_status(self, decision: Decision, stamp: Any) -> None:
         phase = decision.phase
         level = DiagnosticStatus.OK
         if phase in (Phase.STALE, Phase.NO_STATE, Phase.NO_REFERENCE):
@@ -202,7 +189,7 @@ class ControllerNode(Node):
         array.header.stamp = stamp
         self._status_pub.publish(array)
 
-    def _speed_check(self):
+    def _speed_check(self) -> float:
         """The reference's step per kick period over the furthest the learned kicks reach
         along it; a line in the log whenever it crosses 1 (the reference outruns the plant)."""
         ratio = self.cycle.speed_ratio()
@@ -216,7 +203,7 @@ class ControllerNode(Node):
                 self.get_logger().info('the kicks can follow the reference again')
         return ratio
 
-    def summary(self):
+    def summary(self) -> str:
         c = self.cycle.counts
         return (f'controller: {c.kicks} kicks over {self.pace.simulated_span_s():.3f} s of '
                 f'samples ({c.landed} landed, {c.cut} cut, {c.refused} refused, '
@@ -224,7 +211,7 @@ class ControllerNode(Node):
                 f'{self.pace.real_time_factor():.3f}')
 
 
-def main(args=None):
+def main(args: list[str] | None = None) -> int:
     return run_node(ControllerNode, args, farewell=ControllerNode.summary, name='controller')
 
 

@@ -6,21 +6,21 @@ the tests read (see :mod:`sphere_twin.monitor_summary`).
 """
 
 import sys
+from typing import Any
 
 import numpy as np
 import rclpy
-from rcl_interfaces.msg import IntegerRange, ParameterDescriptor
+from numpy.typing import NDArray
 from rclpy.node import Node
 from rclpy.task import Future
 
 from msg_defs.conversions import surface_normal_from_msg
 from msg_defs.topics import SURFACE_NORMAL
 from sphere_twin.monitor_summary import summary_line
-from sphere_twin.node_runtime.ros_env import run_node
+from sphere_twin.node_runtime.ros_env import declare_node_parameters, run_node
+from sphere_twin.nodes.parameters import MONITOR_PARAMETERS
 
 REPORT_PERIOD_S = 1.0
-# ROS integer parameters are int64; this bound only keeps the descriptor's range finite.
-MAX_MESSAGES_LIMIT = 2**31 - 1
 
 
 class MonitorNode(Node):
@@ -36,19 +36,13 @@ class MonitorNode(Node):
         Completes with the count when ``max_messages`` (> 0) messages have arrived.
     """
 
-    def __init__(self, **node_kwargs):
+    def __init__(self, **node_kwargs: Any) -> None:
         super().__init__('monitor', **node_kwargs)
-        self.declare_parameter(
-            'max_messages', 0,
-            ParameterDescriptor(
-                description='Exit after this many messages; 0 runs until stopped.',
-                integer_range=[IntegerRange(from_value=0, to_value=MAX_MESSAGES_LIMIT, step=1)],
-                read_only=True,
-            ))
+        declare_node_parameters(self, MONITOR_PARAMETERS)
         self.max_messages = self.get_parameter('max_messages').value
         self.count = 0
         self.invalid_count = 0
-        self.latest_normal = None
+        self.latest_normal: NDArray[np.float64] | None = None
         self.done = Future()
         self._count_at_last_report = 0
         self.create_subscription(
@@ -56,7 +50,7 @@ class MonitorNode(Node):
             SURFACE_NORMAL.qos.to_profile())
         self.create_timer(REPORT_PERIOD_S, self.on_report_timer)
 
-    def on_message(self, msg):
+    def on_message(self, msg: Any) -> None:
         """Count one message; complete :attr:`done` at ``max_messages``."""
         if self.done.done():
             return
@@ -69,7 +63,7 @@ class MonitorNode(Node):
         if self.max_messages and self.count >= self.max_messages:
             self.done.set_result(self.count)
 
-    def on_report_timer(self):
+    def on_report_timer(self) -> None:
         """Log the count, the rate over the last period and the latest normal."""
         rate_hz = (self.count - self._count_at_last_report) / REPORT_PERIOD_S
         self._count_at_last_report = self.count
@@ -79,12 +73,12 @@ class MonitorNode(Node):
             f'{self.count} messages on {SURFACE_NORMAL.name} ({rate_hz:g} Hz), '
             f'latest normal {latest}')
 
-    def summary(self):
+    def summary(self) -> str:
         """The final line, ``received N messages on /sphere/surface_normal``."""
         return summary_line(self.count, SURFACE_NORMAL.name)
 
 
-def main(args=None):
+def main(args: list[str] | None = None) -> int:
     # Never completes when max_messages is 0, so the node then runs until signalled.
     return run_node(MonitorNode, args,
                     spin=lambda node: rclpy.spin_until_future_complete(node, node.done),

@@ -17,25 +17,30 @@ memory when the node starts; a bag left by a killed recorder plays its completed
 import dataclasses
 import sys
 import time
+from collections.abc import Collection, Mapping, Sequence
+from typing import Any
 
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from msg_defs.device import NS_PER_S
 from msg_defs.topics import ALL_TOPICS, CLOCK
 from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.locate import locate_bag
-from sphere_twin.bag.reader import BagError, message_class, read_messages, read_metadata
-from sphere_twin.node_runtime.ros_env import declare_node_parameters, parameter_descriptor, run_node
+from sphere_twin.bag.reader import (
+    BagError,
+    RecordedMessage,
+    message_class,
+    read_messages,
+    read_metadata,
+)
+from sphere_twin.node_runtime.ros_env import declare_node_parameters, run_node
+from sphere_twin.nodes.parameters import MAX_RATE, MIN_RATE, PLAYER_PARAMETERS
 
-MAX_RATE = 1000.0
-MIN_RATE = 0.001
 # Longest single sleep, so that a stop signal is handled promptly.
 SLEEP_SLICE_S = 0.1
 ACK_TIMEOUT_S = 5.0
-MAX_WAIT_S = 3600.0
 DEFAULT_QOS_DEPTH = 10
 
 
@@ -66,7 +71,9 @@ CLOCK_GAP_TICK_S = 0.1
 CLOCK_GAP_TICK_NS = round(CLOCK_GAP_TICK_S * NS_PER_S)
 
 
-def playback_plan(messages, rate=1.0, start_offset_s=0.0, topics=None, publish_clock=True):
+def playback_plan(messages: Sequence[RecordedMessage], rate: float = 1.0,
+                  start_offset_s: float = 0.0, topics: Collection[str] | None = None,
+                  publish_clock: bool = True) -> list[PlaybackItem]:
     """What the player publishes and when.
 
     Parameters
@@ -105,7 +112,7 @@ def playback_plan(messages, rate=1.0, start_offset_s=0.0, topics=None, publish_c
         return []
     start_ns = messages[0].log_time_ns + round(start_offset_s * NS_PER_S)
     make_clock = publish_clock and not any(m.topic == CLOCK.name for m in messages)
-    plan = []
+    plan: list[PlaybackItem] = []
     for message in messages:
         if message.log_time_ns < start_ns or (topics is not None and message.topic not in topics):
             continue
@@ -121,7 +128,7 @@ def playback_plan(messages, rate=1.0, start_offset_s=0.0, topics=None, publish_c
     return plan
 
 
-def recorded_qos(topic_metadata):
+def recorded_qos(topic_metadata: Mapping[str, Any]) -> QoSProfile:
     """A QoS profile from a metadata.yaml topic entry's first offered profile.
 
     Discovered profiles do not announce history and depth; those become keep-last
@@ -139,7 +146,7 @@ def recorded_qos(topic_metadata):
                     else DurabilityPolicy.VOLATILE))
 
 
-def played_line(count):
+def played_line(count: int) -> str:
     """The player's last line of output."""
     return f'played {count} messages'
 
@@ -168,7 +175,7 @@ class PlayerNode(Node):
         For a bad parameter.
     """
 
-    def __init__(self, **node_kwargs):
+    def __init__(self, **node_kwargs: Any) -> None:
         super().__init__('player', **node_kwargs)
         p = self._declare_parameters()
         if not p['bag']:
@@ -189,7 +196,7 @@ class PlayerNode(Node):
         self.plan = playback_plan(messages, p['rate'], p['start_offset_s'], topics,
                                   p['publish_clock'])
         contract = {t.name: t for t in ALL_TOPICS}
-        self._playback_publishers = {}
+        self._playback_publishers: dict[str, Any] = {}
         for item in self.plan:
             if item.topic in self._playback_publishers:
                 continue
@@ -208,32 +215,10 @@ class PlayerNode(Node):
             f'domain id {self.context.get_domain_id()}; playing {len(self.plan)} publications '
             f'on {len(self._playback_publishers)} topics from {self.bag} at rate {p["rate"]:g}')
 
-    def _declare_parameters(self):
-        specs = {
-            'bag': ('', parameter_descriptor(
-                'Bag to play: its directory, one of its .mcap files, a bare .mcap file, or '
-                'the name of a bag installed with the package (example).')),
-            'rate': (1.0, parameter_descriptor(
-                'Playback speed: 2 plays twice as fast as recorded.', (MIN_RATE, MAX_RATE))),
-            'start_offset_s': (0.0, parameter_descriptor(
-                'Skip this much of the bag (s of recorded time from its first message).',
-                (0.0, 1e9))),
-            'topics': (Parameter.Type.STRING_ARRAY, parameter_descriptor(
-                'Topics to play, by name; every topic of the bag if unset.')),
-            'loop': (False, parameter_descriptor('Start over at the end, until stopped.')),
-            'publish_clock': (True, parameter_descriptor(
-                'Publish /clock from the log times when the bag has no /clock messages.')),
-            'wait_for_subscribers_s': (0.0, parameter_descriptor(
-                'Before playing, wait up to this long (s) until every topic played has a '
-                'subscriber; 0 starts at once.', (0.0, MAX_WAIT_S))),
-            'delay_s': (0.0, parameter_descriptor(
-                'Then wait this long (s) before the first message: a publisher sees a '
-                'subscriber slightly before that subscriber accepts its messages.',
-                (0.0, MAX_WAIT_S))),
-        }
-        return declare_node_parameters(self, specs)
+    def _declare_parameters(self) -> dict[str, Any]:
+        return declare_node_parameters(self, PLAYER_PARAMETERS)
 
-    def publish_item(self, item):
+    def publish_item(self, item: PlaybackItem) -> None:
         """Publish one :class:`PlaybackItem` (the recorded bytes, or a made-up /clock tick)."""
         publisher = self._playback_publishers[item.topic]
         if item.data is None:
@@ -244,7 +229,7 @@ class PlayerNode(Node):
             publisher.publish(bytes(item.data))
             self.played += 1
 
-    def wait_for_subscribers(self):
+    def wait_for_subscribers(self) -> bool:
         """Wait up to ``wait_for_subscribers_s`` until every publisher has a subscriber."""
         deadline = time.monotonic() + self.wait_for_subscribers_s
         while time.monotonic() < deadline and self.context.ok():
@@ -253,12 +238,12 @@ class PlayerNode(Node):
             time.sleep(0.02)
         return all(p.get_subscription_count() > 0 for p in self._playback_publishers.values())
 
-    def _sleep(self, duration_s):
+    def _sleep(self, duration_s: float) -> None:
         deadline = time.monotonic() + duration_s
         while self.context.ok() and time.monotonic() < deadline:
             time.sleep(max(0.0, min(deadline - time.monotonic(), SLEEP_SLICE_S)))
 
-    def play_once(self):
+    def play_once(self) -> None:
         """Publish :attr:`plan` at its times."""
         start = time.monotonic()
         for item in self.plan:
@@ -271,7 +256,7 @@ class PlayerNode(Node):
                 return
             self.publish_item(item)
 
-    def play(self):
+    def play(self) -> None:
         """Play the bag (for ever with ``loop``), then wait for acknowledgements."""
         if self.wait_for_subscribers_s > 0 and not self.wait_for_subscribers():
             missing = [t for t, p in self._playback_publishers.items()
@@ -285,15 +270,15 @@ class PlayerNode(Node):
         for publisher in self._playback_publishers.values():
             publisher.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
 
-    def summary(self):
+    def summary(self) -> str:
         return played_line(self.played)
 
 
-def _build():
+def _build() -> PlayerNode:
     return PlayerNode()
 
 
-def main(args=None):
+def main(args: list[str] | None = None) -> int:
     """Play a bag; exit status 1 if it cannot be read or a parameter is bad."""
     import rclpy
 

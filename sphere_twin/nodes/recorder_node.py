@@ -14,12 +14,16 @@ delivered to it, finishes the MCAP file and metadata.yaml, and prints
 so a recorder killed outright loses at most that much.
 """
 
+from __future__ import annotations
+
 import datetime
 import functools
 import signal
 import sys
 import time
 from pathlib import Path
+from types import FrameType
+from typing import Any
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -27,22 +31,19 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
-from msg_defs.topics import ALL_TOPICS, topic_by_name
+from msg_defs.topics import Topic, topic_by_name
 from sphere_twin.bag import format as bag_format
-from sphere_twin.bag.writer import COMPRESSIONS, DEFAULT_CHUNK_SIZE_BYTES, BagWriter
+from sphere_twin.bag.writer import COMPRESSIONS, BagWriter
 from sphere_twin.node_runtime.ros_env import (
     declare_node_parameters,
     ensure_localhost_discovery,
-    parameter_descriptor,
 )
+from sphere_twin.nodes.parameters import DEFAULT_BAG_PARENT, RECORDER_PARAMETERS
 
-DEFAULT_BAG_PARENT = 'bags'
 # Depth of the recorder's subscriptions. History does not affect QoS compatibility; a
 # deeper one than the contract's keeps a message that arrives while a chunk is being
 # compressed from being overwritten before it is taken.
 RECORDER_HISTORY_DEPTH = 1000
-DEFAULT_FLUSH_PERIOD_S = 1.0
-MAX_FLUSH_PERIOD_S = 3600.0
 # On shutdown, messages already delivered are taken until none has come for this long.
 DRAIN_QUIET_S = 0.1
 DRAIN_MAX_S = 2.0
@@ -50,13 +51,13 @@ DRAIN_MAX_S = 2.0
 SPIN_POLL_S = 0.1
 
 
-def default_output_dir(now=None):
+def default_output_dir(now: datetime.datetime | None = None) -> str:
     """``bags/run_<UTC time>``, e.g. ``bags/run_20250101T120000Z``."""
     now = now or datetime.datetime.now(datetime.UTC)
     return str(Path(DEFAULT_BAG_PARENT) / f'run_{now.strftime("%Y%m%dT%H%M%SZ")}')
 
 
-def summary_line(message_count, topic_count, path):
+def summary_line(message_count: int, topic_count: int, path: str | Path) -> str:
     """The recorder's last line of output."""
     return f'recorded {message_count} messages on {topic_count} topics to {path}'
 
@@ -85,7 +86,7 @@ class RecorderNode(Node):
         If the output directory exists and is not empty.
     """
 
-    def __init__(self, **node_kwargs):
+    def __init__(self, **node_kwargs: Any) -> None:
         super().__init__('recorder', **node_kwargs)
         p = self._declare_parameters()
         if p['compression'] not in COMPRESSIONS:
@@ -109,29 +110,12 @@ class RecorderNode(Node):
             f'domain id {self.context.get_domain_id()}; recording {len(self.topics)} topics '
             f'to {self.writer.path} ({p["compression"]} chunks)')
 
-    def _declare_parameters(self):
-        specs = {
-            'output_dir': ('', parameter_descriptor(
-                'Bag directory to create (must not exist or be empty); "" for '
-                f'{DEFAULT_BAG_PARENT}/run_<UTC time>.')),
-            'topics': ([t.name for t in ALL_TOPICS], parameter_descriptor(
-                'Topics to record, by name; each must be in the topic contract. All of them '
-                'by default.')),
-            'compression': ('zstd', parameter_descriptor(
-                f'Compression of the MCAP chunks: {", ".join(COMPRESSIONS)}.')),
-            'chunk_size_bytes': (DEFAULT_CHUNK_SIZE_BYTES, parameter_descriptor(
-                'Uncompressed size (bytes) at which an MCAP chunk is completed.',
-                int_range=(1024, 2**31 - 1))),
-            'flush_period_s': (DEFAULT_FLUSH_PERIOD_S, parameter_descriptor(
-                'Complete the current chunk and write it to disk this often (s), bounding '
-                'what a crash can lose; 0 writes chunks only when full.',
-                float_range=(0.0, MAX_FLUSH_PERIOD_S))),
-        }
-        return declare_node_parameters(self, specs)
+    def _declare_parameters(self) -> dict[str, Any]:
+        return declare_node_parameters(self, RECORDER_PARAMETERS)
 
     # --- recording ----------------------------------------------------------------------
 
-    def on_message(self, topic, data, message_info):
+    def on_message(self, topic: Topic, data: bytes, message_info: dict[str, Any]) -> None:
         """Write one serialized message; the first one on a topic adds the topic."""
         if self.writer.closed:
             return
@@ -141,7 +125,7 @@ class RecorderNode(Node):
             self._add_topic(topic)
         self.writer.write(topic.name, data, log_time_ns, publish_time_ns)
 
-    def offered_qos(self, topic):
+    def offered_qos(self, topic: Topic) -> tuple[list[dict[str, Any]], str]:
         """QoS profiles and type hash the publishers of ``topic`` offer, from the graph.
 
         Returns
@@ -166,7 +150,7 @@ class RecorderNode(Node):
             history=profile.history, depth=profile.depth, reliability=profile.reliability,
             durability=profile.durability))], type_hash
 
-    def _add_topic(self, topic):
+    def _add_topic(self, topic: Topic) -> None:
         qos_dicts, type_hash = self.offered_qos(topic)
         self.writer.add_topic(topic.name, bag_format.type_name_of(topic.msg_type), qos_dicts,
                               type_hash)
@@ -174,14 +158,14 @@ class RecorderNode(Node):
             f'recording {topic.name} ({bag_format.type_name_of(topic.msg_type)}) offered by '
             f'{len(qos_dicts)} publisher(s)')
 
-    def on_flush_timer(self):
+    def on_flush_timer(self) -> None:
         """Complete the current chunk, so that a crash loses at most one flush period."""
         if not self.writer.closed:
             self.writer.flush()
 
     # --- shutdown -----------------------------------------------------------------------
 
-    def spin_until(self, stop):
+    def spin_until(self, stop: StopRequest) -> None:
         """Record until ``stop`` is requested, then :meth:`drain`.
 
         Parameters
@@ -199,7 +183,8 @@ class RecorderNode(Node):
             executor.remove_node(self)
             executor.shutdown(timeout_sec=0)
 
-    def drain(self, executor, quiet_s=DRAIN_QUIET_S, max_s=DRAIN_MAX_S):
+    def drain(self, executor: Any, quiet_s: float = DRAIN_QUIET_S,
+              max_s: float = DRAIN_MAX_S) -> None:
         """Take the messages already delivered to this node, until none comes for ``quiet_s``
         (at most ``max_s``); does nothing once the context is shut down."""
         hard_deadline = time.monotonic() + max_s
@@ -211,13 +196,13 @@ class RecorderNode(Node):
             if self.writer.message_count != before:
                 quiet_deadline = time.monotonic() + quiet_s
 
-    def finish(self):
+    def finish(self) -> str:
         """Close the bag and return :func:`summary_line`."""
         self.writer.close()
         return summary_line(self.writer.message_count, self.writer.topic_count,
                             self.writer.path)
 
-    def destroy_node(self):
+    def destroy_node(self) -> None:
         """Close the bag, then destroy the node."""
         self.writer.close()
         super().destroy_node()
@@ -238,27 +223,27 @@ class StopRequest:
         The first stop signal received.
     """
 
-    def __init__(self):
-        self.signal_name = None
+    def __init__(self) -> None:
+        self.signal_name: str | None = None
 
     @property
-    def requested(self):
+    def requested(self) -> bool:
         """Whether a stop signal has arrived."""
         return self.signal_name is not None
 
-    def install(self):
+    def install(self) -> StopRequest:
         """Handle SIGINT and SIGTERM with :meth:`request`; returns ``self``."""
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, self.request)
         return self
 
-    def request(self, signum=signal.SIGINT, _frame=None):
+    def request(self, signum: int = signal.SIGINT, _frame: FrameType | None = None) -> None:
         """Ask the recorder to stop (the signal handler)."""
         if self.signal_name is None:
             self.signal_name = signal.Signals(signum).name
 
 
-def main(args=None):
+def main(args: list[str] | None = None) -> int:
     """Run the recorder until SIGINT or SIGTERM; exit status 1 if it could not record."""
     ensure_localhost_discovery()
     stop = StopRequest().install()

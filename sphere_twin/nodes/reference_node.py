@@ -4,7 +4,10 @@ Time is the node's clock, so with ``use_sim_time`` it follows the simulator's ``
 reference beyond the reachable cone is clamped to its edge with a warning.
 """
 
+from __future__ import annotations
+
 import sys
+from typing import TYPE_CHECKING, Any
 
 from rclpy.node import Node
 
@@ -14,42 +17,30 @@ from msg_defs.markers import reference_markers
 from msg_defs.topics import CLOCK, MARKERS, SPHERE_REFERENCE
 from sphere_control.reference import CircleTrajectory, ScheduledReference, Setpoint, sample
 from sphere_twin.node_runtime.pace import PaceMeter
-from sphere_twin.node_runtime.ros_env import declare_node_parameters, parameter_descriptor, run_node
+from sphere_twin.node_runtime.ros_env import declare_node_parameters, run_node
+from sphere_twin.nodes.parameters import REFERENCE_PARAMETERS
 
-DEFAULT_PUBLISH_RATE_HZ = 10.0
-NEVER = -1.0
-
+if TYPE_CHECKING:
+    from sphere_control.reference import ReferenceSample
 
 
 class ReferenceNode(Node):
     """Publishes the reference normal at a fixed rate."""
 
-    def __init__(self, **node_kwargs):
+    def __init__(self, **node_kwargs: Any) -> None:
         super().__init__('reference', **node_kwargs)
-        p = declare_node_parameters(self, {
-                 'setpoint_xy': ([0.01, 0.02], parameter_descriptor(
-                     'x and y of the setpoint normal (Fig. 13: [0.01, 0.02]).')),
-                 'trajectory_start_s': (NEVER, parameter_descriptor(
-                     'Time (s) from which eq. (64) replaces the setpoint; -1 never.',
-                     (NEVER, 1e6))),
-                 'trajectory_offset_s': (0.0, parameter_descriptor(
-                     'Time (s) into eq. (64) at which it is entered: 0 starts at [A_max, 0], '
-                     '1/(4 f1) at the centre.', (0.0, 1e6))),
-                 'amplitude': (0.44, parameter_descriptor('A_max of eq. (64).', (0.0, 1.0))),
-                 'frequency_hz': (0.02, parameter_descriptor('f1 of eq. (64) (Hz).', (0.0, 10.0))),
-                 'publish_rate_hz': (DEFAULT_PUBLISH_RATE_HZ, parameter_descriptor(
-                     'Publications per second of the node clock (Hz).', (0.1, 1000.0))),
-             })
+        p = declare_node_parameters(self, REFERENCE_PARAMETERS)
         if len(p['setpoint_xy']) != 2:
             raise ValueError(f'setpoint_xy needs 2 values, got {list(p["setpoint_xy"])}')
-        self.schedule = ScheduledReference(Setpoint(tuple(float(v) for v in p['setpoint_xy'])),
+        x, y = (float(v) for v in p['setpoint_xy'])
+        self.schedule = ScheduledReference(Setpoint((x, y)),
                                            CircleTrajectory(p['amplitude'], p['frequency_hz']),
                                            p['trajectory_start_s'], p['trajectory_offset_s'])
         self._publisher = self.create_publisher(
             SPHERE_REFERENCE.msg_type, SPHERE_REFERENCE.name, SPHERE_REFERENCE.qos.to_profile())
         self._marker_publisher = self.create_publisher(MARKERS.msg_type, MARKERS.name,
                                                        MARKERS.qos.to_profile())
-        self._start_ns = None
+        self._start_ns: int | None = None
         self._warned_clamp = False
         self._clock_checked = False
         self.pace = PaceMeter()
@@ -61,11 +52,11 @@ class ReferenceNode(Node):
         # soon as it hears it; one that never hears it holds its setpoint (test_clock_wait).
         self.on_timer()
 
-    def reference_at(self, elapsed_s):
+    def reference_at(self, elapsed_s: float) -> tuple[ReferenceSample, str]:
         """(sample, phase name) at ``elapsed_s`` since the first publication."""
         return sample(self.schedule, elapsed_s), self.schedule.phase_at(elapsed_s)
 
-    def on_timer(self):
+    def on_timer(self) -> None:
         now = self.get_clock().now()
         if self._start_ns is None:
             self._start_ns = now.nanoseconds
@@ -83,7 +74,7 @@ class ReferenceNode(Node):
         self._marker_publisher.publish(reference_markers(reference.normal, now.to_msg()))
         self._check_clock()
 
-    def _check_clock(self):
+    def _check_clock(self) -> None:
         """Warn once when a simulator publishes /clock but this node stamps wall time: every
         stamp of the twin is simulated time, so the reference should follow /clock."""
         if self._clock_checked or self.get_parameter('use_sim_time').value:
@@ -94,14 +85,14 @@ class ReferenceNode(Node):
                 f'{CLOCK.name} is published (a simulator runs) but this node stamps wall time: '
                 'start it with use_sim_time:=true so its stamps are simulated time')
 
-    def summary(self):
+    def summary(self) -> str:
         switch_s = self.schedule.switch_s
         return (f'reference: setpoint {self.schedule.setpoint.xy}, trajectory from '
                 + (f'{switch_s:g} s' if switch_s >= 0 else 'never')
                 + f'; real-time factor {self.pace.real_time_factor():.3f}')
 
 
-def main(args=None):
+def main(args: list[str] | None = None) -> int:
     return run_node(ReferenceNode, args, farewell=ReferenceNode.summary, name='reference')
 
 

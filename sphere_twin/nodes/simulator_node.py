@@ -8,9 +8,13 @@ programme's actual start and end, or its cut or refusal). A command that breaks 
 rejected with a logged error and a diagnostics entry; it never reaches the plant.
 """
 
+from __future__ import annotations
+
 import os
 import sys
 import time
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
@@ -27,7 +31,7 @@ from msg_defs.conversions import (
     voltages_from_msg,
     voltages_to_msg,
 )
-from msg_defs.device import NS_PER_S, SENSOR_RATE_HZ
+from msg_defs.device import NS_PER_S
 from msg_defs.markers import twin_markers
 from msg_defs.topics import (
     BEAM_STATE,
@@ -41,22 +45,25 @@ from msg_defs.topics import (
     SURFACE_NORMAL,
     VOLTAGE_COMMAND,
 )
-from sphere_sim.twin.plant_setup import PLANT_KINDS
 from sphere_sim.twin.report_limit import ReportLimit
 from sphere_twin.node_runtime.outbox import Outbox
 from sphere_twin.node_runtime.ros_env import (
     DISCOVERY_RANGE_VAR,
     StartupError,
     declare_node_parameters,
-    parameter_descriptor,
     run_node,
 )
+from sphere_twin.nodes.parameters import SIMULATOR_PARAMETERS
+
+if TYPE_CHECKING:
+    from msg_defs.programme_events import ProgrammeEvent
+    from sphere_sim.kicks.plants import TwinPlant
+    from sphere_sim.twin.runner import Sample
 
 # The physics (scipy, numba, the kick table) is imported when the node is built, not with this
 # module, so that main() installs its signal handlers first: a SIGINT during the seconds of
 # start-up is then a clean shutdown like any other.
 
-MAX_PUBLISH_RATE_HZ = 1000.0
 MARKER_EVERY_N_SAMPLES = 5
 # As-fast-as-possible and lockstep runs still yield to the executor between samples, so
 # commands are taken in between.
@@ -87,7 +94,7 @@ class SimulatorNode(Node):
         Passed to ``rclpy.node.Node`` (e.g. ``context``).
     """
 
-    def __init__(self, plant=None, **node_kwargs):
+    def __init__(self, plant: TwinPlant | None = None, **node_kwargs: Any) -> None:
         from sphere_sim.twin.plant_setup import build_plant
         from sphere_sim.twin.runner import TwinRunner
 
@@ -122,7 +129,7 @@ class SimulatorNode(Node):
         self.create_timer(STATUS_PERIOD_S, self.on_status_timer)
         self.wait_for_subscribers = p['wait_for_subscribers']
         self.wait_for_clock_subscribers = p['wait_for_clock_subscribers']
-        self._last_sample = None
+        self._last_sample: Sample | None = None
         self._reports = ReportLimit()
         self._last_repeat_wall_s = 0.0
         self._wall_start_s = time.perf_counter()
@@ -132,47 +139,11 @@ class SimulatorNode(Node):
             f'{self.publish_rate_hz:g} Hz, real-time factor {self.real_time_factor:g}'
             f'{", lockstep" if p["lockstep"] else ""}; publishing {SURFACE_NORMAL.name}')
 
-    def _declare_parameters(self):
-        specs = {
-            'plant': ('discrete', parameter_descriptor(
-                f'Plant to run: {" or ".join(PLANT_KINDS)} (the lookup table of kicks).')),
-            'scene': ('rest', parameter_descriptor('Scene (shipped name or YAML path): parameters, '
-                                          'beams, sphere and initial state.')),
-            'params': ('', parameter_descriptor(
-                'Parameter set (shipped name or YAML file with base: and overrides:) instead '
-                'of the scene\'s; "" keeps the scene\'s.')),
-            'tables': ([''], parameter_descriptor(
-                'Kick tables (.npz) of the discrete plant, their actions combined (the '
-                'diagonal and the axis-parallel tables give 8 directions); [""] for the '
-                'shipped default.')),
-            'publish_rate_hz': (SENSOR_RATE_HZ, parameter_descriptor(
-                'Samples per simulated second (Hz).',
-                float_range=(1.0, MAX_PUBLISH_RATE_HZ))),
-            'real_time_factor': (1.0, parameter_descriptor(
-                'Simulated seconds per wall second; 0 runs as fast as possible.',
-                float_range=(0.0, 1000.0))),
-            'seed': (0, parameter_descriptor('Seed of the measurement noise.',
-                                             int_range=(0, 2**31 - 1))),
-            'noise_std_rad': (0.0, parameter_descriptor(
-                'Standard deviation of the measured normal per tangential axis (rad).',
-                float_range=(0.0, 0.1))),
-            'wait_for_subscribers': (0, parameter_descriptor(
-                f'Hold simulated time at 0 until {SURFACE_NORMAL.name} has this many '
-                'subscribers (DDS discovery takes seconds; a scenario should not start before '
-                'its controller listens).', int_range=(0, 100))),
-            'wait_for_clock_subscribers': (0, parameter_descriptor(
-                f'Hold simulated time at 0 until {CLOCK.name} has this many subscribers (the '
-                'nodes on use_sim_time, and a recorder, which counts too: a reference that has '
-                'not yet heard the clock when a short run ends never moves).',
-                int_range=(0, 100))),
-            'lockstep': (False, parameter_descriptor(
-                'Advance simulated time only while a command is in effect: runs are then '
-                'identical whatever the wall-clock timing.')),
-        }
-        return declare_node_parameters(self, specs)
+    def _declare_parameters(self) -> dict[str, Any]:
+        return declare_node_parameters(self, SIMULATOR_PARAMETERS)
 
     # --- commands ----------------------------------------------------------------------
-    def on_voltage_command(self, msg):
+    def on_voltage_command(self, msg: Any) -> None:
         # ValueError covers both the contract (conversions) and the runner's CommandRejectedError.
         try:
             cut = self.runner.command_voltages(voltages_from_msg(msg))
@@ -183,7 +154,7 @@ class SimulatorNode(Node):
             self._report_rejection(VOLTAGE_COMMAND.name, str(error))
         self._publish_events()
 
-    def on_pulse_program(self, msg):
+    def on_pulse_program(self, msg: Any) -> None:
         start_s = ns_from_time(msg.header.stamp) / NS_PER_S
         try:
             times, volts = programme_from_msg(msg)
@@ -205,18 +176,18 @@ class SimulatorNode(Node):
             self._report_rejection(PULSE_PROGRAM.name, str(error))
         self._publish_events()
 
-    def _publish_events(self):
+    def _publish_events(self) -> None:
         """Echo what happened to programmes since the last echo, oldest first."""
         events = self.runner.take_events()
         if events:
             self._outbox.submit(self._send_events, events)
 
-    def _send_events(self, events):
+    def _send_events(self, events: Sequence[ProgrammeEvent]) -> None:
         publisher = self._topic_publishers[PROGRAMME_STATUS.name]
         for event in events:
             publisher.publish(programme_event_to_msg(event))
 
-    def _publishing_failed(self, error):
+    def _publishing_failed(self, error: BaseException) -> None:
         # After a shutdown signal the context is gone and a publish fails: that is the
         # shutdown. Before it, a failed publish is a bug, said once per kind.
         if not self.context.ok():
@@ -224,11 +195,11 @@ class SimulatorNode(Node):
         self.get_logger().error(f'publishing failed: {type(error).__name__}: {error}',
                                 once=True)
 
-    def _report_rejection(self, topic, reason):
+    def _report_rejection(self, topic: str, reason: str) -> None:
         """Report a rejection (already counted)."""
         self._report(DiagnosticStatus.ERROR, f'rejected {topic}: {reason}')
 
-    def _report(self, level, text):
+    def _report(self, level: bytes, text: str) -> None:
         """Log and publish a rejection or a cut programme, at most REPORTS_PER_WINDOW a
         second; the next report says how many were left out (the status counts them all)."""
         if not self._reports.allow():
@@ -242,13 +213,13 @@ class SimulatorNode(Node):
             self.get_logger().warning(text)
         self._publish_diagnostics(level, text)
 
-    def on_status_timer(self):
+    def on_status_timer(self) -> None:
         state = 'waiting for subscribers' if self._waiting() else 'running'
         left_out = self._reports.take_suppressed()  # a burst that ended: its count is said here
         self._publish_diagnostics(DiagnosticStatus.OK, state + (
             f' ({left_out} more reports left out)' if left_out else ''))
 
-    def status_values(self):
+    def status_values(self) -> tuple[tuple[str, int | str], ...]:
         """The figures of the periodic status: counters, time, real-time factor, where the
         wall time went (fractions) and programme latency (ms)."""
         c, t, out = self.runner.counters, self.runner.timings, self._outbox
@@ -268,7 +239,7 @@ class SimulatorNode(Node):
             ('programme_latency_max_ms', f'{max_ms:.3f}'),
             ('programme_delay_median_ms', f'{1e3 * t.delay_median_s():.3f}'))
 
-    def _publish_diagnostics(self, level, message):
+    def _publish_diagnostics(self, level: bytes, message: str) -> None:
         status = DiagnosticStatus(level=level, name='simulator: commands',
                                   hardware_id='sphere_twin', message=message)
         status.values = [KeyValue(key=k, value=str(v)) for k, v in self.status_values()]
@@ -277,15 +248,15 @@ class SimulatorNode(Node):
         self._outbox.submit(self._topic_publishers[DIAGNOSTICS.name].publish, array)
 
     # --- time --------------------------------------------------------------------------
-    def _waiting(self):
+    def _waiting(self) -> bool:
         return bool(self.wait_for_subscribers or self.wait_for_clock_subscribers)
 
-    def _subscribers_present(self):
+    def _subscribers_present(self) -> bool:
         pub = self._topic_publishers
         return (pub[SURFACE_NORMAL.name].get_subscription_count() >= self.wait_for_subscribers
                 and pub[CLOCK.name].get_subscription_count() >= self.wait_for_clock_subscribers)
 
-    def on_timer(self):
+    def on_timer(self) -> None:
         if self._waiting():
             if not self._subscribers_present():
                 return
@@ -313,11 +284,11 @@ class SimulatorNode(Node):
         self._outbox.submit(self._publish_sample, sample,
                             self.runner.counters.samples % MARKER_EVERY_N_SAMPLES == 1)
 
-    def _publish_sample(self, sample, markers):
+    def _publish_sample(self, sample: Sample, markers: bool) -> None:
         self._publish(sample, markers)
         self.runner.timings.record_published(sample, time.perf_counter())
 
-    def _publish(self, sample, markers):
+    def _publish(self, sample: Sample, markers: bool) -> None:
         snap = sample.snapshot
         stamp = time_from_ns(round(snap.time_s * NS_PER_S))
         pub = self._topic_publishers
@@ -325,16 +296,20 @@ class SimulatorNode(Node):
         pub[SURFACE_NORMAL.name].publish(surface_normal_to_msg(sample.measured_normal, stamp))
         pub[BEAM_VOLTAGE.name].publish(voltages_to_msg(snap.voltages_v, stamp))
         if snap.sphere is not None:
-            pub[SPHERE_STATE.name].publish(sphere_state_to_msg(*snap.sphere, stamp=stamp))
+            centre, quaternion, velocity, omega = snap.sphere
+            pub[SPHERE_STATE.name].publish(sphere_state_to_msg(centre, quaternion, velocity,
+                                                               omega, stamp=stamp))
         if snap.beams is not None:
-            pub[BEAM_STATE.name].publish(beam_state_to_msg(*snap.beams, stamp=stamp))
+            z, phi, z_rate, phi_rate = snap.beams
+            pub[BEAM_STATE.name].publish(beam_state_to_msg(z, phi, z_rate, phi_rate,
+                                                           stamp=stamp))
         if markers:
             beams = snap.beams if snap.beams is not None else (None, None)
             position = snap.sphere[0] if snap.sphere is not None else None
             pub[MARKERS.name].publish(twin_markers(snap.normal, stamp, position, beams[0],
                                                    beams[1]))
 
-    def summary(self):
+    def summary(self) -> str:
         """The final line: simulated time, samples, programmes, rejections, real-time factor,
         and where each thread's wall time went."""
         self._outbox.flush()  # what was handed over counts as published
@@ -346,14 +321,14 @@ class SimulatorNode(Node):
                 f'publishing {float(v["waiting_for_publishing_fraction"]):.0%} (simulation '
                 f'thread), publishing {float(v["publishing_fraction"]):.0%} (publishing thread)')
 
-    def destroy_node(self):
+    def destroy_node(self) -> None:
         # The queued messages go out (or, after a shutdown signal, fail quietly) before the
         # publishers they use are destroyed.
         self._outbox.close()
         super().destroy_node()
 
 
-def main(args=None):
+def main(args: list[str] | None = None) -> int:
     return run_node(SimulatorNode, args, farewell=SimulatorNode.summary, name='simulator')
 
 

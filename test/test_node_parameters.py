@@ -1,0 +1,258 @@
+"""Every node's parameters are written once, in sphere_twin/nodes/parameters.py: the nodes
+declare exactly those, and config/twin.yaml, the arguments of launch/twin.launch.py and the
+code that takes a choice-valued parameter agree with them. Checked without the `launch`
+packages (not on PyPI)."""
+
+import ast
+import math
+from pathlib import Path
+
+import pytest
+import yaml
+
+from sphere_twin.node_runtime.ros_env import ParameterSpec, ParameterType
+from sphere_twin.nodes import parameters
+from sphere_twin.nodes.parameters import NODE_PARAMETERS
+
+ROOT = Path(__file__).resolve().parents[1]
+LAUNCH_FILE = ROOT / 'launch' / 'twin.launch.py'
+CONFIG_FILE = ROOT / 'config' / 'twin.yaml'
+
+# Where config/twin.yaml sets a value other than the node's default, on purpose:
+# (node, parameter) -> value. The launch file's argument defaults follow the file.
+INTENDED_DIFFERENCES = {
+    # The physics of §3; started alone, the node runs the discrete table, which starts faster.
+    ('simulator', 'plant'): 'continuous',
+    # The example bag; started alone, the player requires a bag.
+    ('player', 'bag'): 'example',
+}
+# Parameters that rclpy declares on every node; the launch file may pass them too.
+ROS_PARAMETERS = {'use_sim_time'}
+# What the launch file's typed(name, <type>) gives a node for each parameter type; arg(name)
+# (a string) is only for string parameters.
+LAUNCH_VALUE_TYPES = {ParameterType.BOOL: 'bool', ParameterType.INTEGER: 'int',
+                      ParameterType.DOUBLE: 'float'}
+
+
+def _specs(node):
+    return {spec.name: spec for spec in NODE_PARAMETERS[node]}
+
+
+def _choice_parameters():
+    """(node, parameter) -> what the code that takes the value accepts."""
+    from sphere_control.controllers import CONTROLLER_KINDS
+    from sphere_sim.twin.plant_setup import PLANT_KINDS
+    from sphere_twin.bag.writer import COMPRESSIONS
+
+    return {('simulator', 'plant'): tuple(PLANT_KINDS),
+            ('controller', 'controller'): tuple(CONTROLLER_KINDS),
+            ('recorder', 'compression'): tuple(COMPRESSIONS)}
+
+
+def _has_type(spec: ParameterSpec, value):
+    """Whether a node takes ``value`` for ``spec`` (a double also takes an integer)."""
+    number = isinstance(value, int | float) and not isinstance(value, bool)
+    array = isinstance(value, list | tuple)
+    return {ParameterType.BOOL: isinstance(value, bool),
+            ParameterType.INTEGER: number and isinstance(value, int),
+            ParameterType.DOUBLE: number,
+            ParameterType.STRING: isinstance(value, str),
+            ParameterType.DOUBLE_ARRAY: array and all(isinstance(v, float) for v in value),
+            ParameterType.STRING_ARRAY: array and all(isinstance(v, str) for v in value),
+            }[spec.type]
+
+
+def _allowed(spec: ParameterSpec, value):
+    if spec.range is not None and not spec.range[0] <= value <= spec.range[1]:
+        return False
+    return spec.choices is None or value in spec.choices
+
+
+def _same(a, b):
+    if isinstance(a, list | tuple) and isinstance(b, list | tuple):
+        return list(a) == list(b)
+    return type(a) is type(b) and a == b
+
+
+def _expected(node, spec):
+    """The value a node gets from config/twin.yaml or the launch file's default."""
+    return INTENDED_DIFFERENCES.get((node, spec.name), spec.default)
+
+
+def _config():
+    return {node: section['ros__parameters']
+            for node, section in yaml.safe_load(CONFIG_FILE.read_text()).items()}
+
+
+# --- the specs themselves ---------------------------------------------------------------
+
+@pytest.mark.parametrize('node', sorted(NODE_PARAMETERS))
+def test_every_default_has_its_type_and_lies_in_its_range(node):
+    names = [spec.name for spec in NODE_PARAMETERS[node]]
+    assert len(names) == len(set(names))
+    for spec in NODE_PARAMETERS[node]:
+        assert spec.description and spec.read_only
+        if spec.default is None:  # declared by type alone
+            assert spec.type in (ParameterType.STRING_ARRAY, ParameterType.DOUBLE_ARRAY)
+            continue
+        assert _has_type(spec, spec.default), spec.name
+        assert _allowed(spec, spec.default), spec.name
+        assert spec.range is None or spec.type in (ParameterType.INTEGER, ParameterType.DOUBLE)
+
+
+def test_choice_valued_parameters_offer_exactly_what_the_code_accepts():
+    accepted = _choice_parameters()
+    marked = {(node, spec.name): spec.choices for node, specs in NODE_PARAMETERS.items()
+              for spec in specs if spec.choices is not None}
+    assert marked == accepted
+    for (node, name), choices in accepted.items():
+        spec = _specs(node)[name]
+        for choice in choices:
+            assert choice in spec.description
+        assert spec.default in choices
+
+
+def test_constants_written_out_to_keep_the_nodes_light_match_their_source():
+    from sphere_control.controllers import DEFAULT_PHI_MIN_RAD
+    from sphere_twin.bag.writer import DEFAULT_CHUNK_SIZE_BYTES
+
+    assert math.degrees(DEFAULT_PHI_MIN_RAD) == parameters.DEFAULT_PHI_MIN_DEG
+    assert parameters.DEFAULT_CHUNK_SIZE_BYTES == DEFAULT_CHUNK_SIZE_BYTES
+
+
+# --- config/twin.yaml -------------------------------------------------------------------
+
+def test_the_config_has_a_section_for_each_launched_node():
+    assert set(_config()) == set(NODE_PARAMETERS) - {'monitor'}
+
+
+@pytest.mark.parametrize('node', sorted(set(NODE_PARAMETERS) - {'monitor'}))
+def test_the_config_sets_declared_parameters_to_their_defaults(node):
+    config = _config()[node]
+    specs = _specs(node)
+    assert set(config) <= set(specs)
+    for name, value in config.items():
+        spec = specs[name]
+        assert _has_type(spec, value), f'{node}.{name}: {value!r} is not a {spec.type.value}'
+        assert _allowed(spec, value), f'{node}.{name}: {value!r} is out of range'
+        assert _same(value, _expected(node, spec)), (
+            f'{node}.{name} = {value!r} in {CONFIG_FILE.name}, but the node\'s default is '
+            f'{spec.default!r}: change one, or name the difference in INTENDED_DIFFERENCES')
+
+
+def test_every_intended_difference_is_in_the_config_and_differs():
+    config = _config()
+    for (node, name), value in INTENDED_DIFFERENCES.items():
+        assert config[node][name] == value
+        assert not _same(value, _specs(node)[name].default)
+
+
+# --- launch/twin.launch.py --------------------------------------------------------------
+
+def _launch_arguments():
+    namespace = {}
+    exec(compile(LAUNCH_FILE.read_text(), str(LAUNCH_FILE), 'exec'), namespace)
+    return namespace['ARGUMENTS']
+
+
+def _launch_parameters():
+    """(executable, parameter, argument, typed value type or None) of every launch argument
+    passed to one of our nodes as a parameter."""
+    tree = ast.parse(LAUNCH_FILE.read_text())
+    assigned = {n.targets[0].id: n.value for n in ast.walk(tree)
+                if isinstance(n, ast.Assign) and isinstance(n.targets[0], ast.Name)}
+    found = []
+    for call in ast.walk(tree):
+        if not (isinstance(call, ast.Call) and getattr(call.func, 'id', None) == 'Node'):
+            continue
+        kw = {k.arg: k.value for k in call.keywords}
+        if kw['package'].value != 'sphere_twin':
+            continue
+        for item in getattr(kw.get('parameters'), 'elts', []):
+            item = assigned.get(item.id, item) if isinstance(item, ast.Name) else item
+            if not isinstance(item, ast.Dict):
+                continue
+            for key, value in zip(item.keys, item.values, strict=True):
+                assert isinstance(value, ast.Call) and value.func.id in ('arg', 'typed')
+                value_type = value.args[1].id if value.func.id == 'typed' else None
+                found.append((kw['executable'].value, key.value, value.args[0].value,
+                              value_type))
+    return found
+
+
+def _parse(spec, text):
+    return {ParameterType.BOOL: lambda t: {'true': True, 'false': False}[t],
+            ParameterType.INTEGER: int, ParameterType.DOUBLE: float,
+            ParameterType.STRING: str}[spec.type](text)
+
+
+def test_launch_arguments_passed_to_nodes_agree_with_their_declarations():
+    arguments = _launch_arguments()
+    passed = _launch_parameters()
+    assert {node for node, *_ in passed} >= {'simulator', 'controller', 'recorder', 'player'}
+    for node, name, argument, value_type in passed:
+        if name in ROS_PARAMETERS:
+            continue
+        specs = _specs(node)
+        assert name in specs, f'the launch file passes {name} to {node}, which lacks it'
+        spec = specs[name]
+        assert argument == name
+        assert value_type == LAUNCH_VALUE_TYPES.get(spec.type), f'{node}.{name}'
+        default, description = arguments[argument]
+        assert _same(_parse(spec, default), _expected(node, spec)), (
+            f'launch argument {argument} defaults to {default!r}, the node to '
+            f'{spec.default!r}')
+        assert description == spec.description, f'launch argument {argument}'
+
+
+# --- the nodes declare exactly the specs --------------------------------------------------
+
+def _build(node, context, tmp_path):
+    from rclpy.parameter import Parameter
+
+    from sphere_twin.nodes.controller_node import ControllerNode
+    from sphere_twin.nodes.monitor_node import MonitorNode
+    from sphere_twin.nodes.player_node import PlayerNode
+    from sphere_twin.nodes.recorder_node import RecorderNode
+    from sphere_twin.nodes.reference_node import ReferenceNode
+    from sphere_twin.nodes.simulator_node import SimulatorNode
+
+    if node == 'simulator':  # a plant of its own: the parameters are what is checked
+        return SimulatorNode(plant=object(), context=context), set()
+    if node == 'recorder':
+        return RecorderNode(context=context, parameter_overrides=[
+            Parameter('output_dir', value=str(tmp_path / 'bag'))]), {'output_dir'}
+    if node == 'player':
+        return PlayerNode(context=context, parameter_overrides=[
+            Parameter('bag', value='example')]), {'bag'}
+    cls = {'controller': ControllerNode, 'reference': ReferenceNode, 'monitor': MonitorNode}
+    return cls[node](context=context), set()
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('node', sorted(NODE_PARAMETERS))
+def test_each_node_declares_its_specs(node, context, tmp_path, monkeypatch):
+    from rclpy.node import Node
+
+    monkeypatch.chdir(tmp_path)
+    bare = Node('bare', context=context)
+    builtin = set(bare.list_parameters([], 0).names)
+    bare.destroy_node()
+    built, overridden = _build(node, context, tmp_path)
+    try:
+        specs = _specs(node)
+        assert set(built.list_parameters([], 0).names) - builtin == set(specs)
+        for name, spec in specs.items():
+            descriptor = built.describe_parameter(name)
+            assert descriptor.description == spec.description
+            assert descriptor.read_only == spec.read_only
+            floats = [(r.from_value, r.to_value) for r in descriptor.floating_point_range]
+            ints = [(r.from_value, r.to_value) for r in descriptor.integer_range]
+            assert floats == ([spec.range] if spec.type is ParameterType.DOUBLE
+                              and spec.range is not None else [])
+            assert ints == ([spec.range] if spec.type is ParameterType.INTEGER
+                            and spec.range is not None else [])
+            if name not in overridden and spec.default is not None:  # else uninitialised
+                assert _same(built.get_parameter(name).value, spec.default), name
+    finally:
+        built.destroy_node()
