@@ -11,6 +11,7 @@ shows it for anything).
 import argparse
 import importlib
 import sys
+import typing
 from collections.abc import Sequence
 
 import yaml
@@ -69,8 +70,18 @@ def one_line(error: BaseException) -> str:
     return ' '.join(str(error).split()) or type(error).__name__
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse, but a usage error is the same one line as every other user mistake: the
+    usage would be a second line, and ``--help`` shows it to whoever asks."""
+
+    def error(self, message: str) -> typing.NoReturn:
+        self.exit(USAGE_STATUS, f'{self.prog}: error: {" ".join(message.split())} '
+                                f'(see {self.prog} --help)\n')
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    # Subparsers are made of the parser's own class, so every subcommand errs in one line.
+    parser = OneLineParser(
         prog='sphere-twin',
         description='Digital twin of an electrostatically kicked sphere micromirror.',
     )

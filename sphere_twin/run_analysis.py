@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import time
 from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -43,7 +44,15 @@ from msg_defs.voltage_rules import check_segments, check_voltages
 from sphere_control.reference_motion import JUMP_TOLERANCE
 from sphere_sim.kicks.plants import TIME_TOL_S
 from sphere_sim.model.rotations import angle_between
-from sphere_twin.bag.reader import BagError, deserialize, read_messages
+from sphere_twin.bag.reader import (
+    BagError,
+    deserialize,
+    has_footer,
+    read_messages,
+    read_metadata,
+    scan_mcap,
+    storage_files,
+)
 
 if TYPE_CHECKING:
     from msg_defs.programme_events import ProgrammeEvent
@@ -61,6 +70,25 @@ DEFAULT_BAND_RAD = math.radians(0.05)  # Fig. 13's tighter resting band
 MIN_SETPOINT_S = 0.5
 # The controller's phases in which it decided on a sample (sphere_control.kick_cycle.Phase).
 DECIDING_PHASES = ('kicking', 'resting')
+# Wall seconds between two progress lines of a long command: often enough that it never seems
+# to hang (the promise is one at least every 10 s), seldom enough not to bury its results.
+PROGRESS_PERIOD_S = 5.0
+
+
+class ProgressClock:
+    """Says when a long loop's next progress line is due: once per ``period_s`` of wall time,
+    the first one ``period_s`` after it was made (a short run prints none)."""
+
+    def __init__(self, period_s: float | None = None) -> None:
+        self.period_s = PROGRESS_PERIOD_S if period_s is None else period_s
+        self._next_s = time.monotonic() + self.period_s
+
+    def due(self) -> bool:
+        now_s = time.monotonic()
+        if now_s < self._next_s:
+            return False
+        self._next_s = now_s + self.period_s
+        return True
 
 
 @dataclasses.dataclass(frozen=True)
@@ -171,6 +199,29 @@ def load_run(bag_dir: str | os.PathLike[str],
         kicks, sorted(((on_stamps(log), volts) for log, volts in read.holds),
                       key=lambda h: h[0]),
         np.unique(read.decisions))
+
+
+def unclosed_bag_warning(bag_dir: str | os.PathLike[str], run: RecordedRun) -> str | None:
+    """What a command that analysed ``run``, read from ``bag_dir``, must say when a file of the
+    bag was not closed (its recorder died): that it read only the readable part, how much
+    that was, and the command that closes the bag; None for a bag closed cleanly.
+
+    The readable part is every chunk completed before the end, exactly what ``bag repair``
+    keeps, so the analysis is the one the repaired bag would give: the commands go on with
+    this warning rather than refuse (``bag info`` tells the same story).
+    """
+    unclosed = [scan_mcap(path) for path in storage_files(bag_dir) if not has_footer(path)]
+    if not unclosed:
+        return None
+    reasons = '; '.join(f'{scan.path.name}: {scan.stop_reason}' for scan in unclosed)
+    read = sum(len(scan.messages) for scan in unclosed)
+    # A recorder rewrites metadata.yaml as it goes or only at the end: a count is a fact
+    # only if it is more than what was read.
+    listed = read_metadata(bag_dir).get('message_count') or 0
+    of_listed = f' of the {listed} messages metadata.yaml lists' if listed > read else ' messages'
+    return (f'{bag_dir} was not closed ({reasons}): read only its readable part, {read}'
+            f'{of_listed}, surface normals from {run.normal_t_s[0]:.2f} to '
+            f'{run.normal_t_s[-1]:.2f} s; run `sphere-twin bag repair {bag_dir}` to close it')
 
 
 def _reported_starts(programmes: Sequence[tuple[int, int, NDArray[np.float64],
@@ -388,12 +439,14 @@ def replay_start_index(run: RecordedRun, window_s: float) -> int:
     return int(np.searchsorted(run.normal_t_s, max(earlier) + window_s - TIME_TOL_S))
 
 
-def replay(run: RecordedRun, plant: TwinPlant, start_index: int = 0) -> ReplayResult:
+def replay(run: RecordedRun, plant: TwinPlant, start_index: int = 0,
+           progress: Callable[[float], None] | None = None) -> ReplayResult:
     """Feed the recorded commands open loop into ``plant``, sampled at the recorded times.
 
     The plant starts from the recorded normal at ``start_index`` (the caller builds it so;
     see :func:`replay_start_index` for a bag whose recording began mid-kick); each programme
-    starts at its stamp, each voltage command at its mapped receive time.
+    starts at its stamp, each voltage command at its mapped receive time. ``progress`` is
+    called with each sample's time once the plant has reached it (a long replay's progress).
     """
     from sphere_sim.kicks.plants import PlantError
     from sphere_sim.model.programme import PulseProgramme
@@ -421,4 +474,6 @@ def replay(run: RecordedRun, plant: TwinPlant, start_index: int = 0) -> ReplayRe
             k += 1
         plant.advance(max(t, plant.time_s))
         errors.append(angle_between(plant.snapshot().normal, recorded))
+        if progress is not None:
+            progress(float(t))
     return ReplayResult(run.normal_t_s[start_index:].copy(), np.array(errors))

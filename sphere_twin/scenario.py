@@ -4,12 +4,16 @@ scenario as an offline closed loop (no ROS), the yardstick of the node loop."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING, cast
 
 from msg_defs.device import NS_PER_S
 from sphere_twin.processes import NodeSpec, parameter_args
 
 if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
     from sphere_control.closed_loop import LoopHistory
     from sphere_control.reference import ScheduledReference
     from sphere_sim.kicks.plants import ContinuousPlant
@@ -84,12 +88,36 @@ def scenario_reference(setpoint_s: float) -> ScheduledReference:
                               TRAJECTORY_OFFSET_S)
 
 
-def offline_loop(setpoint_s: float, duration_s: float,
-                 plant: str = 'continuous') -> LoopHistory:
+class _WatchedReference:
+    """A reference that tells ``on_time`` each time it is sampled at: how far a closed loop
+    has got, from outside it (the loop has no callback of its own). ``on_time`` may raise to
+    end the loop early."""
+
+    def __init__(self, reference: ScheduledReference, on_time: Callable[[float], None]) -> None:
+        self._reference = reference
+        self._on_time = on_time
+
+    @property
+    def is_constant(self) -> bool:
+        return self._reference.is_constant
+
+    def xy_at(self, time_s: float) -> NDArray[np.float64]:
+        self._on_time(time_s)
+        return self._reference.xy_at(time_s)
+
+    def velocity_xy(self, time_s: float) -> NDArray[np.float64]:
+        return self._reference.velocity_xy(time_s)
+
+
+def offline_loop(setpoint_s: float, duration_s: float, plant: str = 'continuous',
+                 on_time: Callable[[float], None] | None = None) -> LoopHistory:
     """The scenario as an offline closed loop (:func:`~sphere_control.closed_loop.run_closed_loop`):
     the controller node's controller and kick period, the simulator's plant from its
     initial state (the continuous one carrying its state from kick to kick), the reference
     node's schedule. Returns the :class:`~sphere_control.closed_loop.LoopHistory`.
+
+    ``on_time`` is called with the simulated time of every step (progress; it may raise to
+    stop the loop).
     """
     from sphere_control.closed_loop import LoopSettings, run_closed_loop
     from sphere_control.controllers import controller_for
@@ -109,5 +137,7 @@ def offline_loop(setpoint_s: float, duration_s: float,
                                                       period_s)
                                         if plant == 'continuous' else kicks)
     settings = LoopSettings(max_steps=round(duration_s / period_s), kick_period_s=period_s)
+    reference = scenario_reference(setpoint_s)
     return run_closed_loop(controller_for(CONTROLLER, calibration.applied_to(kicks)), kick_plant,
-                           start, scenario_reference(setpoint_s), settings)
+                           start, reference if on_time is None
+                           else _WatchedReference(reference, on_time), settings)

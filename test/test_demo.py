@@ -1,7 +1,12 @@
 """``sphere-twin demo``: the closed loop over DDS, recorded, stopped cleanly, summarised."""
 
 import io
+import os
 import re
+import signal
+import subprocess
+import threading
+import time
 
 import pytest
 
@@ -9,6 +14,10 @@ from msg_defs.topics import ALL_TOPICS, CLOCK
 from sphere_twin.cli import build_parser
 from sphere_twin.commands.demo import DEFAULT_REAL_TIME_FACTOR, demo_nodes, run_demo
 from sphere_twin.nodes.simulator_node import CATCH_UP_SPEEDUP
+from sphere_twin.processes import fresh_domain_id, resolve_executable
+
+# Longest wait for a line of the signalled demo, and for its exit after the signal.
+SIGNALLED_DEMO_WAIT_S = 120.0
 
 pytestmark = pytest.mark.ros
 
@@ -72,3 +81,64 @@ def test_cli_parses_the_scenario_and_rejects_non_positive_durations():
         parser.parse_args(['demo', '--plant', 'table'])
     with pytest.raises(SystemExit):
         parser.parse_args(['demo', '--trajectory-s', '0'])
+
+
+def _lines_of(popen, lines):
+    """Collect the child's stdout lines as they come (a thread: the test waits on them)."""
+    def read():
+        for raw in popen.stdout:
+            lines.append(raw.rstrip('\n'))
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    return reader
+
+
+def _wait_for_line(lines, prefix, popen, after=0):
+    deadline = time.monotonic() + SIGNALLED_DEMO_WAIT_S
+    while time.monotonic() < deadline:
+        found = [line for line in lines[after:] if line.startswith(prefix)]
+        if found:
+            return lines.index(found[0], after)
+        assert popen.poll() is None, '\n'.join(lines)
+        time.sleep(0.2)
+    raise AssertionError(f'no line {prefix!r} within {SIGNALLED_DEMO_WAIT_S} s:\n'
+                         + '\n'.join(lines))
+
+
+def test_sigterm_stops_the_demo_as_sigint_does_on_the_domain_the_environment_names(tmp_path):
+    """One short run (discrete plant, the cheapest) for three promises: ROS_DOMAIN_ID from the
+    environment is used and said; a progress line comes while the loop runs; SIGTERM by PID
+    stops every node cleanly, says so, summarises from the bag and exits with 143."""
+    domain_id = fresh_domain_id()  # held by this process: no other run takes it meanwhile
+    env = {**os.environ, 'ROS_DOMAIN_ID': str(domain_id),
+           'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'PYTHONUNBUFFERED': '1'}
+    popen = subprocess.Popen(
+        [resolve_executable('sphere-twin'), 'demo', '--plant', 'discrete', '--setpoint-s', '3',
+         '--trajectory-s', '600', '--bags-dir', str(tmp_path)],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines: list[str] = []
+    reader = _lines_of(popen, lines)
+    try:
+        running = _wait_for_line(lines, 'demo: the loop runs', popen)
+        _wait_for_line(lines, 'demo: progress: ', popen, after=running)
+        popen.send_signal(signal.SIGTERM)
+        code = popen.wait(SIGNALLED_DEMO_WAIT_S)
+    finally:
+        if popen.poll() is None:
+            popen.kill()
+            popen.wait()
+    reader.join(5.0)
+    stderr = popen.stderr.read()
+    text = '\n'.join(lines)
+    assert code == 143, text + stderr
+    assert 'Traceback' not in stderr + text
+    assert lines[0].startswith(f'demo: ROS_DOMAIN_ID={domain_id} (from the environment)')
+    assert re.search(r'demo: progress: [\d.]+ of 603 s simulated, \d+ kicks, bag [\d.]+ MB',
+                     text), text
+    assert len([line for line in lines if line.startswith('demo: got SIGTERM at ')]) == 1
+    stopped = [line for line in lines if line.startswith('demo: stopped ')]
+    assert len(stopped) == 4 and all(line.endswith('exit code 0') for line in stopped), text
+    assert re.search(r'demo: \d+ kicks in [\d.]+ s simulated .*, from the bag', text), text
+    assert 'offline loop' not in text  # no comparison: the run was cut short
+    assert lines[-1] == 'demo: STOPPED by SIGTERM, exit status 143'
+    assert len(list(tmp_path.glob('demo_*/metadata.yaml'))) == 1  # the bag, closed

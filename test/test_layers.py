@@ -26,6 +26,8 @@ NODE_RUNTIME = 'sphere_twin.node_runtime'
 # Modules outside the nodes that may import rclpy, and why.
 RCLPY_ALLOWED = {
     'sphere_twin.node_runtime.ros_env': 'the shared main() of every node',
+    'sphere_twin.node_runtime.parameter_specs': "declares a node's parameters, inside the "
+                                                'functions that do',
     'msg_defs.topics': 'turns its QoS specs into rclpy profiles, inside that one method',
     'sphere_twin.testing': "the tests' probe node that watches a running twin",
     'sphere_twin.bag.reader': "rclpy's CDR deserialiser reads recorded messages; no graph",

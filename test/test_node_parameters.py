@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from sphere_twin.node_runtime.ros_env import ParameterSpec, ParameterType
+from sphere_twin.node_runtime.parameter_specs import ParameterSpec, ParameterType
 from sphere_twin.nodes import parameters
 from sphere_twin.nodes.parameters import NODE_PARAMETERS
 

@@ -13,13 +13,14 @@ pytestmark = pytest.mark.ros
 EXIT_TIMEOUT_S = 60.0
 
 BAD_STARTS = [
-    ('simulator', dict(plant='foo'), "unknown plant 'foo'"),
+    ('simulator', dict(plant='foo'), "parameter plant = 'foo' is not one of: discrete, continuous"),
     ('simulator', dict(scene='no_such_scene'), 'no_such_scene'),
     ('simulator', dict(tables=['/nonexistent/table.npz']), '/nonexistent/table.npz'),
-    ('simulator', dict(publish_rate_hz=0.5), 'publish_rate_hz out of range'),
+    ('simulator', dict(publish_rate_hz=0.5),
+     'parameter publish_rate_hz = 0.5 is outside [1, 1000]'),
     ('simulator', dict(publish_rate_hz='fast'), 'parameter publish_rate_hz must be a number'),
     ('simulator', dict(use_sim_time=True), 'the simulator is the clock'),
-    ('controller', dict(controller='pid'), 'pid'),
+    ('controller', dict(controller='pid'), "parameter controller = 'pid' is not one of: basic"),
     ('controller', dict(tables=['/nonexistent/table.npz']), '/nonexistent/table.npz'),
     ('reference', dict(setpoint_xy=[0.1]), 'setpoint_xy needs 2 values'),
     ('reference', dict(publish_rate_hz=0), 'parameter publish_rate_hz = 0 is outside'),

@@ -177,6 +177,7 @@ def test_a_sliding_law_that_would_drive_is_refused(tmp_path):
     """Coefficients whose Coulomb and Stribeck terms turn negative at some speed would inject
     energy; the set is refused at load time with one line."""
     path = tmp_path / 'driving.yaml'
-    path.write_text('name: driving\nbase: table_a1\noverrides:\n  friction.stribeck: -1.0\n')
+    # mu_s = 0 under Table A1's mu_c = 2: the Stribeck term's -mu_c tanh(v_s/v_c) wins at low speed
+    path.write_text('name: driving\nbase: table_a1\noverrides:\n  friction.stribeck: 0.0\n')
     with pytest.raises(ParameterError, match='drives'):
         load_parameter_set(path)

@@ -62,6 +62,10 @@ DEFAULT_MAX_WALL_S = 600.0
 # Accepted steps per run: the stiffest shipped scenes take ~1e4 steps per simulated 100 ms at
 # rtol 1e-8, so 2e7 allows 10 s of simulated time at any tolerance before calling it a stall.
 DEFAULT_MAX_STEPS = 20_000_000
+# Sampled states a run may hold (t, x and u together, 8 bytes each): 1 GiB, about five minutes
+# of a sphere scene at the default 0.1 ms sampling; beyond it the allocation fails or swaps, so
+# a longer run is refused before anything is allocated.
+MAX_SAMPLE_BYTES = 2**30
 # Deepest closure of an open contact within one step, as a fraction of the contact law's
 # transition depth 2 C / k_c (100 nm with Table A1): 2 nm, where the contact force is still
 # 4e-4 C and starting the contact that late adds ~1e-15 J of elastic energy.
@@ -177,6 +181,22 @@ SEGMENT_METHODS: dict[str, SegmentMethod] = {
 METHODS = tuple(SEGMENT_METHODS)
 
 
+def check_sample_grid(model: Model, duration_s: float, sample_period_s: float) -> None:
+    """Raise :class:`SolverError` (FAILED) when a run of ``duration_s`` sampled every
+    ``sample_period_s`` would hold more than MAX_SAMPLE_BYTES, naming the longest that fits."""
+    if not (math.isfinite(duration_s) and sample_period_s > 0.0):
+        raise SolverError(f'cannot sample a run of {duration_s:g} s every {sample_period_s:g} s')
+    # Samples overshoot the period's count by one per segment; the edges are few.
+    bytes_per_sample = 8 * (1 + model.n_states + model.n_beams)
+    samples = duration_s / sample_period_s
+    if samples * bytes_per_sample > MAX_SAMPLE_BYTES:
+        longest_s = MAX_SAMPLE_BYTES / bytes_per_sample * sample_period_s
+        raise SolverError(
+            f'a run of {duration_s:g} s sampled every {sample_period_s:g} s would hold '
+            f'{samples:.3g} samples ({samples * bytes_per_sample / 2**30:.3g} GiB); the '
+            f'duration must be at most {longest_s:.4g} s at this sampling')
+
+
 def simulate(model: Model, x0: ArrayLike | None, t_end_s: float,
              programme: PulseProgramme | VoltageSchedule | None = None,
              rtol: float = DEFAULT_RTOL, atol: ArrayLike | None = None,
@@ -225,6 +245,7 @@ def simulate(model: Model, x0: ArrayLike | None, t_end_s: float,
         raise TypeError('programme must be a PulseProgramme or a VoltageSchedule')
     if method not in METHODS:
         raise ValueError(f'method must be one of {METHODS}, got {method!r}')
+    check_sample_grid(model, t_end_s - t_start_s, sample_period_s)
     atol = rtol * state_scale(model) if atol is None else atol
     atol = np.broadcast_to(np.asarray(atol, dtype=float), (model.n_states,)).copy()
     onset = default_onset_depth_m(model) if onset_depth_m is None else float(onset_depth_m)

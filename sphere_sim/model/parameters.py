@@ -5,10 +5,14 @@ and override some of its values; the ``calibrated`` set does this and declares w
 parameters it treats as uncertain, with a plausible range and a reason for each.
 """
 
+import contextlib
+import copy
 import dataclasses
 import hashlib
 import json
 import math
+import re
+from collections.abc import Iterator
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -22,6 +26,21 @@ PARAMS_DIR = Path(__file__).parents[1] / 'params'
 
 class ParameterError(ValueError):
     """A parameter file is missing, malformed or names an unknown key."""
+
+
+class YamlLoader(yaml.SafeLoader):
+    """YAML's safe loader that also reads ``1e-6`` as a number.
+
+    YAML 1.1 (PyYAML) takes a number with an exponent but no decimal point for text; a quoted
+    value is text on purpose and is refused where a number belongs (never guessed), so the
+    unquoted exponent form must arrive as the number it is.
+    """
+
+
+YamlLoader.add_implicit_resolver(
+    'tag:yaml.org,2002:float',
+    re.compile(r'^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$'),
+    list('-+0123456789.'))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -185,51 +204,209 @@ _SECTIONS: dict[str, type[_Section]] = {
     'contact': ContactParams,
     'friction': FrictionParams,
 }
-_CHOICES = {
-    ('beam', 'inertia_about'): ('suspension', 'cog'),
-    ('friction', 'reading'): ('paper', 'stiction', 'structure', 'additive', 'printed'),
+
+
+@dataclasses.dataclass(frozen=True)
+class ParameterRule:
+    """What one parameter may hold: a number in ``unit`` within ``low..high``, a boolean, or
+    one of ``choices``.
+
+    ``above_low`` excludes ``low`` itself (a division by the value, or a mass matrix that must
+    stay positive definite, follows); ``below_high`` likewise excludes ``high``.
+    """
+
+    kind: type[float] | type[bool] | type[str]
+    unit: str = ''
+    low: float = -math.inf
+    high: float = math.inf
+    above_low: bool = False
+    below_high: bool = False
+    choices: tuple[str, ...] = ()
+
+
+def _positive(unit: str, high_si: float) -> ParameterRule:
+    return ParameterRule(float, unit, 0.0, high_si, above_low=True)
+
+
+def _within(unit: str, low_si: float, high_si: float) -> ParameterRule:
+    return ParameterRule(float, unit, low_si, high_si)
+
+
+_FLAG = ParameterRule(bool)
+
+
+def _one_of(*choices: str) -> ParameterRule:
+    return ParameterRule(str, choices=choices)
+
+
+# Every value of a parameter set, by dotted path: wide physical bounds (the device is a
+# millimetre-sized MEMS part), meant to refuse what no device has (a negative mass, a zero
+# stiffness divided by, a coefficient of friction of 1000), never a plausible hypothesis.
+# A field without an entry here is refused (test_bad_input_files checks that none lacks one).
+PARAMETER_RULES: dict[str, ParameterRule] = {
+    'gravity_m_per_s2': _positive('m/s^2', 100.0),
+    'beam.suspension_z_m': _within('m', -1e-3, 1e-3),
+    'beam.tip_distance_m': _positive('m', 1e-2),
+    'beam.length_m': _positive('m', 1e-2),
+    'beam.width_m': _positive('m', 1e-2),
+    'beam.mass_kg': _positive('kg', 1e-3),
+    'beam.inertia_kg_m2': _positive('kg m^2', 1e-6),
+    'beam.inertia_about': _one_of('suspension', 'cog'),
+    'beam.cog_distance_m': _within('m', 0.0, 1e-2),
+    'beam.electrode_length_m': _positive('m', 1e-2),
+    'beam.electrode_width_m': _positive('m', 1e-2),
+    'beam.insulation_virtual_m': _within('m', 0.0, 1e-4),
+    'beam.stiffness_z_n_per_m': _positive('N/m', 1e6),
+    'beam.stiffness_phi_nm_per_rad': _positive('N m/rad', 1.0),
+    'beam.damping_z_ns_per_m': _within('N s/m', 0.0, 1.0),
+    'beam.damping_phi_nms_per_rad': _within('N m s/rad', 0.0, 1e-3),
+    'beam.ground_z_m': _within('m', -1e-3, 1e-3),
+    'beam.ground_length_m': _positive('m', 1e-2),
+    'electrostatics.fringe': _FLAG,
+    'electrostatics.fringe_angle_rad': _positive('rad', 0.5),
+    'sphere.radius_m': _positive('m', 1e-2),
+    'sphere.cut_angle_rad': ParameterRule(float, 'rad', 0.0, math.pi, above_low=True),
+    'sphere.mass_kg': _positive('kg', 1.0),
+    'sphere.cog_offset_m': _within('m', 0.0, 1e-2),
+    'sphere.damping_rot_nms': _within('N m s', 0.0, 1e-3),
+    'sphere.damping_trans_ns_per_m': _within('N s/m', 0.0, 10.0),
+    'contact.stiffness_n_per_m': _positive('N/m', 1e12),
+    'contact.transition_force_n': _positive('N', 1e3),
+    'contact.loss_s_per_m': _within('s/m', 0.0, 1e6),
+    # Coefficients are magnitudes in every reading: the readings apply Table A1's signs.
+    'friction.reading': _one_of('paper', 'stiction', 'structure', 'additive', 'printed'),
+    'friction.viscous_ns_per_m': _within('N s/m', 0.0, 100.0),
+    'friction.coulomb': _within('', 0.0, 10.0),
+    'friction.coulomb_velocity_m_per_s': _positive('m/s', 100.0),
+    'friction.stribeck': _within('', 0.0, 10.0),
+    'friction.stribeck_velocity_m_per_s': _positive('m/s', 100.0),
+    'friction.epsilon_m2_per_s2': _positive('m^2/s^2', 1e-2),
+    'friction.viscous_onset_m': _within('m', 0.0, 1e-4),  # 0: no ramp (friction.onset_gate)
+    'friction.presliding_m': _positive('m', 1e-4),
+    'friction.viscous_s_per_m': _within('s/m', 0.0, 1e3),
+    'friction.bristle_damping_s': _within('s', 0.0, 1.0),
+    'friction.static_coefficient': _within('', 0.0, 10.0),
+    'friction.bristle_stiffness_n_per_m': _positive('N/m', 1e12),
+    'friction.bristle_speed_m_per_s': _positive('m/s', 100.0),
+    'friction.breakaway_ratio': ParameterRule(float, '', 0.0, 1.0, below_high=True),
 }
 
 
-def _set_path(data: dict[str, Any], path: str, value: Any) -> None:
-    keys = path.split('.')
-    node = data
-    for key in keys[:-1]:
-        if not isinstance(node, dict) or key not in node:
-            raise ParameterError(f'unknown parameter {path!r}')
-        node = node[key]
-    if keys[-1] not in node:
-        raise ParameterError(f'unknown parameter {path!r}')
-    node[keys[-1]] = value
+def check_parameter(path: str, value: object) -> float | bool | str:
+    """``value`` as parameter ``path`` holds it, or ParameterError saying on one line what is
+    wrong and what is allowed. Nothing is guessed: a quoted number or boolean is refused."""
+    rule = PARAMETER_RULES.get(path)
+    if rule is None:
+        raise _unknown_parameter(path)
+    if rule.kind is bool:
+        if not isinstance(value, bool):
+            raise ParameterError(f'{path} = {value!r}: must be true or false, without quotes')
+        return value
+    if rule.kind is str:
+        if not isinstance(value, str) or value not in rule.choices:
+            raise ParameterError(f'{path} = {value!r}: must be one of {", ".join(rule.choices)}')
+        return value
+    return check_number(path, value, rule)
+
+
+def _unknown_parameter(path: object) -> ParameterError:
+    if isinstance(path, str) and path in _SECTIONS:  # a nested mapping where a value belongs
+        first = dataclasses.fields(_SECTIONS[path])[0].name
+        return ParameterError(f'{path!r} is a section, not one value: name each value by its '
+                              f'dotted path, like {path}.{first}')
+    return ParameterError(f'unknown parameter {path!r}; every parameter is listed in '
+                          f'{PARAMS_DIR / "table_a1.yaml"}')
+
+
+def check_number(path: str, value: object, rule: ParameterRule) -> float:
+    """``value`` as a float if it is a finite, unquoted number within ``rule``'s range, else
+    ParameterError naming ``path``, the value, the rule and the allowed range on one line."""
+    allowed = _allowed_text(rule)
+    if isinstance(value, str):
+        raise ParameterError(f'{path} = {value!r}: must be a number written without quotes '
+                             f'(allowed {allowed})')
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParameterError(f'{path} = {value!r}: must be a number, not {_kind_of(value)} '
+                             f'(allowed {allowed})')
+    number = float(value)
+    shown = _with_unit(number, rule.unit)
+    if not math.isfinite(number):
+        raise ParameterError(f'{path} = {shown}: must be a finite number (allowed {allowed})')
+    if number < rule.low or (rule.above_low and number == rule.low):
+        raise ParameterError(f'{path} = {shown}: must be {_low_rule(rule)} (allowed {allowed})')
+    if number > rule.high or (rule.below_high and number == rule.high):
+        raise ParameterError(f'{path} = {shown}: must be {_high_rule(rule)} (allowed {allowed})')
+    return number
+
+
+def _kind_of(value: object) -> str:
+    """What a YAML value that is not a number is, in a user's words."""
+    if value is None:
+        return 'empty'
+    if isinstance(value, bool):
+        return 'true/false'
+    if isinstance(value, dict):
+        return 'a mapping'
+    if isinstance(value, list):
+        return 'a list'
+    return type(value).__name__
+
+
+def _with_unit(number: float, unit: str) -> str:
+    return f'{number:g} {unit}' if unit else f'{number:g}'
+
+
+def _allowed_text(rule: ParameterRule) -> str:
+    """``0..0.001 kg, 0 excluded``: the range as a user reads it."""
+    text = f'{rule.low:g}..{_with_unit(rule.high, rule.unit)}'
+    excluded = [f'{bound:g}' for bound, open_ in ((rule.low, rule.above_low),
+                                                  (rule.high, rule.below_high)) if open_]
+    return f'{text}, {" and ".join(excluded)} excluded' if excluded else text
+
+
+def _low_rule(rule: ParameterRule) -> str:
+    if rule.above_low:
+        return 'positive' if rule.low == 0.0 else f'above {_with_unit(rule.low, rule.unit)}'
+    return 'zero or positive' if rule.low == 0.0 else f'at least {_with_unit(rule.low, rule.unit)}'
+
+
+def _high_rule(rule: ParameterRule) -> str:
+    if rule.below_high:
+        return f'below {_with_unit(rule.high, rule.unit)}'
+    return f'at most {_with_unit(rule.high, rule.unit)}'
+
+
+def _set_path(data: dict[str, Any], path: Any, value: Any) -> None:
+    """Set one value by its dotted path; the path must name one value of the table."""
+    if not isinstance(path, str) or path not in PARAMETER_RULES:
+        raise _unknown_parameter(path)
+    *sections, key = path.split('.')
+    node: Any = data
+    for section in sections:
+        node = node.get(section) if isinstance(node, dict) else None
+    if not isinstance(node, dict):
+        raise ParameterError(f'cannot set {path}: the base set has no section {sections[0]!r}')
+    node[key] = value
 
 
 def _section(section: str, cls: type[_Section], values: Any) -> _Section:
     """One section's dataclass from its YAML mapping, every key checked and converted."""
-    if not isinstance(values, dict):
+    if values is None:
         raise ParameterError(f'parameter set lacks section {section!r}')
-    allowed = {f.name: f.type for f in dataclasses.fields(cls)}
+    if not isinstance(values, dict):
+        raise ParameterError(f'section {section!r} must be a mapping of its parameters, not '
+                             f'{_kind_of(values)}')
+    allowed = [f.name for f in dataclasses.fields(cls)]
     extra = set(values) - set(allowed)
     missing = set(allowed) - set(values)
     if extra:
         raise ParameterError(
-            f'unknown key(s) {sorted(extra)} in {section!r}; allowed: {sorted(allowed)}')
+            f'unknown key(s) {sorted(map(str, extra))} in {section!r}; allowed: {sorted(allowed)}')
     if missing:
         raise ParameterError(f'missing key(s) {sorted(missing)} in {section!r}')
-    return cls(**{key: _value(section, key, allowed[key], value) for key, value in values.items()})
-
-
-def _value(section: str, key: str, kind: object, value: Any) -> Any:
-    choices = _CHOICES.get((section, key))
-    if choices is not None:
-        if value not in choices:
-            raise ParameterError(f'{section}.{key} must be one of {choices}, got {value!r}')
-        return value
-    if kind in (bool, 'bool'):
-        return bool(value)
-    try:
-        return float(value)
-    except (TypeError, ValueError) as exc:
-        raise ParameterError(f'{section}.{key} must be a number, got {value!r}') from exc
+    checked: dict[str, Any] = {key: check_parameter(f'{section}.{key}', value)
+                               for key, value in values.items()}
+    return cls(**checked)
 
 
 def _from_dict(data: dict[str, Any]) -> ParameterSet:
@@ -240,15 +417,26 @@ def _from_dict(data: dict[str, Any]) -> ParameterSet:
             f'unknown key(s) {sorted(unknown)} in parameter set; allowed: {sorted(top_fields)}')
     kwargs: dict[str, Any] = {section: _section(section, cls, data.get(section))
                               for section, cls in _SECTIONS.items()}
+    _check_gap(kwargs['beam'])
     _check_friction(kwargs['friction'])
-    uncertain = tuple(_uncertain(item) for item in data.get('uncertain', ()) or ())
+    if 'gravity_m_per_s2' not in data:
+        raise ParameterError('parameter set lacks gravity_m_per_s2')
     return ParameterSet(
         name=str(data.get('name', 'unnamed')),
         description=str(data.get('description', '')),
-        gravity_m_per_s2=float(data['gravity_m_per_s2']),
-        uncertain=uncertain,
+        gravity_m_per_s2=float(check_parameter('gravity_m_per_s2', data['gravity_m_per_s2'])),
+        uncertain=_uncertain_entries(data.get('uncertain')),
         **kwargs,
     )
+
+
+def _check_gap(beam: BeamParams) -> None:
+    """The ground plate must lie below the suspension: the electrostatic force divides by
+    the gap between them (eq. 8), which the table's ranges alone do not keep positive."""
+    if not beam.ground_z_m < beam.suspension_z_m:
+        raise ParameterError(f'beam.ground_z_m = {beam.ground_z_m:g} m: must lie below '
+                             f'beam.suspension_z_m = {beam.suspension_z_m:g} m (the '
+                             'electrode gap must be positive)')
 
 
 # Speeds, relative to v_s, at which the ``paper`` reading's sliding law is checked not to drive.
@@ -258,23 +446,10 @@ _LAW_CHECK_SPEEDS = tuple(10.0 ** (k / 20.0) for k in range(-100, 41))
 def _check_friction(f: FrictionParams) -> None:
     """Refuse coefficients with which the ``paper`` reading would inject energy or divide by
     zero: its loaded part mu_c tanh(v/v_c) + (mu_s - mu_c tanh(v_s/v_c)) b(v/v_s) must not turn
-    negative at any speed, and the bristle's constants must be positive."""
+    negative at any speed (the signs and the positive velocities and bristle constants are
+    PARAMETER_RULES')."""
     if f.reading != 'paper':
         return
-    positive = {'coulomb_velocity_m_per_s': f.coulomb_velocity_m_per_s,
-                'stribeck_velocity_m_per_s': f.stribeck_velocity_m_per_s,
-                'bristle_stiffness_n_per_m': f.bristle_stiffness_n_per_m,
-                'bristle_speed_m_per_s': f.bristle_speed_m_per_s}
-    for key, value in positive.items():
-        if not value > 0.0:
-            raise ParameterError(f'friction.{key} must be positive, got {value!r}')
-    for key in ('viscous_ns_per_m', 'coulomb', 'static_coefficient', 'bristle_damping_s'):
-        if getattr(f, key) < 0.0:
-            raise ParameterError(f'friction.{key} must not be negative with the paper reading '
-                                 '(Table A1\'s signs are folded into Q = -f d|v|/dq_dot)')
-    if not 0.0 <= f.breakaway_ratio < 1.0:
-        raise ParameterError(f'friction.breakaway_ratio must lie in [0, 1), got '
-                             f'{f.breakaway_ratio!r}')
     peak = f.stribeck - f.coulomb * math.tanh(f.stribeck_velocity_m_per_s
                                               / f.coulomb_velocity_m_per_s)
     for ratio in _LAW_CHECK_SPEEDS:
@@ -287,9 +462,21 @@ def _check_friction(f: FrictionParams) -> None:
                                  f'{loaded:.3g} F_n there')
 
 
+def _uncertain_entries(entries: Any) -> tuple[UncertainParameter, ...]:
+    if entries is None:
+        return ()
+    if not isinstance(entries, (list, tuple)):
+        raise ParameterError(f'uncertain must be a list of entries (path, low, high, target, '
+                             f'reason), not {_kind_of(entries)}')
+    return tuple(_uncertain(item) for item in entries)
+
+
 def _uncertain(item: Any) -> UncertainParameter:
     if isinstance(item, UncertainParameter):
         return item
+    if not isinstance(item, dict):
+        raise ParameterError(f'uncertain entry {item!r}: must be a mapping with path, low, '
+                             'high, target and reason')
     fields = {f.name for f in dataclasses.fields(UncertainParameter)}
     required = {f.name for f in dataclasses.fields(UncertainParameter)
                 if f.default is dataclasses.MISSING}
@@ -297,17 +484,44 @@ def _uncertain(item: Any) -> UncertainParameter:
     missing = required - set(item)
     if unknown or missing:
         raise ParameterError(f'uncertain entry {item.get("path", "?")!r}: unknown key(s) '
-                             f'{sorted(unknown)}, missing key(s) {sorted(missing)}; allowed: '
-                             f'{sorted(fields)}')
-    return UncertainParameter(**item)
+                             f'{sorted(map(str, unknown))}, missing key(s) {sorted(missing)}; '
+                             f'allowed: {sorted(fields)}')
+    return UncertainParameter(**_checked_uncertain(item))
+
+
+def _checked_uncertain(item: dict[str, Any]) -> dict[str, Any]:
+    """An uncertain entry's values checked against the table: its range lies within its
+    parameter's, and every path it names is a number of the set."""
+    tied = item.get('tied', ())
+    if not isinstance(tied, (list, tuple)):  # a tuple when replace() rebuilds a set
+        raise ParameterError(f'uncertain {item["path"]!r}: tied must be a list of parameter '
+                             f'paths, not {_kind_of(tied)}')
+    for path in (item['path'], *tied):
+        rule = PARAMETER_RULES.get(path) if isinstance(path, str) else None
+        if rule is None or rule.kind is not float:
+            raise ParameterError(f'uncertain {path!r}: must name a numeric parameter like '
+                                 'beam.mass_kg')
+    for key in ('reason', 'target'):
+        if not isinstance(item[key], str):
+            raise ParameterError(f'uncertain {item["path"]!r}: {key} must be text, not '
+                                 f'{_kind_of(item[key])}')
+    return {**item, 'tied': tuple(tied),
+            'low': check_parameter(item['path'], item['low']),
+            'high': check_parameter(item['path'], item['high'])}
 
 
 def _read_yaml(path: Path) -> dict[str, Any]:
+    """A parameter file's mapping; every way it can fail to be one is a ParameterError."""
+    if path.is_dir():
+        raise ParameterError(f'{path} is a directory, not a parameter file')
     try:
-        with open(path) as stream:
-            data = yaml.safe_load(stream)
+        with open(path, encoding='utf-8') as stream:
+            data = yaml.load(stream, Loader=YamlLoader)  # a SafeLoader
     except FileNotFoundError as exc:
         raise ParameterError(f'parameter file not found: {path}') from exc
+    except UnicodeDecodeError as exc:
+        raise ParameterError(f'parameter file {path} is not UTF-8 text (byte {exc.start}): '
+                             'save it as UTF-8') from exc
     except yaml.YAMLError as exc:
         raise ParameterError(f'parameter file {path} is not valid YAML: '
                              f'{" ".join(str(exc).split())}') from exc
@@ -316,21 +530,53 @@ def _read_yaml(path: Path) -> dict[str, Any]:
     return data
 
 
-def _resolve(data: dict[str, Any], seen: tuple[str, ...] = ()) -> dict[str, Any]:
+@contextlib.contextmanager
+def _naming(source: Path) -> Iterator[None]:
+    """Prefix the ParameterErrors raised inside with the file whose content they are about."""
+    try:
+        yield
+    except ParameterError as exc:
+        raise ParameterError(f'{source}: {exc}') from exc
+
+
+def _resolve(data: dict[str, Any], source: Path, seen: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The set ``data`` (read from ``source``) describes, its ``base`` and ``overrides``
+    merged in; override paths and values are checked here, where their file is known."""
     base = data.get('base')
     if base is None:
+        if 'overrides' in data:
+            raise ParameterError(f'{source}: overrides need a base: the set they change, like '
+                                 'base: calibrated')
         return data
-    if base in seen:
-        raise ParameterError(f'parameter sets form a cycle through {base!r}')
-    merged = _resolve(_read_yaml(_path_of(base)), (*seen, base))
-    merged = json.loads(json.dumps(merged))
-    for path, value in (data.get('overrides') or {}).items():
-        _set_path(merged, path, value)
+    with _naming(source):
+        base_path = _base_path(base, seen)
+        overrides = data.get('overrides') or {}
+        if not isinstance(overrides, dict):
+            raise ParameterError('overrides must be a mapping of dotted paths to values, like '
+                                 f'beam.mass_kg: 1.0e-7; not {_kind_of(overrides)}')
+    merged = copy.deepcopy(_resolve(_read_yaml(base_path), base_path, (*seen, base)))
+    with _naming(source):
+        for path, value in overrides.items():
+            check_parameter(path, value)
+            _set_path(merged, path, value)
     for key in ('name', 'description', 'uncertain'):
         if key in data:
             merged[key] = data[key]
     merged.pop('base', None)
     return merged
+
+
+def _base_path(base: Any, seen: tuple[str, ...]) -> Path:
+    if not isinstance(base, str):
+        raise ParameterError(f'base must name a parameter set, like calibrated; not '
+                             f'{_kind_of(base)}')
+    if base in seen:
+        raise ParameterError(f'parameter sets form a cycle through {base!r}')
+    path = _path_of(base)
+    if not path.exists():
+        raise ParameterError(f'base: unknown parameter set {base!r}; available: '
+                             f'{available_parameter_sets()}')
+    return path
 
 
 def _path_of(name_or_path: str | Path) -> Path:
@@ -357,4 +603,6 @@ def load_parameter_set(name_or_path: str | Path = DEFAULT_PARAMETER_SET) -> Para
     if not path.exists():
         raise ParameterError(
             f'unknown parameter set {name_or_path!r}; available: {available_parameter_sets()}')
-    return _from_dict(_resolve(_read_yaml(path)))
+    merged = _resolve(_read_yaml(path), path)
+    with _naming(path):
+        return _from_dict(merged)

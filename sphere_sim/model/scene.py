@@ -7,7 +7,6 @@ model is assembled from what the scene declares and nothing else
 """
 
 import dataclasses
-import math
 from collections.abc import Collection
 from functools import lru_cache
 from pathlib import Path
@@ -16,7 +15,15 @@ from typing import Any, Self, overload
 import yaml
 
 from msg_defs.device import BEAM_IDS, DEFAULT_PARAMETER_SET, VOLTAGE_LIMIT_V
-from sphere_sim.model.parameters import ParameterError, ParameterSet, load_parameter_set
+from sphere_sim.model.parameters import (
+    ParameterError,
+    ParameterRule,
+    ParameterSet,
+    YamlLoader,
+    check_number,
+    check_parameter,
+    load_parameter_set,
+)
 from sphere_sim.model.programme import ProgrammeError, PulseProgramme
 
 SCENES_DIR = Path(__file__).parents[1] / 'scenes'
@@ -25,6 +32,22 @@ INITIAL_MODES = ('rest', 'explicit')
 EFFECTS = ('gravity', 'electrostatics', 'ground_contact', 'sphere_contact', 'contact_losses',
            'damping')
 FRICTION_TERMS = ('viscous', 'coulomb', 'stribeck')
+
+# The scene's numbers, checked by the parameters' checker: wide physical bounds (a
+# millimetre-sized device), refusing what would divide by zero or leave the model.
+SCENE_RULES = {
+    'duration_s': ParameterRule(float, 's', 0.0, 3600.0, above_low=True),
+    'initial_state.sphere_angles_deg': ParameterRule(float, 'deg', -180.0, 180.0),
+    'initial_state.sphere_lift_m': ParameterRule(float, 'm', 0.0, 1e-3),
+    'initial_state.sphere_position_m': ParameterRule(float, 'm', -1e-2, 1e-2),
+    'initial_state.sphere_velocity_m_per_s': ParameterRule(float, 'm/s', -10.0, 10.0),
+    'initial_state.sphere_omega_rad_per_s': ParameterRule(float, 'rad/s', -1e4, 1e4),
+    'initial_state.beam_z_m': ParameterRule(float, 'm', -1e-3, 1e-3),
+    'initial_state.beam_phi_rad': ParameterRule(float, 'rad', -1.0, 1.0),
+    # The drivers' own limit is the most a scene may allow (msg_defs.device).
+    'voltage_programme.voltage_limit_v': ParameterRule(float, 'V', 0.0, VOLTAGE_LIMIT_V,
+                                                       above_low=True),
+}
 
 
 class SceneError(ValueError):
@@ -79,7 +102,8 @@ class Scene:
     initial: InitialState
     programme: PulseProgramme
     duration_s: float
-    perturbation: tuple[tuple[str, float], ...] = ()  # ((dotted parameter path, value), ...)
+    # ((dotted parameter path, value), ...)
+    perturbation: tuple[tuple[str, float | bool | str], ...] = ()
 
     def parameters(self, base: ParameterSet | None = None) -> ParameterSet:
         """The parameter set (``base`` instead of the one named, if given) with the plant
@@ -122,24 +146,26 @@ def _vector(value: Any, key: str, length: int) -> tuple[float, ...] | None:
         return None
     if not isinstance(value, (list, tuple)) or len(value) != length:
         raise SceneError(f'{key!r} must be a list of {length} numbers, got {value!r}')
-    try:
-        out = tuple(float(v) for v in value)
-    except (TypeError, ValueError) as exc:
-        raise SceneError(f'{key!r} must be a list of {length} numbers, got {value!r}') from exc
-    if not all(math.isfinite(v) for v in out):
-        raise SceneError(f'{key!r} must be finite, got {value!r}')
-    return out
+    return tuple(_number(v, key, f'{key}[{index}]') for index, v in enumerate(value))
 
 
-def _number(value: Any, key: str, minimum: float | None = None) -> float:
+def _number(value: Any, key: str, shown_as: str | None = None) -> float:
+    """Scene number ``key`` checked against its SCENE_RULES entry (named ``shown_as``)."""
     try:
-        out = float(value)
-    except (TypeError, ValueError) as exc:
-        raise SceneError(f'{key!r} must be a number, got {value!r}') from exc
-    if not math.isfinite(out) or (minimum is not None and out < minimum):
-        bound = '' if minimum is None else f' >= {minimum}'
-        raise SceneError(f'{key!r} must be a finite number{bound}, got {value!r}')
-    return out
+        return check_number(shown_as or key, value, SCENE_RULES[key])
+    except ParameterError as exc:
+        raise SceneError(str(exc)) from exc
+
+
+def _perturbation(values: Any) -> tuple[tuple[str, float | bool | str], ...]:
+    """The plant perturbation's (path, value) pairs, each checked as its parameter."""
+    perturbation = _require_mapping(values or {}, 'perturbation')
+    try:
+        checked = [(str(path), check_parameter(str(path), value))
+                   for path, value in perturbation.items()]
+    except ParameterError as exc:
+        raise SceneError(f"'perturbation': {exc}") from exc
+    return tuple(sorted(checked, key=lambda item: item[0]))
 
 
 def scene_from_dict(data: Any, name: str = 'scene') -> Scene:
@@ -151,7 +177,7 @@ def scene_from_dict(data: Any, name: str = 'scene') -> Scene:
 
     beams = data.get('beams', list(BEAM_IDS))
     if (not isinstance(beams, list) or not beams or len(set(beams)) != len(beams)
-            or any(b not in BEAM_IDS for b in beams)):
+            or any(isinstance(b, bool) or b not in BEAM_IDS for b in beams)):
         raise SceneError(f"'beams' must be a non-empty list of distinct beam numbers from "
                          f"{list(BEAM_IDS)}, got {beams!r}")
     sphere = _bool(data.get('sphere', True), 'sphere')
@@ -202,14 +228,13 @@ def scene_from_dict(data: Any, name: str = 'scene') -> Scene:
         programme = PulseProgramme.from_dicts(
             prog_in.get('pulses', []) or [],
             _number(prog_in.get('voltage_limit_v', VOLTAGE_LIMIT_V),
-                    'voltage_programme.voltage_limit_v', 0))
+                    'voltage_programme.voltage_limit_v'))
     except ProgrammeError as exc:
         raise SceneError(f"'voltage_programme': {exc}") from exc
     absent = sorted({p.beam for p in programme.pulses} - set(beams))
     if absent:
         raise SceneError(f"'voltage_programme' drives beam(s) {absent} that the scene lacks")
 
-    perturbation = _require_mapping(data.get('perturbation', {}) or {}, 'perturbation')
     parameter_set = str(data.get('parameters', DEFAULT_PARAMETER_SET))
     scene = Scene(
         name=str(data.get('name', name)),
@@ -221,8 +246,8 @@ def scene_from_dict(data: Any, name: str = 'scene') -> Scene:
         capacitance=capacitance,
         initial=initial,
         programme=programme,
-        duration_s=_number(data.get('duration_s', 0.1), 'duration_s', 0.0),
-        perturbation=tuple(sorted((str(k), float(v)) for k, v in perturbation.items())),
+        duration_s=_number(data.get('duration_s', 0.1), 'duration_s'),
+        perturbation=_perturbation(data.get('perturbation')),
     )
     try:
         scene.parameters()
@@ -243,11 +268,17 @@ def load_scene(name_or_path: str | Path) -> Scene:
         path = SCENES_DIR / f'{name_or_path}.yaml'
     if not path.exists():
         raise SceneError(f'scene {name_or_path!r} not found; shipped scenes: {available_scenes()}')
-    with open(path) as stream:
-        try:
-            data = yaml.safe_load(stream)
-        except yaml.YAMLError as exc:
-            raise SceneError(f'scene file {path} is not valid YAML: {exc}') from exc
+    if path.is_dir():
+        raise SceneError(f'{path} is a directory, not a scene file')
+    try:
+        with open(path, encoding='utf-8') as stream:
+            data = yaml.load(stream, Loader=YamlLoader)  # a SafeLoader
+    except UnicodeDecodeError as exc:
+        raise SceneError(f'scene file {path} is not UTF-8 text (byte {exc.start}): save it as '
+                         'UTF-8') from exc
+    except yaml.YAMLError as exc:
+        raise SceneError(f'scene file {path} is not valid YAML: '
+                         f'{" ".join(str(exc).split())}') from exc
     if data is None:
         raise SceneError(f'scene file {path} is empty')
     try:

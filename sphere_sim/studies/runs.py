@@ -5,7 +5,7 @@ from typing import Any
 
 import numpy as np
 
-from sphere_sim.integrate.solve import Trajectory, simulate
+from sphere_sim.integrate.solve import Trajectory, check_sample_grid, simulate
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import initial_state
 from sphere_sim.model.parameters import ParameterSet
@@ -45,6 +45,8 @@ def run_scene(scene: Scene, params: ParameterSet | None = None, rtol: float = DE
               sample_period_s: float = 1e-4, method: str = 'fast') -> Trajectory:
     """Simulate a scene from its initial state for its duration; returns the Trajectory."""
     model = assemble(scene, params)
+    # Before the initial state's solve: a run too long to sample is refused at once.
+    check_sample_grid(model, scene.duration_s, sample_period_s)
     x0 = initial_state(model)
     return simulate(model, x0, scene.duration_s, rtol=rtol, sample_period_s=sample_period_s,
                     method=method)
@@ -76,6 +78,44 @@ def summarize(traj: Trajectory) -> KickOutcome:
         sphere_position_m=tuple(float(c) for c in traj.x[o:o + 3, -1]),
         max_tilt_change_deg=float(np.max(change)),
         airborne_s=airborne,
+        wall_time_s=traj.stats.wall_time_s,
+    )
+
+
+@dataclasses.dataclass(frozen=True)
+class BeamsOutcome:
+    """What a run of beams without a sphere shows: each beam's tip height at the end and its
+    largest excursion from the start (m), and the smallest electrode gap reached (m; near
+    zero means the beam was pulled in)."""
+
+    scene: str
+    parameter_set: str
+    duration_s: float
+    beams: tuple[int, ...]
+    final_tip_change_m: tuple[float, ...]
+    max_tip_excursion_m: tuple[float, ...]
+    min_electrode_gap_m: tuple[float, ...]
+    wall_time_s: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+def summarize_beams(traj: Trajectory) -> BeamsOutcome:
+    """The :class:`BeamsOutcome` of any trajectory (the beams are in every scene)."""
+    model = traj.model
+    tip_z = np.stack([model.tip_positions(traj.x[:, i])[:, 2] for i in range(traj.t.size)],
+                     axis=1)
+    change = tip_z - tip_z[:, :1]
+    gaps = np.stack([model.electrode_gaps(traj.x[:, i]) for i in range(traj.t.size)], axis=1)
+    return BeamsOutcome(
+        scene=model.scene.name,
+        parameter_set=model.params.name,
+        duration_s=float(traj.t[-1] - traj.t[0]),
+        beams=tuple(int(b) for b in model.beams),
+        final_tip_change_m=tuple(float(c) for c in change[:, -1]),
+        max_tip_excursion_m=tuple(float(c) for c in np.max(np.abs(change), axis=1)),
+        min_electrode_gap_m=tuple(float(g) for g in np.min(gaps, axis=1)),
         wall_time_s=traj.stats.wall_time_s,
     )
 

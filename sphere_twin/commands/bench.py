@@ -51,7 +51,7 @@ from sphere_sim.studies.work_precision import (
 )
 from sphere_twin.commands import bench_levers, bench_twin
 from sphere_twin.commands.bench_scenes import optimised_design, scenes_of_this_tree
-from sphere_twin.commands.options import worker_counts
+from sphere_twin.commands.options import output_directory, worker_counts
 
 RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
 def run_work_precision_bench(quick: bool = False,
@@ -199,6 +199,7 @@ def run_regularisation_study(quick: bool = False, out_dir: str | os.PathLike[str
     with tqdm(total=total, desc='regularisation', unit='run', file=sys.stderr) as bar:
         rows = regularisation_rows(programmes, design.direction_rad, rtols, bar.update)
     out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)  # checked creatable before the study ran
     with open(out_dir / 'regularisation.csv', 'w', newline='') as f:
         writer = csv.DictWriter(f, fieldnames=list(rows[0]))
         writer.writeheader()
@@ -232,13 +233,15 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                                     'writes bench/results/work_precision.{csv,md,png}.')
     wp.add_argument('--quick', action='store_true',
                     help='one scene, three methods, three tolerances, one timed run (< 1 min)')
-    wp.add_argument('--out', type=Path, default=RESULTS_DIR, help='output directory')
+    wp.add_argument('--out', type=output_directory, default=RESULTS_DIR,
+                    help='output directory')
     wp.set_defaults(func=run_work_precision)
     reg = sub.add_parser('regularisation', help='convergence study of the friction ramps',
                          description='Kick outcomes as the viscous onset ramp and epsilon of '
                                      'eq. (51) shrink; writes bench/results/regularisation.*')
     reg.add_argument('--quick', action='store_true', help='one tolerance only')
-    reg.add_argument('--out', type=Path, default=RESULTS_DIR, help='output directory')
+    reg.add_argument('--out', type=output_directory, default=RESULTS_DIR,
+                     help='output directory')
     reg.set_defaults(func=run_regularisation)
     thr = sub.add_parser('throughput', help='kicks/s of the kick workloads against bare '
                                             'integration',
@@ -252,7 +255,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                      metavar='N[,N...]',
                      help='worker counts of the pool and Dask runs, e.g. 2,4,8 (one worker '
                           'always runs; default %(default)s)')
-    thr.add_argument('--out', type=Path, default=RESULTS_DIR, help='output directory')
+    thr.add_argument('--out', type=output_directory, default=RESULTS_DIR,
+                     help='output directory')
     thr.set_defaults(func=run_throughput)
     bench_twin.register(sub)
     bench_levers.register(sub)

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 import numpy as np
 
 from sphere_sim.model import capacitance as cap
 from sphere_sim.model import capacitance_rbf as rbf
-from sphere_twin.commands.options import add_params_option, positive_float
+from sphere_twin.commands.options import add_params_option, output_file, positive_float
 
 # Gaps g = z_S - z_G of the plotted slices (m): from near the contact (d_Iso = 1.5 um) to the
 # rest gap (10 um), all inside the fitted region for phi >= 0.
@@ -37,7 +38,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         metavar='RAD',
                         help="theta_f regularising the fringe term (default: the parameter "
                              "set's)")
-    parser.add_argument('--plot', metavar='PATH', default=None,
+    parser.add_argument('--plot', metavar='PATH', type=output_file('.png'), default=None,
                         help='also write a PNG of C and dC/dphi, closed form and RBF, along '
                              'slices of constant gap')
     parser.set_defaults(func=run)
@@ -78,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _plot(path: str, fit: rbf.RbfCapacitance, geometry: tuple[float, float, float],
+def _plot(path: Path, fit: rbf.RbfCapacitance, geometry: tuple[float, float, float],
           fringe_angle_rad: float, include_fringe: bool) -> None:
     """C and dC/dphi along phi at the gaps PLOT_GAPS_M, closed form (solid) and RBF (dashed)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -104,4 +105,5 @@ def _plot(path: str, fit: rbf.RbfCapacitance, geometry: tuple[float, float, floa
     ax_c.set(xlabel='phi (mrad)', ylabel='C (pF)', title='capacitance')
     ax_d.set(xlabel='phi (mrad)', ylabel='dC/dphi (nF/rad)', title='dC/dphi')
     ax_c.legend(fontsize='small')
+    path.parent.mkdir(parents=True, exist_ok=True)  # checked creatable before the fit
     fig.savefig(path, dpi=120)

@@ -33,7 +33,7 @@ from sphere_control.studies import (
 )
 from sphere_sim.kicks.discrete import LEVEL_NORMAL, PAPER_FULL_KICK_RAD
 from sphere_sim.kicks.lookup_table import AXIS_TABLE_PATH
-from sphere_twin.commands.options import positive_float
+from sphere_twin.commands.options import number_in_range, output_directory
 
 if TYPE_CHECKING:
     from sphere_control.closed_loop import LoopHistory
@@ -46,6 +46,9 @@ RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
 # characteristic like Fig. 10 and widths shrinking by a tenth towards the cone's edge.
 ANALYTIC_EXPONENT = 1.7
 ANALYTIC_SOFTENING = 0.1
+# A decision every 10 ms at the fastest (one sample of the device) and every 10 s at the
+# slowest: the trajectories of §5 change over seconds, so slower ones follow nothing.
+KICK_PERIOD_S = number_in_range(0.01, 10.0, 'one sample of the device to ten seconds')
 COLORS = {ControllerKind.BASIC: 'tab:red', ControllerKind.EXTENDED: 'tab:blue',
           ControllerKind.PRELEARNED: 'black'}
 
@@ -73,10 +76,11 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         help='axis-parallel kick table for the eight-direction study')
     parser.add_argument('--plant', type=PlantChoice, choices=list(PlantChoice),
                         default=PlantChoice.TABLE, help='discrete model to evaluate on')
-    parser.add_argument('--kick-period-s', type=positive_float, default=None,
-                        help='time per decision in the trajectory runs (s; default: the full '
-                             "kick's settle time rounded up to 10 ms)")
-    parser.add_argument('--out', type=Path, default=RESULTS_DIR, help='output directory')
+    parser.add_argument('--kick-period-s', type=KICK_PERIOD_S, default=None,
+                        help='time per decision in the trajectory runs (s, 0.01 to 10; default: '
+                             "the full kick's settle time rounded up to 10 ms)")
+    parser.add_argument('--out', type=output_directory, default=RESULTS_DIR,
+                        help='output directory')
     parser.set_defaults(func=run)
 
 

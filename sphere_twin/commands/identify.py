@@ -24,7 +24,7 @@ from tqdm import tqdm
 
 from sphere_sim.kicks.identification import START_PARAMETER_SET
 from sphere_twin.commands.bag import BAG_HELP
-from sphere_twin.commands.options import CommandError, add_params_option, positive_int
+from sphere_twin.commands.options import CommandError, add_params_option, output_file, positive_int
 
 if TYPE_CHECKING:
     from sphere_sim.kicks.identification import Evaluator, IdentificationResult
@@ -51,7 +51,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser.add_argument('--fit', nargs='+', metavar='NAME', default=None,
                         help='parameter paths to fit (default: those the set declares '
                              'uncertain), e.g. beam.damping_phi_nms_per_rad')
-    parser.add_argument('--out', type=Path, default=None,
+    parser.add_argument('--out', type=output_file('.yaml'), default=None,
                         help='fitted parameter file (default: <bag>_identified.yaml beside the '
                              'first bag)')
     parser.add_argument('--workers', type=positive_int, default=2, help='local processes')

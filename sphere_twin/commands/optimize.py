@@ -13,7 +13,7 @@ from tqdm import tqdm
 from sphere_sim.kicks.design import KickDesign
 from sphere_sim.kicks.discrete import PAPER_FULL_KICK_RAD
 from sphere_sim.kicks.optimization import optimise_kick
-from sphere_twin.commands.options import add_params_option, positive_int
+from sphere_twin.commands.options import add_params_option, output_file, positive_int, seed
 
 DEFAULT_OUTPUT = 'bench/results/kick_optimization.json'
 AXIS_OUTPUT = 'bench/results/kick_optimization_axis.json'
@@ -53,11 +53,11 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         help='paper (35 V on the low beams, 80 V on the high ones, as §4.1) or '
                              'swapped (low and high beams exchanged: the dry contact\'s own)')
     add_params_option(parser)
-    parser.add_argument('--seed', type=int, default=1)
+    parser.add_argument('--seed', type=seed, default=1)
     parser.add_argument('--popsize', type=positive_int, default=8, help='population per parameter')
     parser.add_argument('--maxiter', type=positive_int, default=12, help='generations')
     parser.add_argument('--workers', type=positive_int, default=2, help='parallel processes')
-    parser.add_argument('--output', default=None,
+    parser.add_argument('--output', type=output_file('.json'), default=None,
                         help=f'JSON path (default {DEFAULT_OUTPUT}, or {AXIS_OUTPUT} for axis)')
     parser.set_defaults(func=run)
 

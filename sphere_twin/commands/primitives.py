@@ -16,13 +16,24 @@ from sphere_sim.kicks.characteristics import (
     voltage_offsets,
 )
 from sphere_sim.kicks.design import KickDesign
+from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD
 from sphere_sim.kicks.lookup_table import TableSpec
 from sphere_twin.commands.optimize import DEFAULT_OUTPUT as DEFAULT_DESIGN
-from sphere_twin.commands.options import add_params_option, positive_float, positive_int
+from sphere_twin.commands.options import (
+    GRID_STEP,
+    add_params_option,
+    number_in_range,
+    output_directory,
+    positive_int,
+)
 
 RESULTS = Path('bench/results')
 # The shipped offsets of the shipped design (§4.1), which the default table is built with.
 DEFAULT_OFFSETS = RESULTS / 'voltage_offsets.json'
+# Initial tilts of the width curves: inside the cone the paper investigates (§4).
+CONE_HALF_ANGLE_DEG = math.degrees(CONE_HALF_ANGLE_RAD)
+TILT_DEG = number_in_range(-CONE_HALF_ANGLE_DEG, CONE_HALF_ANGLE_DEG,
+                           'degrees of tilt inside the cone of the paper')
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -34,19 +45,21 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     width = sub.add_parser('width', help='rotation width against intensity u_K (Fig. 10)',
                            description='Rotation width against u_K in [0, 1] for initial '
                                        'tilts alpha; writes a PNG and JSON.')
-    width.add_argument('--alphas-deg', type=float, nargs='+', default=[0.0, 20.0, 35.0])
+    width.add_argument('--alphas-deg', type=TILT_DEG, nargs='+', default=[0.0, 20.0, 35.0],
+                       help=f'initial tilts about x (deg, within +-{CONE_HALF_ANGLE_DEG:g})')
     width.add_argument('--intensities', type=positive_int, default=11, help='points in [0, 1]')
     offsets = sub.add_parser('offsets', help='voltage offsets over the cone (Fig. 8)',
                              description='For each grid state, the offset on the compensating '
                                          'beam that puts the kick on its nominal direction.')
-    offsets.add_argument('--grid-step', type=positive_float, default=TableSpec.grid_step,
-                         help="step in x_sn and y_sn (default the table's own)")
+    offsets.add_argument('--grid-step', type=GRID_STEP, default=TableSpec.grid_step,
+                         help="step in x_sn and y_sn, 0.01 to 1 (default the table's own)")
     offsets.add_argument('--workers', type=positive_int, default=2, help='local processes')
     for p in (width, offsets):
         add_params_option(p)
         p.add_argument('--design', default=DEFAULT_DESIGN,
                        help='kick optimisation JSON whose design to use')
-        p.add_argument('--out', default=str(RESULTS), help='output directory')
+        p.add_argument('--out', type=output_directory, default=RESULTS,
+                       help='output directory')
     width.set_defaults(func=run_width)
     offsets.set_defaults(func=run_offsets)
 

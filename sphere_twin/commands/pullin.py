@@ -12,7 +12,7 @@ from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.scene import load_scene
 from sphere_sim.studies.pullin import dynamic_threshold, pulse_sweep, quasi_static_threshold
-from sphere_twin.commands.options import add_params_option
+from sphere_twin.commands.options import add_params_option, output_file
 from sphere_twin.plots import plot_pulse_sweep
 
 SWEEP_V = (30.0, 35.0, 40.0, 45.0, 50.0, 55.0, 60.0, 65.0, 70.0)  # Fig. 4's range
@@ -26,8 +26,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                     'a Fig. 4-like PNG of the 30-70 V sweep.')
     add_params_option(parser)
     parser.add_argument('--no-sphere', action='store_true', help='beams alone')
-    parser.add_argument('--plot', default=None,
-                        help='PNG path (default bench/results/fig4_pullin_<params>.png)')
+    parser.add_argument('--plot', type=output_file('.png'), default=None,
+                        help='PNG file (default bench/results/fig4_pullin_<params>.png); a '
+                             'directory is refused')
     parser.add_argument('--no-plot', action='store_true', help='skip the sweep and its figure')
     parser.set_defaults(func=run)
 

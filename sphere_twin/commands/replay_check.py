@@ -5,13 +5,19 @@ from __future__ import annotations
 import argparse
 import json
 import math
-from collections.abc import Iterable
+import sys
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from msg_defs.device import DEFAULT_PARAMETER_SET, KICK_WINDOW_S
 from sphere_twin.commands.bag import BAG_HELP
-from sphere_twin.commands.options import CommandError, add_params_option, parameter_set
+from sphere_twin.commands.options import (
+    CommandError,
+    add_params_option,
+    output_directory,
+    parameter_set,
+)
 
 if TYPE_CHECKING:
     import numpy as np
@@ -45,7 +51,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         help='with a --params other than the shipped set (a file that '
                              '`sphere-twin identify` fitted, say): the set to compare it with, '
                              f'replayed too (default {DEFAULT_PARAMETER_SET})')
-    parser.add_argument('--out', type=Path, default=None,
+    parser.add_argument('--out', type=output_directory, default=None,
                         help='output directory (default: beside the bag)')
     parser.set_defaults(func=run)
 
@@ -77,12 +83,15 @@ def run(args: argparse.Namespace) -> int:
     from sphere_sim.model.parameters import load_parameter_set
     from sphere_twin.bag.locate import locate_bag
     from sphere_twin.plots import plot_lines
-    from sphere_twin.run_analysis import load_run, replay_start_index
+    from sphere_twin.run_analysis import load_run, replay_start_index, unclosed_bag_warning
 
     bag = locate_bag(args.bag)
     if bag.note:
         print(bag.note)
     recorded = load_run(bag.directory)
+    warning = unclosed_bag_warning(bag.directory, recorded)
+    if warning:
+        print(f'sphere-twin replay-check: warning: {warning}', file=sys.stderr, flush=True)
     start = replay_start_index(recorded, KICK_WINDOW_S)
     if start >= recorded.normal_t_s.size:
         raise CommandError(f'{args.bag}: the recording ends before a kick that began before '
@@ -94,7 +103,8 @@ def run(args: argparse.Namespace) -> int:
     if before is None and args.params.digest() != shipped.digest():
         before = shipped
     runs = ([('before', before)] if before is not None else []) + [('after', args.params)]
-    results = {label: _replay(recorded, start, plant, params, args.tables)
+    results = {label: _replay(recorded, start, plant, params, args.tables,
+                              f'{label} ({params.name})' if before else '')
                for label, params in runs}
     out = args.out or bag.output_dir
     out.mkdir(parents=True, exist_ok=True)
@@ -109,7 +119,8 @@ def run(args: argparse.Namespace) -> int:
                logy=True)
     data = {'bag': str(args.bag), 'plant': plant, 'samples': int(result.times_s.size),
             'kicks': len(recorded.kicks), 'params': args.params.name,
-            'max_error_rad': result.max_error_rad, 'rms_error_rad': result.rms_error_rad}
+            'max_error_rad': result.max_error_rad, 'rms_error_rad': result.rms_error_rad,
+            **({'warning': warning} if warning else {})}
     if before is not None:
         data['before'] = {'params': before.name,
                           'max_error_rad': results['before'].max_error_rad,
@@ -133,12 +144,32 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _replay(recorded: RecordedRun, start: int, plant: str, params: ParameterSet,
-            tables: Iterable[str | Path]) -> ReplayResult:
+            tables: Iterable[str | Path], label: str) -> ReplayResult:
     from sphere_twin.run_analysis import replay
 
-    replay_plant = build_replay_plant(plant, resting_start(recorded, start),
-                                      float(recorded.normal_t_s[start]), params, tables)
-    return replay(recorded, replay_plant, start)
+    start_s = float(recorded.normal_t_s[start])
+    replay_plant = build_replay_plant(plant, resting_start(recorded, start), start_s, params,
+                                      tables)
+    progress = _progress_line(label, start_s, float(recorded.normal_t_s[-1]))
+    return replay(recorded, replay_plant, start, progress)
+
+
+def _progress_line(label: str, start_s: float, end_s: float) -> Callable[[float], None]:
+    """A replay's progress, on stderr (stdout holds the results) every few seconds: a long
+    continuous replay (a minute for the example bag) would otherwise be silent throughout."""
+    from sphere_twin.run_analysis import ProgressClock
+
+    clock = ProgressClock()
+    what = f'replaying {label}' if label else 'replaying'
+    span_s = max(end_s - start_s, 1e-9)
+
+    def report(time_s: float) -> None:
+        if clock.due():
+            done_s = time_s - start_s
+            print(f'replay-check: {what}: {done_s:.1f} of {span_s:.1f} s of the recording '
+                  f'({100.0 * done_s / span_s:.0f}%)', file=sys.stderr, flush=True)
+
+    return report
 
 
 def resting_start(recorded: RecordedRun, start: int) -> NDArray[np.float64]:

@@ -5,10 +5,10 @@ from __future__ import annotations
 import argparse
 import json
 import math
-from pathlib import Path
+import sys
 
 from sphere_twin.commands.bag import BAG_HELP
-from sphere_twin.commands.options import positive_float
+from sphere_twin.commands.options import output_directory, positive_float
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -18,7 +18,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                     'x-y plane beside the reference (PNG), and kicks, settle times, final, RMS '
                     'and max error (text and JSON). Works on any bag of the topic contract.')
     parser.add_argument('bag', help=BAG_HELP)
-    parser.add_argument('--out', type=Path, default=None,
+    parser.add_argument('--out', type=output_directory, default=None,
                         help='output directory (default: beside the bag)')
     parser.add_argument('--band-deg', type=positive_float, default=0.05,
                         help='settling band around a setpoint (deg)')
@@ -27,18 +27,21 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 def run(args: argparse.Namespace) -> int:
     from sphere_twin.bag.locate import locate_bag
-    from sphere_twin.run_analysis import load_run, plot_report, statistics
+    from sphere_twin.run_analysis import load_run, plot_report, statistics, unclosed_bag_warning
 
     bag = locate_bag(args.bag)
     if bag.note:
         print(bag.note)
     recorded = load_run(bag.directory)
+    warning = unclosed_bag_warning(bag.directory, recorded)
+    if warning:
+        print(f'sphere-twin report: warning: {warning}', file=sys.stderr, flush=True)
     stats = statistics(recorded, math.radians(args.band_deg))
     out = args.out or bag.output_dir
     out.mkdir(parents=True, exist_ok=True)
     stem = out / f'{bag.name}_report'
     png = plot_report(recorded, stem.with_suffix('.png'), title=bag.name)
-    data = {'bag': str(args.bag), **stats.to_dict()}
+    data = {'bag': str(args.bag), **stats.to_dict(), **({'warning': warning} if warning else {})}
     stem.with_suffix('.json').write_text(json.dumps(data, indent=2) + '\n')
     settle = ', '.join('never' if s is None else f'{s:.2f} s' for s in stats.settle_times_s)
     lines = [f'bag: {args.bag}',

@@ -16,7 +16,13 @@ from typing import TYPE_CHECKING, Any
 from tqdm import tqdm
 
 from sphere_twin.commands.identify import interval_text
-from sphere_twin.commands.options import CommandError, positive_int
+from sphere_twin.commands.options import (
+    CommandError,
+    output_directory,
+    output_file,
+    positive_int,
+    seed,
+)
 from sphere_twin.synthetic_device import PUBLISH_RATE_HZ
 
 if TYPE_CHECKING:
@@ -40,11 +46,11 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     record = sub.add_parser('record', help='record one synthetic device into a bag',
                             description='Record a seeded sequence of kicks of one device of '
                                         'the study (or of --truth) into OUT, with truth.yaml.')
-    record.add_argument('out', type=Path, help='bag directory to create')
+    record.add_argument('out', type=output_directory, help='bag directory to create')
     record.add_argument('--device', default='device_a',
                         help='a device of the study (device_a to device_e)')
     record.add_argument('--kicks', type=positive_int, default=DEFAULT_KICKS)
-    record.add_argument('--seed', type=int, default=None,
+    record.add_argument('--seed', type=seed, default=None,
                         help="seed of the kicks and the noise (default: the device's)")
     record.set_defaults(func=run_record)
     study = sub.add_parser('study', help='record every device of the study and identify it',
@@ -56,7 +62,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                        help='study only this device (repeatable; default: all five)')
     study.add_argument('--workers', type=positive_int, default=2)
     study.add_argument('--scheduler', default=None)
-    study.add_argument('--out', type=Path, default=DEFAULT_STUDY)
+    study.add_argument('--out', type=output_file('.md'), default=DEFAULT_STUDY,
+                       help=f'Markdown table, its JSON beside it (default {DEFAULT_STUDY})')
     study.set_defaults(func=run_study)
 
 

@@ -17,12 +17,19 @@ from sphere_sim.kicks.offset_lookup import OffsetLookup
 from sphere_sim.kicks.table_build import build_table, check_table
 from sphere_twin.commands.optimize import DEFAULT_OUTPUT as DEFAULT_DESIGN
 from sphere_twin.commands.options import (
+    GRID_STEP,
     add_params_option,
-    positive_float,
+    number_in_range,
+    output_file,
     positive_int,
+    seed,
     unit_interval,
 )
 from sphere_twin.commands.primitives import DEFAULT_OFFSETS
+
+# The kick window: the kicks' pulses last a few ms and they settle in about 50 ms (Fig. 5); a
+# second is far past settling.
+WINDOW_S = number_in_range(0.01, 1.0, 'seconds; the kicks settle in about 0.05 s')
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -33,13 +40,15 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     build = sub.add_parser('build', help='simulate the table (resumable)',
                            description='Simulate every grid kick with a process pool or Dask; '
                                        'an interrupted build resumes from its partial file.')
-    build.add_argument('--output', default=str(DEFAULT_TABLE_PATH), help='table .npz path')
+    build.add_argument('--output', type=output_file('.npz'), default=DEFAULT_TABLE_PATH,
+                       help='table .npz path')
     add_params_option(build)
-    build.add_argument('--grid-step', type=positive_float, default=TableSpec.grid_step,
-                       help='grid step in x_sn and y_sn')
+    build.add_argument('--grid-step', type=GRID_STEP, default=TableSpec.grid_step,
+                       help='grid step in x_sn and y_sn (0.01 to 1)')
     build.add_argument('--intensities', type=unit_interval, nargs='+',
                        default=list(TableSpec.intensities), help='u_K values')
-    build.add_argument('--window-s', type=positive_float, default=TableSpec.window_s)
+    build.add_argument('--window-s', type=WINDOW_S, default=TableSpec.window_s,
+                       help='kick window (s, 0.01 to 1)')
     build.add_argument('--design', default=DEFAULT_DESIGN,
                        help='kick optimisation JSON whose design to use')
     build.add_argument('--offsets', default=str(DEFAULT_OFFSETS),
@@ -57,7 +66,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                                        'off-grid states, actions and intensities.')
     check.add_argument('--table', default=str(DEFAULT_TABLE_PATH))
     check.add_argument('--points', type=positive_int, default=8)
-    check.add_argument('--seed', type=int, default=0)
+    check.add_argument('--seed', type=seed, default=0)
     check.set_defaults(func=run_check)
 
 
@@ -74,6 +83,7 @@ def run_build(args: argparse.Namespace) -> int:
         reuse = LookupTable.load(args.reuse)
     output = Path(args.output)
     partial = output.with_suffix('.partial.jsonl')
+    output.parent.mkdir(parents=True, exist_ok=True)  # the partial file is written from the start
     started = time.perf_counter()
     first_done: list[int] = []
     with tqdm(desc='kicks', unit='kick') as bar:

@@ -1,8 +1,8 @@
 """How every executable joins and leaves the ROS graph: discovery kept on this machine, SIGINT
-and SIGTERM as a clean shutdown, the shared ``main()`` of the nodes, parameter descriptors, the
-real-time factor a node saw.
+and SIGTERM as a clean shutdown, the shared ``main()`` of the nodes (``ros_env``), a node's
+parameters declared and checked from their specs (``parameter_specs``), the publishing thread
+(``outbox``) and the real-time factor a node saw (``pace``).
 
-The lowest package beside :mod:`msg_defs`: it imports none of the project's packages, and
-rclpy only inside the functions that start a node, so the CLI and the tests can use its
-environment hygiene without ROS.
+It imports no other part of the project, and rclpy only inside the functions that start a
+node or declare its parameters, so the CLI and the tests can use it without ROS.
 """

@@ -6,17 +6,16 @@ unless the user chose a range explicitly.
 
 from __future__ import annotations
 
-import dataclasses
-import enum
 import os
+import re
 import signal
 import sys
-from collections.abc import Callable, Iterable, MutableMapping
+from collections.abc import Callable, MutableMapping
 from types import FrameType
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from rcl_interfaces.msg import ParameterDescriptor
+    pass
 
 DISCOVERY_RANGE_VAR = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
 DEFAULT_DISCOVERY_RANGE = 'LOCALHOST'
@@ -107,7 +106,31 @@ def startup_error_line(node_name: str, error: BaseException) -> str:
         remedy = MODULE_TO_ROSDEP.get(module, f'pip install {module}')
         return (f'{node_name}: error: the Python module {module!r} is missing: install '
                 f'{remedy} (on a ROS install: rosdep install --from-paths src -y)')
-    return f'{node_name}: error: {str(error).splitlines()[0] if str(error) else error!r}'
+    # args[0], not str(error): str() of a KeyError (or an exception of several args) is a repr.
+    text = str(error.args[0]) if error.args else ''
+    return f'{node_name}: error: {text.splitlines()[0] if text.strip() else repr(error)}'
+
+
+# rcl ends its messages with where in its C sources it failed (', at /project/src/...').
+_RCL_SOURCE_SUFFIX = re.compile(r',? at /\S+\.c:\d+.*$', re.DOTALL)
+_RCL_PARAMS_FILE = re.compile(r"Couldn't parse params file: '--params-file (?P<path>.*?)'\. "
+                              r'Error: (?P<reason>[^\n]*)')
+
+
+def ros_arguments_error_line(node_name: str, error: BaseException) -> str:
+    """The one line for ROS arguments that ``rclpy.init`` refused (an ``RCLError``): a
+    ``--params-file`` that is missing or not a parameters YAML, or a malformed ``-p``/``-r``."""
+    text = str(error).removeprefix('failed to initialize rcl: ')
+    params_file = _RCL_PARAMS_FILE.search(text)
+    if params_file is not None:
+        path = params_file['path']
+        reason = (_RCL_SOURCE_SUFFIX.sub('', params_file['reason']).strip()
+                  if os.path.isfile(path) else 'no such file')
+        return (f'{node_name}: error: cannot read --params-file {path}: {reason} (a YAML file '
+                'of <node>: {ros__parameters: {name: value}} sections)')
+    detail = ' '.join(_RCL_SOURCE_SUFFIX.sub('', text).split())
+    return (f'{node_name}: error: invalid ROS arguments: {detail} (parameters are given as '
+            '--ros-args -p name:=value)')
 
 
 def _startup_errors() -> tuple[type[BaseException], ...]:
@@ -117,104 +140,10 @@ def _startup_errors() -> tuple[type[BaseException], ...]:
     return (ValueError, OSError, ModuleNotFoundError, ParameterException)
 
 
-class ParameterType(enum.Enum):
-    """The ROS type of a parameter (the names of ``rclpy.parameter.Parameter.Type``)."""
-
-    BOOL = 'bool'
-    INTEGER = 'integer'
-    DOUBLE = 'double'
-    STRING = 'string'
-    DOUBLE_ARRAY = 'double_array'
-    STRING_ARRAY = 'string_array'
-
-
-# What a parameter's default may be; arrays are tuples here and lists once declared.
-ParameterValue = bool | int | float | str | tuple[float, ...] | tuple[str, ...]
-
-
-@dataclasses.dataclass(frozen=True)
-class ParameterSpec:
-    """One parameter of a node, without ROS: what :func:`declare_node_parameters` declares.
-
-    Attributes
-    ----------
-    name : str
-    type : ParameterType
-    default : bool, int, float, str, tuple or None
-        None declares the parameter by its type alone (its value is None until it is set).
-    description : str
-    range : (low, high), optional
-        Inclusive bounds of an integer or double parameter.
-    choices : tuple of str, optional
-        The values a string parameter takes (said in ``description``; the node checks them).
-    read_only : bool
-    """
-
-    name: str
-    type: ParameterType
-    default: ParameterValue | None
-    description: str
-    range: tuple[float, float] | None = None
-    choices: tuple[str, ...] | None = None
-    read_only: bool = True
-
-
-def spec_descriptor(spec: ParameterSpec) -> ParameterDescriptor:
-    """The ``ParameterDescriptor`` of ``spec``: description, range, read-only."""
-    bounds = spec.range
-    return parameter_descriptor(
-        spec.description,
-        float_range=bounds if spec.type is ParameterType.DOUBLE else None,
-        int_range=((int(bounds[0]), int(bounds[1]))
-                   if bounds is not None and spec.type is ParameterType.INTEGER else None),
-        read_only=spec.read_only)
-
-
-def declare_node_parameters(node: Any, specs: Iterable[ParameterSpec]) -> dict[str, Any]:
-    """Declare every parameter of ``specs`` on ``node``; returns {name: value}.
-
-    A parameter whose default is a float also takes an integer (``-p publish_rate_hz:=50``,
-    what a ROS user writes), returned as a float and checked against the descriptor's range
-    here, since ROS checks the range of a double only.
-
-    Raises
-    ------
-    StartupError
-        For a value of the wrong type or out of range, naming the parameter.
-    """
-    from rclpy.parameter import Parameter
-
-    values = {}
-    for spec in specs:
-        descriptor = spec_descriptor(spec)
-        default: Any = spec.default
-        if default is None:
-            default = Parameter.Type[spec.type.name]
-        elif isinstance(default, tuple):
-            default = list(default)
-        if isinstance(default, float):
-            descriptor.dynamic_typing = True
-        value = node.declare_parameter(spec.name, default, descriptor).value
-        if isinstance(default, float):
-            value = _as_float(spec.name, value, descriptor)
-        values[spec.name] = value
-    return values
-
-
-def _as_float(name: str, value: Any, descriptor: ParameterDescriptor) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise StartupError(f'parameter {name} must be a number, got {value!r}')
-    value = float(value)
-    for bounds in descriptor.floating_point_range:
-        if not bounds.from_value <= value <= bounds.to_value:
-            raise StartupError(f'parameter {name} = {value:g} is outside '
-                               f'[{bounds.from_value:g}, {bounds.to_value:g}]')
-    return value
-
-
 def run_node(build: Callable[[], Any], args: list[str] | None = None,
              spin: Callable[[Any], object] | None = None,
-             farewell: Callable[[Any], str] | None = None, name: str | None = None) -> int:
+             farewell: Callable[[Any], str] | None = None, name: str | None = None,
+             own_signal_handling: Callable[[], object] | None = None) -> int:
     """The ``main()`` of every executable: hygiene, init, build, spin, clean shutdown.
 
     Follows ros2/demos: the node is built inside the ``try`` so that a signal during start-up
@@ -234,20 +163,28 @@ def run_node(build: Callable[[], Any], args: list[str] | None = None,
         by the signal) before the node is destroyed.
     name : str, optional
         The executable's name, for the one line of a start-up error.
+    own_signal_handling : callable, optional
+        Installs the node's own SIGINT and SIGTERM handling instead of the KeyboardInterrupt
+        handlers and rclpy's (the recorder's: a flag its spin polls, so no write is cut).
 
     Returns
     -------
     int
-        The exit status: 0, or 2 when the node could not start (a bad parameter, a missing
-        file or module: one line on stderr, ``<name>: error: ...``, no traceback).
+        The exit status: 0; 2 when the node could not start (bad ROS arguments or params
+        file, a bad parameter, a missing file or module: one line on stderr,
+        ``<name>: error: ...``, no traceback); 1 when the system failed it while it ran (an
+        ``OSError``, such as a full disk: one line too).
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException
 
     ensure_localhost_discovery()
-    install_shutdown_signal_handlers()
-    rclpy.init(args=args)
+    (own_signal_handling or install_shutdown_signal_handlers)()
+    node_name = name or 'node'
+    if not _init_rclpy(node_name, args, rclpy_signal_handlers=own_signal_handling is None):
+        return 2
     node = None
+    status = 0
     try:
         # The executor that rclpy.spin uses exists before the node announces itself: a signal
         # that interrupts Executor.__init__ before it sets _sigint_gc makes Executor.__del__
@@ -258,11 +195,15 @@ def run_node(build: Callable[[], Any], args: list[str] | None = None,
         try:
             node = build()
         except _startup_errors() as error:
-            print(startup_error_line(name or 'node', error), file=sys.stderr, flush=True)
+            print(startup_error_line(node_name, error), file=sys.stderr, flush=True)
             return 2
         (spin or rclpy.spin)(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except OSError as error:
+        if not shutdown_requested():
+            print(f'{node_name}: error: {error}', file=sys.stderr, flush=True)
+            status = 1
     except Exception:
         if not shutdown_requested():
             raise
@@ -272,28 +213,41 @@ def run_node(build: Callable[[], Any], args: list[str] | None = None,
                 print(farewell(node), flush=True)
             node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    return status
 
 
-def parameter_descriptor(description: str, float_range: tuple[float, float] | None = None,
-                         int_range: tuple[int, int] | None = None,
-                         read_only: bool = True) -> ParameterDescriptor:
-    """A ``ParameterDescriptor`` with a description, an optional range, read-only by default.
+def _init_rclpy(node_name: str, args: list[str] | None, rclpy_signal_handlers: bool) -> bool:
+    """``rclpy.init`` (with or without rclpy's SIGINT and SIGTERM handlers); False, after the
+    one line on stderr, when it refuses the ROS arguments.
 
-    Parameters
-    ----------
-    description : str
-    float_range, int_range : (low, high), optional
-        Inclusive bounds that ROS enforces when the parameter is set.
-    read_only : bool
+    rcl also logs its own lines about refused arguments ('Failed to parse global arguments')
+    straight to file descriptor 2, so stderr is held in a file during the call: on success
+    what it caught is passed on, on failure the one line replaces it.
     """
-    from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+    import tempfile
 
-    d = ParameterDescriptor(description=description, read_only=read_only)
-    if float_range is not None:
-        d.floating_point_range = [FloatingPointRange(from_value=float(float_range[0]),
-                                                     to_value=float(float_range[1]), step=0.0)]
-    if int_range is not None:
-        d.integer_range = [IntegerRange(from_value=int(int_range[0]),
-                                        to_value=int(int_range[1]), step=1)]
-    return d
+    import rclpy
+    from rclpy.impl.implementation_singleton import rclpy_implementation
+    from rclpy.signals import SignalHandlerOptions
+
+    handlers = SignalHandlerOptions.ALL if rclpy_signal_handlers else SignalHandlerOptions.NO
+    refused: BaseException | None = None
+    sys.stderr.flush()
+    saved_fd = os.dup(2)
+    with tempfile.TemporaryFile() as held:
+        os.dup2(held.fileno(), 2)
+        try:
+            rclpy.init(args=args, signal_handler_options=handlers)
+        except rclpy_implementation.RCLError as error:
+            refused = error
+        finally:
+            os.dup2(saved_fd, 2)
+            os.close(saved_fd)
+        if refused is None:
+            held.seek(0)
+            sys.stderr.write(held.read().decode(errors='replace'))
+            sys.stderr.flush()
+    if refused is not None:
+        print(ros_arguments_error_line(node_name, refused), file=sys.stderr, flush=True)
+        return False
+    return True

@@ -41,7 +41,8 @@ from msg_defs.topics import (
 from sphere_control.controllers import controller_for
 from sphere_control.kick_cycle import KickCycle, Phase
 from sphere_twin.node_runtime.pace import PaceMeter
-from sphere_twin.node_runtime.ros_env import declare_node_parameters, run_node
+from sphere_twin.node_runtime.parameter_specs import declare_node_parameters
+from sphere_twin.node_runtime.ros_env import run_node
 from sphere_twin.nodes.parameters import CONTROLLER_PARAMETERS
 
 if TYPE_CHECKING:

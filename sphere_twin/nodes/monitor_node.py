@@ -17,7 +17,8 @@ from rclpy.task import Future
 from msg_defs.conversions import surface_normal_from_msg
 from msg_defs.topics import SURFACE_NORMAL
 from sphere_twin.monitor_summary import summary_line
-from sphere_twin.node_runtime.ros_env import declare_node_parameters, run_node
+from sphere_twin.node_runtime.parameter_specs import declare_node_parameters
+from sphere_twin.node_runtime.ros_env import run_node
 from sphere_twin.nodes.parameters import MONITOR_PARAMETERS
 
 REPORT_PERIOD_S = 1.0

@@ -1,16 +1,19 @@
 """Every node's parameters, written once: name, type, default, range, description, read-only.
 
 Each node declares its parameters from its tuple here (through
-:func:`sphere_twin.node_runtime.ros_env.declare_node_parameters`); ``config/twin.yaml`` and
+:func:`sphere_twin.node_runtime.parameter_specs.declare_node_parameters`); ``config/twin.yaml`` and
 the arguments of ``launch/twin.launch.py`` are checked against these tuples by
 ``test/test_node_parameters.py``. This module imports no rclpy and no physics, so tests and
 docs can read it without ROS and a node can import it before it installs its signal handlers.
 """
 
+import math
+from collections.abc import Sequence
+
 from msg_defs.device import SENSOR_RATE_HZ
 from msg_defs.topics import ALL_TOPICS, CLOCK, SURFACE_NORMAL
 from sphere_sim.twin.plant_setup import PLANT_KINDS
-from sphere_twin.node_runtime.ros_env import ParameterSpec, ParameterType
+from sphere_twin.node_runtime.parameter_specs import ParameterSpec, ParameterType
 
 BOOL = ParameterType.BOOL
 INTEGER = ParameterType.INTEGER
@@ -96,9 +99,19 @@ CONTROLLER_PARAMETERS = (
 DEFAULT_PUBLISH_RATE_HZ = 10.0
 NEVER = -1.0
 
+
+def inside_unit_disk(xy: Sequence[float]) -> str | None:
+    """Why ``xy`` cannot be the x-y part of a unit normal (|(x, y)| >= 1), or None."""
+    norm = math.hypot(*xy)
+    if norm < 1.0:
+        return None
+    return f'is not the x-y part of a unit normal: |(x, y)| = {norm:.4g} must be below 1'
+
+
 REFERENCE_PARAMETERS = (
     ParameterSpec('setpoint_xy', DOUBLE_ARRAY, (0.01, 0.02),
-                  'x and y of the setpoint normal (Fig. 13: [0.01, 0.02]).'),
+                  'x and y of the setpoint normal (Fig. 13: [0.01, 0.02]).', length=2,
+                  rule=inside_unit_disk),
     ParameterSpec('trajectory_start_s', DOUBLE, NEVER,
                   'Time (s) from which eq. (64) replaces the setpoint; -1 never.',
                   range=(NEVER, 1e6)),

@@ -29,13 +29,13 @@ from msg_defs.topics import ALL_TOPICS, CLOCK
 from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.locate import locate_bag
 from sphere_twin.bag.reader import (
-    BagError,
     RecordedMessage,
     message_class,
     read_messages,
     read_metadata,
 )
-from sphere_twin.node_runtime.ros_env import declare_node_parameters, run_node
+from sphere_twin.node_runtime.parameter_specs import declare_node_parameters
+from sphere_twin.node_runtime.ros_env import StartupError, run_node
 from sphere_twin.nodes.parameters import MAX_RATE, MIN_RATE, PLAYER_PARAMETERS
 
 # Longest single sleep, so that a stop signal is handled promptly.
@@ -146,6 +146,30 @@ def recorded_qos(topic_metadata: Mapping[str, Any]) -> QoSProfile:
                     else DurabilityPolicy.VOLATILE))
 
 
+def check_selection(bag: str, messages: Sequence[RecordedMessage], start_offset_s: float,
+                    topics: Collection[str] | None) -> None:
+    """Refuse a start offset past the bag's end, or topics it does not hold: either would
+    play nothing and exit 0, as if the bag had been played.
+
+    Raises
+    ------
+    StartupError
+        Naming the bag's duration, or its topics.
+    """
+    if not messages:
+        return
+    duration_s = (messages[-1].log_time_ns - messages[0].log_time_ns) / NS_PER_S
+    if start_offset_s > duration_s:
+        raise StartupError(f'parameter start_offset_s = {start_offset_s:g} is beyond the end of '
+                           f'{bag}, which lasts {duration_s:.3f} s: give an offset in '
+                           f'[0, {duration_s:.3f}]')
+    recorded = sorted({m.topic for m in messages})
+    missing = sorted(set(topics or ()) - set(recorded))
+    if missing:
+        raise StartupError(f'parameter topics: {", ".join(missing)} not in {bag}; its topics: '
+                           f'{", ".join(recorded)}')
+
+
 def played_line(count: int) -> str:
     """The player's last line of output."""
     return f'played {count} messages'
@@ -192,6 +216,7 @@ class PlayerNode(Node):
                   for t in metadata.get('topics_with_message_count') or []}
         topics = [t for t in (p['topics'] or []) if t] or None
         messages = list(read_messages(self.bag))
+        check_selection(self.bag, messages, p['start_offset_s'], topics)
         types = {m.topic: m.type_name for m in messages}
         self.plan = playback_plan(messages, p['rate'], p['start_offset_s'], topics,
                                   p['publish_clock'])
@@ -274,20 +299,10 @@ class PlayerNode(Node):
         return played_line(self.played)
 
 
-def _build() -> PlayerNode:
-    return PlayerNode()
-
-
 def main(args: list[str] | None = None) -> int:
-    """Play a bag; exit status 1 if it cannot be read or a parameter is bad."""
-    import rclpy
-
-    try:
-        return run_node(_build, args, spin=PlayerNode.play, farewell=PlayerNode.summary,
-                        name='player')
-    except (BagError, ValueError) as error:
-        rclpy.logging.get_logger('player').error(str(error))
-        return 1
+    """Play a bag; exit status 2, with one line, if it cannot be read or a parameter is bad."""
+    return run_node(PlayerNode, args, spin=PlayerNode.play, farewell=PlayerNode.summary,
+                    name='player')
 
 
 if __name__ == '__main__':

@@ -25,19 +25,15 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
-from rclpy.signals import SignalHandlerOptions
 
 from msg_defs.topics import Topic, topic_by_name
 from sphere_twin.bag import format as bag_format
-from sphere_twin.bag.writer import COMPRESSIONS, BagWriter
-from sphere_twin.node_runtime.ros_env import (
-    declare_node_parameters,
-    ensure_localhost_discovery,
-)
+from sphere_twin.bag.writer import BagWriter
+from sphere_twin.node_runtime.parameter_specs import declare_node_parameters
+from sphere_twin.node_runtime.ros_env import StartupError, run_node
 from sphere_twin.nodes.parameters import DEFAULT_BAG_PARENT, RECORDER_PARAMETERS
 
 # Depth of the recorder's subscriptions. History does not affect QoS compatibility; a
@@ -81,24 +77,24 @@ class RecorderNode(Node):
     Raises
     ------
     ValueError
-        For a topic that is not in the contract or an unknown compression.
-    FileExistsError
-        If the output directory exists and is not empty.
+        For a bad parameter, such as a topic that is not in the contract, or an output
+        directory that exists and is not empty (a StartupError).
     """
 
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__('recorder', **node_kwargs)
         p = self._declare_parameters()
-        if p['compression'] not in COMPRESSIONS:
-            raise ValueError(f'compression {p["compression"]!r} is not one of '
-                             f'{", ".join(COMPRESSIONS)}')
         try:
             self.topics = tuple(topic_by_name(name) for name in p['topics'] if name)
         except KeyError as error:
-            raise ValueError(error.args[0]) from None
+            raise ValueError(f'parameter topics: {error.args[0]}') from None
         output_dir = p['output_dir'] or default_output_dir()
-        self.writer = BagWriter(output_dir, compression=p['compression'],
-                                chunk_size_bytes=p['chunk_size_bytes'])
+        try:
+            self.writer = BagWriter(output_dir, compression=p['compression'],
+                                    chunk_size_bytes=p['chunk_size_bytes'])
+        except FileExistsError as error:
+            raise StartupError(f'parameter output_dir: {error}: give a new or empty '
+                               'directory (a bag is never overwritten)') from None
         for topic in self.topics:
             self.create_subscription(topic.msg_type, topic.name,
                                      functools.partial(self.on_message, topic),
@@ -244,29 +240,16 @@ class StopRequest:
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the recorder until SIGINT or SIGTERM; exit status 1 if it could not record."""
-    ensure_localhost_discovery()
-    stop = StopRequest().install()
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
-    status = 0
-    try:
-        node = RecorderNode()
-        node.spin_until(stop)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ValueError, OSError) as error:
-        # A bad parameter, an existing bag directory, a missing message definition, a full
-        # disk: one clear line rather than a traceback.
-        rclpy.logging.get_logger('recorder').error(str(error))
-        status = 1
-    finally:
-        if node is not None:
-            # Printed, not logged: the summary must appear even if logging is shut down.
-            print(node.finish(), flush=True)
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return status
+    """Run the recorder until SIGINT or SIGTERM.
+
+    Exit status 2 when it cannot start (a bad parameter, a bag directory that is not empty)
+    and 1 when it could not write (a full disk, a missing message definition), each with one
+    line on stderr; the summary line is printed whenever the bag was opened.
+    """
+    stop = StopRequest()
+    return run_node(RecorderNode, args, spin=lambda node: node.spin_until(stop),
+                    farewell=RecorderNode.finish, name='recorder',
+                    own_signal_handling=stop.install)
 
 
 if __name__ == '__main__':

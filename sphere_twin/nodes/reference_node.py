@@ -17,7 +17,8 @@ from msg_defs.markers import reference_markers
 from msg_defs.topics import CLOCK, MARKERS, SPHERE_REFERENCE
 from sphere_control.reference import CircleTrajectory, ScheduledReference, Setpoint, sample
 from sphere_twin.node_runtime.pace import PaceMeter
-from sphere_twin.node_runtime.ros_env import declare_node_parameters, run_node
+from sphere_twin.node_runtime.parameter_specs import declare_node_parameters
+from sphere_twin.node_runtime.ros_env import run_node
 from sphere_twin.nodes.parameters import REFERENCE_PARAMETERS
 
 if TYPE_CHECKING:
@@ -30,9 +31,7 @@ class ReferenceNode(Node):
     def __init__(self, **node_kwargs: Any) -> None:
         super().__init__('reference', **node_kwargs)
         p = declare_node_parameters(self, REFERENCE_PARAMETERS)
-        if len(p['setpoint_xy']) != 2:
-            raise ValueError(f'setpoint_xy needs 2 values, got {list(p["setpoint_xy"])}')
-        x, y = (float(v) for v in p['setpoint_xy'])
+        x, y = p['setpoint_xy']
         self.schedule = ScheduledReference(Setpoint((x, y)),
                                            CircleTrajectory(p['amplitude'], p['frequency_hz']),
                                            p['trajectory_start_s'], p['trajectory_offset_s'])

@@ -47,12 +47,8 @@ from msg_defs.topics import (
 )
 from sphere_sim.twin.report_limit import ReportLimit
 from sphere_twin.node_runtime.outbox import Outbox
-from sphere_twin.node_runtime.ros_env import (
-    DISCOVERY_RANGE_VAR,
-    StartupError,
-    declare_node_parameters,
-    run_node,
-)
+from sphere_twin.node_runtime.parameter_specs import declare_node_parameters
+from sphere_twin.node_runtime.ros_env import DISCOVERY_RANGE_VAR, StartupError, run_node
 from sphere_twin.nodes.parameters import SIMULATOR_PARAMETERS
 
 if TYPE_CHECKING:
