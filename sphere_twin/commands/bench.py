@@ -2,7 +2,8 @@
 
 ``bench work-precision`` runs three scenes (the optimised diagonal kick from rest, an 80 V kick
 on all beams, the optimised kick from a 35 deg tilt) with every method over a range of
-tolerances and writes ``bench/results/work_precision.{csv,md,png}``. Wall times are medians of
+tolerances and writes ``work_precision.{csv,md,png}`` (into ``--out``; the committed ones are
+in ``bench/results``). Wall times are medians of
 at least three runs after one warm-up run; errors are against a reference made of two
 different methods at the tightest tolerance, whose agreement is printed. The line before its
 last gives the real-time factor of each scene; its last line is
@@ -10,12 +11,12 @@ last gives the real-time factor of each scene; its last line is
 method, odeint included; the real-time factor of the 80 V all-beams scene).
 
 ``bench regularisation`` runs the convergence study of the friction regularisations (the
-viscous onset ramp and epsilon of eq. 51) and writes ``bench/results/regularisation.{csv,md}``.
+viscous onset ramp and epsilon of eq. 51) and writes ``regularisation.{csv,md}``.
 
 ``bench throughput`` runs the kick workloads (table build, kick optimisation, calibration) on
 one worker, and on a process pool and a Dask cluster of each worker count asked (``--workers
 2,4``; 2 by default), against the bare integration rate of their kicks and a CPU loop's scaling
-on as many processes, and writes ``bench/results/throughput.{json,md}``. Its last line is
+on as many processes, and writes ``throughput.{json,md}``. Its last line is
 ``throughput vs bare integration: <a> table build, <b> optimisation``.
 """
 
@@ -51,11 +52,11 @@ from sphere_sim.studies.work_precision import (
 )
 from sphere_twin.commands import bench_levers, bench_twin
 from sphere_twin.commands.bench_scenes import optimised_design, scenes_of_this_tree
-from sphere_twin.commands.options import output_directory, worker_counts
+from sphere_twin.commands.options import DEFAULT_OUT_DIR, output_directory, worker_counts
 
-RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
+
 def run_work_precision_bench(quick: bool = False,
-                             out_dir: str | os.PathLike[str] = RESULTS_DIR,
+                             out_dir: str | os.PathLike[str] = DEFAULT_OUT_DIR,
                              stream: TextIO = sys.stdout,
                              ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Run the benchmark with a progress bar, write its results; returns (rows, summary)."""
@@ -188,7 +189,7 @@ def plot(rows: Sequence[Mapping[str, Any]], scenes: Sequence[BenchScene], path: 
 
 
 # --- regularisation study ------------------------------------------------------------------
-def run_regularisation_study(quick: bool = False, out_dir: str | os.PathLike[str] = RESULTS_DIR,
+def run_regularisation_study(quick: bool = False, out_dir: str | os.PathLike[str] = DEFAULT_OUT_DIR,
                              stream: TextIO = sys.stdout) -> list[dict[str, Any]]:
     """The study with a progress bar; writes regularisation.{csv,md} and returns the rows."""
     design, _ = optimised_design()
@@ -226,21 +227,22 @@ def run_regularisation_study(quick: bool = False, out_dir: str | os.PathLike[str
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
         'bench', help='integrator benchmarks (work-precision, regularisation study)',
-        description='Benchmarks of the numerics; results go to bench/results.')
+        description='Benchmarks of the numerics; results go to --out (default: the working '
+                    'directory; the committed ones: --out bench/results).')
     sub = parser.add_subparsers(dest='bench_command', metavar='BENCH', required=True)
     wp = sub.add_parser('work-precision', help='wall time against error for every method',
                         description='Three scenes, tolerances 1e-3..1e-10, every method; '
-                                    'writes bench/results/work_precision.{csv,md,png}.')
+                                    'writes work_precision.{csv,md,png} into --out.')
     wp.add_argument('--quick', action='store_true',
                     help='one scene, three methods, three tolerances, one timed run (< 1 min)')
-    wp.add_argument('--out', type=output_directory, default=RESULTS_DIR,
+    wp.add_argument('--out', type=output_directory, default=DEFAULT_OUT_DIR,
                     help='output directory')
     wp.set_defaults(func=run_work_precision)
     reg = sub.add_parser('regularisation', help='convergence study of the friction ramps',
                          description='Kick outcomes as the viscous onset ramp and epsilon of '
-                                     'eq. (51) shrink; writes bench/results/regularisation.*')
+                                     'eq. (51) shrink; writes regularisation.* into --out')
     reg.add_argument('--quick', action='store_true', help='one tolerance only')
-    reg.add_argument('--out', type=output_directory, default=RESULTS_DIR,
+    reg.add_argument('--out', type=output_directory, default=DEFAULT_OUT_DIR,
                      help='output directory')
     reg.set_defaults(func=run_regularisation)
     thr = sub.add_parser('throughput', help='kicks/s of the kick workloads against bare '
@@ -249,13 +251,13 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                                      'worker, and on a process pool and a Dask cluster of n '
                                      'workers for each n of --workers; each 1 -> n scaling '
                                      'beside that of a pure CPU loop on n processes. Writes '
-                                     'bench/results/throughput.{json,md}.')
+                                     'throughput.{json,md} into --out.')
     thr.add_argument('--quick', action='store_true', help='tiny workloads (< 1 min)')
     thr.add_argument('--workers', type=worker_counts, default=tp.DEFAULT_WORKER_COUNTS,
                      metavar='N[,N...]',
                      help='worker counts of the pool and Dask runs, e.g. 2,4,8 (one worker '
                           'always runs; default %(default)s)')
-    thr.add_argument('--out', type=output_directory, default=RESULTS_DIR,
+    thr.add_argument('--out', type=output_directory, default=DEFAULT_OUT_DIR,
                      help='output directory')
     thr.set_defaults(func=run_throughput)
     bench_twin.register(sub)
@@ -287,7 +289,7 @@ def run_throughput(args: argparse.Namespace) -> int:
     return 0
 
 
-def run_throughput_bench(quick: bool = False, out_dir: str | os.PathLike[str] = RESULTS_DIR,
+def run_throughput_bench(quick: bool = False, out_dir: str | os.PathLike[str] = DEFAULT_OUT_DIR,
                          stream: TextIO = sys.stdout, **kwargs: Any) -> tp.Summary:
     """The throughput study with a progress bar; writes throughput{,_quick}.{json,md}."""
     engines = kwargs.get('engines', tp.ENGINES)

@@ -13,7 +13,7 @@ counts in a run of ``fast``, they are what a free right-hand side or a free (ana
 Jacobian would save it at most. An exact Jacobian would not change the steps: central
 differences, 1e4 times more accurate, did not (docs/numerics.md, "Jacobian").
 
-    sphere-twin bench levers      # about 5 minutes; writes bench/results/fast_costs.md
+    sphere-twin bench levers      # about 5 minutes; writes fast_costs.md into --out
 """
 
 from __future__ import annotations
@@ -31,11 +31,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from sphere_twin.commands.options import DEFAULT_OUT_DIR, output_directory
+
 if TYPE_CHECKING:
     from sphere_sim.integrate.solve import Trajectory
     from sphere_sim.studies.work_precision import BenchScene
 
-RESULTS = Path(__file__).resolve().parents[2] / 'bench' / 'results' / 'fast_costs.md'
+RESULTS_NAME = 'fast_costs.md'
 RTOLS = (1e-3, 3e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6)
 REFERENCE_RTOL = 1e-9
 REPEATS = 3  # CPU time of a run: the fastest of this many (the machine is shared)
@@ -177,16 +179,19 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                        'sides would buy the compiled Radau',
         description='Runs fast with its Newton iterations capped at 4, 3 and 2 (each in a '
                     'process of its own, with its own numba cache) and times the kernels; '
-                    'writes bench/results/fast_costs.md (about 5 minutes).')
+                    f'writes {RESULTS_NAME} into --out (about 5 minutes).')
+    parser.add_argument('--out', type=output_directory, default=DEFAULT_OUT_DIR,
+                        help='output directory (default: the working directory; the committed '
+                             'one: bench/results)')
     parser.set_defaults(func=run)
 
 
-def run(_args: argparse.Namespace) -> int:
-    main()
+def run(args: argparse.Namespace) -> int:
+    main(args.out)
     return 0
 
 
-def main() -> None:
+def main(out_dir: Path = DEFAULT_OUT_DIR) -> None:
     rows = [row for variant in VARIANTS for row in _run_variant(variant)]
     costs = _kernel_costs()
     scenes = list(costs)
@@ -199,7 +204,8 @@ def main() -> None:
              'are the counts times the cost per call, over the CPU time:', '',
              *_per_step_lines(rows, costs), '', '## Runs', '',
              '```', *(json.dumps(r) for r in rows), '```', '']
-    RESULTS.write_text('\n'.join(lines))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / RESULTS_NAME).write_text('\n'.join(lines))
     print('\n'.join(lines[:lines.index('## Runs')]))
 
 

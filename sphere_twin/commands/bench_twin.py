@@ -7,20 +7,18 @@ import argparse
 import json
 import os
 import sys
-from pathlib import Path
 
 from tqdm import tqdm
 
 from sphere_sim.twin.plant_setup import PLANT_KINDS
 from sphere_twin.commands.options import (
+    DEFAULT_OUT_DIR,
     CommandError,
     non_negative_float,
     output_directory,
     simulated_seconds,
 )
 from sphere_twin.twin_bench import DEFAULT_DURATION_S, BenchError, run_twin_bench, summary_lines
-
-RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
 
 
 def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -33,14 +31,14 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                     'its wall time spent integrating, publishing and in rclpy, the latency '
                     'from a pulse programme\'s arrival to its first effect, and the node '
                     'loop\'s kick cycle and its parts. Writes '
-                    'bench/results/twin_<plant>[_paced].{json,md}.')
+                    'twin_<plant>[_paced].{json,md} into --out.')
     parser.add_argument('--plant', choices=PLANT_KINDS, default='continuous')
     parser.add_argument('--duration-s', type=simulated_seconds, default=DEFAULT_DURATION_S,
                         help='simulated seconds to run, 0.001 to 3600')
     parser.add_argument('--real-time-factor', type=non_negative_float, default=0.0,
                         help='pace the simulator at this many simulated seconds per wall '
                              'second (default 0: unpaced)')
-    parser.add_argument('--out', type=output_directory, default=RESULTS_DIR,
+    parser.add_argument('--out', type=output_directory, default=DEFAULT_OUT_DIR,
                         help='output directory')
     parser.set_defaults(func=run)
 

@@ -2,9 +2,10 @@
 
 Runs :func:`sphere_control.evaluation.evaluate` on the discrete model (the shipped lookup
 table, or ``--plant analytic``: kicks of the paper's 0.54 deg), prints the comparison table,
-writes ``evaluation.json`` and the figures like the paper's Figs. 13-15 to ``--out``
-(``bench/results``), and ends with Fig. 15 in the paper's set-up (f1 = 0.02 Hz, the basic
-controller's best of the paper's two bands, sigma learned from every kick, the kick period the
+writes ``evaluation.json`` and the figures like the paper's Figs. 13-15 to ``--out`` (the
+working directory by default; the committed ones are in ``bench/results``), and ends with
+Fig. 15 in the paper's set-up (f1 = 0.02 Hz, the basic controller's best of the paper's two
+bands, sigma learned from kicks of at least a fifth of the full width, the kick period the
 full kick's settle time): ``trajectory MSE extended/basic without preview: <ratio>``, then
 ``trajectory MSE extended/basic: <ratio>`` with preview, the default.
 """
@@ -33,7 +34,7 @@ from sphere_control.studies import (
 )
 from sphere_sim.kicks.discrete import LEVEL_NORMAL, PAPER_FULL_KICK_RAD
 from sphere_sim.kicks.lookup_table import AXIS_TABLE_PATH
-from sphere_twin.commands.options import number_in_range, output_directory
+from sphere_twin.commands.options import DEFAULT_OUT_DIR, number_in_range, output_directory
 
 if TYPE_CHECKING:
     from sphere_control.closed_loop import LoopHistory
@@ -41,7 +42,6 @@ if TYPE_CHECKING:
     from sphere_control.studies import TrackingResult
     from sphere_sim.kicks.lookup_table import CombinedKickPlant, LookupTable
 
-RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
 # The analytic stand-in for the paper's plant: the 0.54 deg kick with a convex intensity
 # characteristic like Fig. 10 and widths shrinking by a tenth towards the cone's edge.
 ANALYTIC_EXPONENT = 1.7
@@ -79,7 +79,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser.add_argument('--kick-period-s', type=KICK_PERIOD_S, default=None,
                         help='time per decision in the trajectory runs (s, 0.01 to 10; default: '
                              "the full kick's settle time rounded up to 10 ms)")
-    parser.add_argument('--out', type=output_directory, default=RESULTS_DIR,
+    parser.add_argument('--out', type=output_directory, default=DEFAULT_OUT_DIR,
                         help='output directory')
     parser.set_defaults(func=run)
 

@@ -15,8 +15,8 @@ from sphere_sim.kicks.discrete import PAPER_FULL_KICK_RAD
 from sphere_sim.kicks.optimization import optimise_kick
 from sphere_twin.commands.options import add_params_option, output_file, positive_int, seed
 
-DEFAULT_OUTPUT = 'bench/results/kick_optimization.json'
-AXIS_OUTPUT = 'bench/results/kick_optimization_axis.json'
+DEFAULT_OUTPUT = 'kick_optimization.json'
+AXIS_OUTPUT = 'kick_optimization_axis.json'
 # Templates: the paper's hind-left kick, and an axis-parallel one (§6's future work): the
 # right beam (3, at +x) at the high voltage, the other three at the low one, mirror-symmetric
 # about the x axis, so that its rotation can only go along x. Like the diagonal kick it moves

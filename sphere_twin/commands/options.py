@@ -84,6 +84,12 @@ def _nearest_existing(path: Path) -> Path:
     return Path.cwd()
 
 
+# Where a command writes when not told: the working directory. A command never writes into a
+# tracked file or a shipped bag's folder by default; the committed results are regenerated only
+# with an explicit `--out bench/results`.
+DEFAULT_OUT_DIR = Path('.')
+
+
 def check_output(text: str, is_file: bool, suffixes: tuple[str, ...] = ()) -> Path:
     """The one check of a path a command will write, made before it computes anything and
     writing nothing: a directory that exists or can be created and is writable; for a file,

@@ -20,6 +20,7 @@ from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD
 from sphere_sim.kicks.lookup_table import TableSpec
 from sphere_twin.commands.optimize import DEFAULT_OUTPUT as DEFAULT_DESIGN
 from sphere_twin.commands.options import (
+    DEFAULT_OUT_DIR,
     GRID_STEP,
     add_params_option,
     number_in_range,
@@ -27,6 +28,7 @@ from sphere_twin.commands.options import (
     positive_int,
 )
 
+# The committed results, read as inputs (the offsets a table build applies).
 RESULTS = Path('bench/results')
 # The shipped offsets of the shipped design (§4.1), which the default table is built with.
 DEFAULT_OFFSETS = RESULTS / 'voltage_offsets.json'
@@ -58,7 +60,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         add_params_option(p)
         p.add_argument('--design', default=DEFAULT_DESIGN,
                        help='kick optimisation JSON whose design to use')
-        p.add_argument('--out', type=output_directory, default=RESULTS,
+        p.add_argument('--out', type=output_directory, default=DEFAULT_OUT_DIR,
                        help='output directory')
     width.set_defaults(func=run_width)
     offsets.set_defaults(func=run_offsets)

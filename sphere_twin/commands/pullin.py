@@ -27,8 +27,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     add_params_option(parser)
     parser.add_argument('--no-sphere', action='store_true', help='beams alone')
     parser.add_argument('--plot', type=output_file('.png'), default=None,
-                        help='PNG file (default bench/results/fig4_pullin_<params>.png); a '
-                             'directory is refused')
+                        help='PNG file (default fig4_pullin_<params>.png in the working '
+                             'directory); a directory is refused')
     parser.add_argument('--no-plot', action='store_true', help='skip the sweep and its figure')
     parser.set_defaults(func=run)
 
@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     print(f'quasi-static threshold (end of the static branch): {static:.2f} V '
           f'({100 * (dynamic - static) / static:+.1f} %)')
     if not args.no_plot:
-        path = Path(args.plot or f'bench/results/fig4_pullin_{args.params.name}.png')
+        path = Path(args.plot or f'fig4_pullin_{args.params.name}.png')
         path.parent.mkdir(parents=True, exist_ok=True)
         with tqdm(total=len(SWEEP_V), desc='Fig. 4 sweep', unit='pulse', leave=False) as bar:
             trajs = pulse_sweep(model, x_rest, SWEEP_V, progress=lambda v: bar.update())

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 from msg_defs.device import DEFAULT_PARAMETER_SET, KICK_WINDOW_S
 from sphere_twin.commands.bag import BAG_HELP
 from sphere_twin.commands.options import (
+    DEFAULT_OUT_DIR,
     CommandError,
     add_params_option,
     output_directory,
@@ -52,7 +53,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                              '`sphere-twin identify` fitted, say): the set to compare it with, '
                              f'replayed too (default {DEFAULT_PARAMETER_SET})')
     parser.add_argument('--out', type=output_directory, default=None,
-                        help='output directory (default: beside the bag)')
+                        help='output directory (default: the working directory)')
     parser.set_defaults(func=run)
 
 
@@ -106,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
     results = {label: _replay(recorded, start, plant, params, args.tables,
                               f'{label} ({params.name})' if before else '')
                for label, params in runs}
-    out = args.out or bag.output_dir
+    out = args.out or DEFAULT_OUT_DIR
     out.mkdir(parents=True, exist_ok=True)
     stem = out / f'{bag.name}_replay'
     result = results['after']

@@ -8,7 +8,7 @@ import math
 import sys
 
 from sphere_twin.commands.bag import BAG_HELP
-from sphere_twin.commands.options import output_directory, positive_float
+from sphere_twin.commands.options import DEFAULT_OUT_DIR, output_directory, positive_float
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -19,7 +19,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                     'and max error (text and JSON). Works on any bag of the topic contract.')
     parser.add_argument('bag', help=BAG_HELP)
     parser.add_argument('--out', type=output_directory, default=None,
-                        help='output directory (default: beside the bag)')
+                        help='output directory (default: the working directory)')
     parser.add_argument('--band-deg', type=positive_float, default=0.05,
                         help='settling band around a setpoint (deg)')
     parser.set_defaults(func=run)
@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
     if warning:
         print(f'sphere-twin report: warning: {warning}', file=sys.stderr, flush=True)
     stats = statistics(recorded, math.radians(args.band_deg))
-    out = args.out or bag.output_dir
+    out = args.out or DEFAULT_OUT_DIR
     out.mkdir(parents=True, exist_ok=True)
     stem = out / f'{bag.name}_report'
     png = plot_report(recorded, stem.with_suffix('.png'), title=bag.name)

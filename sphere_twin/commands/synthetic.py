@@ -1,5 +1,5 @@
 """``sphere-twin synthetic record|study``: recordings of synthetic devices, and the
-identification study on them (bench/results/identification.md)."""
+identification study on them (``identification.md``; the committed one is in bench/results)."""
 
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ if TYPE_CHECKING:
     from sphere_sim.kicks.identification import Evaluator
     from sphere_twin.synthetic_device import SyntheticDevice
 
-DEFAULT_STUDY = Path('bench/results/identification.md')
+DEFAULT_STUDY = Path('identification.md')  # the committed one: --out bench/results/...
 DEFAULT_KICKS = 40
 
 

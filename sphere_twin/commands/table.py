@@ -40,7 +40,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     build = sub.add_parser('build', help='simulate the table (resumable)',
                            description='Simulate every grid kick with a process pool or Dask; '
                                        'an interrupted build resumes from its partial file.')
-    build.add_argument('--output', type=output_file('.npz'), default=DEFAULT_TABLE_PATH,
+    build.add_argument('--output', type=output_file('.npz'), default=Path('kick_table.npz'),
                        help='table .npz path')
     add_params_option(build)
     build.add_argument('--grid-step', type=GRID_STEP, default=TableSpec.grid_step,
