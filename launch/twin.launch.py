@@ -2,93 +2,208 @@
 
     ros2 launch sphere_twin twin.launch.py
     ros2 launch sphere_twin twin.launch.py plant:=discrete controller:=basic record:=true
+    ros2 launch sphere_twin twin.launch.py params_file:=my.yaml
     ros2 launch sphere_twin twin.launch.py rviz:=true
 
-Every stamp of the twin is simulated time (docs/twin.md): the simulator publishes /clock and
-never follows it; the other nodes follow it with ``use_sim_time`` (true by default here). With
-``play:=true`` the player replays ``bag`` instead of running the simulator and controller.
-Parameters not exposed as arguments come from ``config/twin.yaml`` (``params_file``).
-Nothing outside ``generate_launch_description`` imports ``launch``, so the file can be read
-and checked where the launch packages are not installed.
+Every node reads its parameters from ``params_file`` (default: the installed
+``config/twin.yaml``). An argument that sets a node parameter (plant, scene, ..., use_sim_time)
+is passed to the node only when it is given, so an edited params file is not overridden by
+defaults of the launch file. Every stamp of the twin is simulated time (docs/twin.md): the
+simulator publishes /clock and never follows it; reference and controller follow it with
+``use_sim_time`` (true in config/twin.yaml). With ``play:=true`` the player replays ``bag``
+instead of running the simulator and controller. If a node the run needs exits, the launch
+ends. Nothing at module level imports anything, and :func:`node_parameters` and
+:func:`launch_problem` import no ``launch``, so the file can be read and its rules checked
+where the launch packages are not installed (test/test_launch.py).
 """
 
+# An argument's default that means "not given": the node keeps the params file's value.
+NOT_GIVEN = ''
+_FROM_FILE = ' Default "": the params file\'s value.'
+
 # Launch arguments: name -> (default, description). An argument passed to a node as the
-# parameter of the same name has that parameter's default and description
-# (sphere_twin/nodes/parameters.py, or config/twin.yaml's value where it differs on purpose);
+# parameter of the same name (PARAMETER_ARGUMENTS) defaults to NOT_GIVEN and has that
+# parameter's description (sphere_twin/nodes/parameters.py) followed by _FROM_FILE;
 # test/test_node_parameters.py checks that they agree.
 ARGUMENTS = {
-    'plant': ('continuous', 'Plant to run: discrete or continuous (the lookup table of '
-                            'kicks).'),
-    'controller': ('extended', 'Control law: basic or extended (§4.2).'),
-    'scene': ('rest', 'Scene (shipped name or YAML path): parameters, beams, sphere and '
-                      'initial state.'),
-    'params': ('', 'Parameter set (shipped name or YAML file with base: and overrides:) '
-                   'instead of the scene\'s; "" keeps the scene\'s.'),
-    'seed': ('0', 'Seed of the measurement noise.'),
-    'noise_std_rad': ('0.0', 'Standard deviation of the measured normal per tangential axis '
-                             '(rad).'),
-    'real_time_factor': ('1.0', 'Simulated seconds per wall second; 0 runs as fast as '
-                                'possible.'),
-    'use_sim_time': ('true', 'Reference, controller and RViz follow the simulator\'s /clock '
-                             '(the simulator and the player publish it).'),
+    'plant': (NOT_GIVEN, 'Plant to run: discrete or continuous (the lookup table of '
+                         'kicks).' + _FROM_FILE),
+    'controller': (NOT_GIVEN, 'Control law: basic or extended (§4.2).' + _FROM_FILE),
+    'scene': (NOT_GIVEN, 'Scene (shipped name or YAML path): parameters, beams, sphere and '
+                         'initial state.' + _FROM_FILE),
+    'params': (NOT_GIVEN, 'Parameter set (shipped name or YAML file with base: and overrides:) '
+                          'instead of the scene\'s; "" keeps the scene\'s.' + _FROM_FILE),
+    'seed': (NOT_GIVEN, 'Seed of the measurement noise.' + _FROM_FILE),
+    'noise_std_rad': (NOT_GIVEN, 'Standard deviation of the measured normal per tangential '
+                                 'axis (rad).' + _FROM_FILE),
+    'real_time_factor': (NOT_GIVEN, 'Simulated seconds per wall second; 0 runs as fast as '
+                                    'possible.' + _FROM_FILE),
+    'use_sim_time': (NOT_GIVEN, 'Reference and controller follow the simulator\'s /clock (the '
+                                'simulator and the player publish it).' + _FROM_FILE
+                     + ' RViz, which reads no params file: true.'),
     'record': ('false', 'Also start the recorder (a bag under bags/).'),
-    'output_dir': ('', 'Bag directory to create (must not exist or be empty); "" for '
-                       'bags/run_<UTC time>.'),
+    'output_dir': (NOT_GIVEN, 'Bag directory to create (must not exist or be empty); "" for '
+                              'bags/run_<UTC time>.' + _FROM_FILE),
     'play': ('false', 'Replay a bag with the player instead of simulating.'),
-    'bag': ('example', 'Bag to play: its directory, one of its .mcap files, a bare .mcap '
-                       'file, or the name of a bag installed with the package (example).'),
-    'rviz': ('false', 'Also start RViz with rviz/twin.rviz.'),
+    'bag': (NOT_GIVEN, 'Bag to play: its directory, one of its .mcap files, a bare .mcap '
+                       'file, or the name of a bag installed with the package '
+                       '(example).' + _FROM_FILE),
+    'rviz': ('false', 'Also start RViz with rviz/twin.rviz (rviz2 is not a dependency of the '
+                      'package: sudo apt install ros-jazzy-rviz2).'),
     'params_file': (None, 'A --params-file for every node (default: the installed '
                           'config/twin.yaml).'),
 }
 
+# Arguments passed as the node parameter of the same name, only when given:
+# name -> (type of the parameter, the nodes that take it).
+PARAMETER_ARGUMENTS = {
+    'plant': ('str', ('simulator',)),
+    'scene': ('str', ('simulator',)),
+    'params': ('str', ('simulator',)),
+    'seed': ('int', ('simulator',)),
+    'noise_std_rad': ('float', ('simulator',)),
+    'real_time_factor': ('float', ('simulator',)),
+    # Never the simulator's: it is the clock and refuses use_sim_time:=true.
+    'use_sim_time': ('bool', ('reference', 'controller', 'rviz2')),
+    'controller': ('str', ('controller',)),
+    'output_dir': ('str', ('recorder',)),
+    'bag': ('str', ('player',)),
+}
+
+# Executable -> package of every node the launch file can start. The twin's own nodes are
+# all required: when one exits (a crash, a bad parameter, the player at the end of its bag),
+# what is left cannot go on, so the launch ends rather than run on half a twin. RViz is not.
+NODES = {'simulator': 'sphere_twin', 'reference': 'sphere_twin', 'controller': 'sphere_twin',
+         'recorder': 'sphere_twin', 'player': 'sphere_twin', 'rviz2': 'rviz2'}
+
+# A node parameter's value as the launch file passes it.
+Value = bool | int | float | str
+
+# The text a boolean launch argument may take, as launch's IfCondition reads it.
+_BOOLEANS = {'true': True, '1': True, 'false': False, '0': False}
+_TYPE_NAMES = {'bool': 'true or false', 'int': 'an integer', 'float': 'a number'}
+
+
+def _value(name: str, text: str, kind: str) -> Value:
+    """``text`` of argument ``name`` as a value of type ``kind``, or a one-line ValueError.
+    Parsed as launch_ros's ParameterValue(value_type=...) would, but before any node starts."""
+    try:
+        if kind == 'bool':
+            return _BOOLEANS[text.strip().lower()]
+        if kind == 'int':
+            return int(text)
+        if kind == 'float':
+            return float(text)
+    except (KeyError, ValueError):
+        raise ValueError(f'launch argument {name}:={text!r} is not {_TYPE_NAMES[kind]}') from None
+    return text
+
+
+def node_parameters(configurations: dict[str, str]) -> dict[str, dict[str, Value]]:
+    """The nodes to start for these launch configurations (argument name -> text, as
+    ``ros2 launch ... name:=text`` gives them; an absent one takes its default), each with the
+    parameters the launch file passes it on top of the params file: only the arguments given,
+    so the params file's value stands for the others. A malformed argument is a ValueError."""
+    def flag(name: str) -> bool:
+        return bool(_value(name, configurations.get(name, ARGUMENTS[name][0]), 'bool'))
+
+    started = ['player'] if flag('play') else ['simulator', 'reference', 'controller']
+    if flag('record'):
+        started.append('recorder')
+    if flag('rviz'):
+        started.append('rviz2')
+    nodes: dict[str, dict[str, Value]] = {name: {} for name in started}
+    if 'rviz2' in nodes:
+        # RViz gets no params file, so nothing but the launch file can put it on /clock.
+        nodes['rviz2']['use_sim_time'] = True
+    for name, (kind, takers) in PARAMETER_ARGUMENTS.items():
+        text = configurations.get(name, NOT_GIVEN)
+        if text == NOT_GIVEN:
+            continue
+        value = _value(name, text, kind)  # checked even for a node not started: a typo
+        for node in takers:
+            if node in nodes:
+                nodes[node][name] = value
+    return nodes
+
+
+def launch_problem(configurations: dict[str, str], nodes: dict[str, dict]) -> str | None:
+    """Why these nodes cannot start, in one line, or None: checked before any starts."""
+    import os
+
+    from ament_index_python.packages import PackageNotFoundError, get_package_prefix
+
+    params_file = configurations.get('params_file')
+    # launch_ros only warns about a --params-file that is not a file and starts the node
+    # without it: every parameter would silently be the node's default.
+    if params_file is not None and not os.path.isfile(params_file):
+        return f'params_file:={params_file}: no such file'
+    if 'rviz2' in nodes:
+        try:
+            get_package_prefix('rviz2')
+        except PackageNotFoundError:
+            return ('rviz:=true needs RViz, and rviz2 is not installed (not in the ament index '
+                    'of AMENT_PREFIX_PATH): sudo apt install ros-jazzy-rviz2, or leave '
+                    'rviz:=false')
+    return None
+
 
 def generate_launch_description():
-    from launch.actions import DeclareLaunchArgument
-    from launch.conditions import IfCondition, UnlessCondition
-    from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
-    from launch_ros.actions import Node
-    from launch_ros.parameter_descriptions import ParameterValue
+    from launch.actions import DeclareLaunchArgument, OpaqueFunction
+    from launch.substitutions import PathJoinSubstitution
     from launch_ros.substitutions import FindPackageShare
 
     from launch import LaunchDescription
 
-    def arg(name):
-        return LaunchConfiguration(name)
-
-    def typed(name, value_type):
-        return ParameterValue(arg(name), value_type=value_type)
-
-    share = FindPackageShare('sphere_twin')
-    defaults = {'params_file': PathJoinSubstitution([share, 'config', 'twin.yaml'])}
-    config = arg('params_file')
-    sim_time = {'use_sim_time': typed('use_sim_time', bool)}
-    simulating = UnlessCondition(arg('play'))
-
+    defaults = {'params_file': PathJoinSubstitution([FindPackageShare('sphere_twin'), 'config',
+                                                     'twin.yaml'])}
     actions = [DeclareLaunchArgument(name, default_value=defaults.get(name, default),
                                      description=text)
                for name, (default, text) in ARGUMENTS.items()]
-    actions += [
-        Node(package='sphere_twin', executable='simulator', name='simulator', output='screen',
-             condition=simulating,
-             parameters=[config, {'plant': arg('plant'), 'scene': arg('scene'),
-                                  'params': arg('params'), 'seed': typed('seed', int),
-                                  'noise_std_rad': typed('noise_std_rad', float),
-                                  'real_time_factor': typed('real_time_factor', float)}]),
-        Node(package='sphere_twin', executable='reference', name='reference', output='screen',
-             condition=simulating, parameters=[config, sim_time]),
-        Node(package='sphere_twin', executable='controller', name='controller',
-             output='screen', condition=simulating,
-             parameters=[config, sim_time, {'controller': arg('controller')}]),
-        Node(package='sphere_twin', executable='recorder', name='recorder', output='screen',
-             condition=IfCondition(arg('record')),
-             parameters=[config, {'output_dir': arg('output_dir')}]),
-        Node(package='sphere_twin', executable='player', name='player', output='screen',
-             condition=IfCondition(arg('play')),
-             parameters=[config, {'bag': arg('bag')}]),
-        Node(package='rviz2', executable='rviz2', name='rviz2', output='screen',
-             condition=IfCondition(arg('rviz')),
-             arguments=['-d', PathJoinSubstitution([share, 'rviz', 'twin.rviz'])],
-             parameters=[sim_time]),
-    ]
+    # The nodes are chosen and given their parameters once the arguments are known: an
+    # argument not given then passes nothing, which a substitution cannot express.
+    actions.append(OpaqueFunction(function=_node_actions))
     return LaunchDescription(actions)
+
+
+def _node_actions(context):
+    """The Node actions for the launch configurations of ``context``; raises (one line, the
+    launch ends with status 1) before any node starts if an argument or file is wrong."""
+    from launch.actions import Shutdown
+    from launch.substitutions import PathJoinSubstitution
+    from launch_ros.actions import Node
+    from launch_ros.parameter_descriptions import ParameterValue
+    from launch_ros.substitutions import FindPackageShare
+
+    configurations = dict(context.launch_configurations)
+    nodes = node_parameters(configurations)
+    problem = launch_problem(configurations, nodes)
+    if problem is not None:
+        raise RuntimeError(problem)
+
+    def ends_the_launch(executable):
+        def on_exit(event, exit_context):
+            if exit_context.is_shutdown:  # stopped by the launch (Ctrl-C): nothing to add
+                return None
+            return Shutdown(reason=f'{executable} exited with code {event.returncode}; the '
+                                   'twin cannot go on without it')
+        return on_exit
+
+    actions = []
+    for executable, given in nodes.items():
+        # launch_ros reads a plain string as YAML (scene:=2 would reach the node as an
+        # integer); ParameterValue keeps it the string parameter it is.
+        values = {name: ParameterValue(value, value_type=str) if isinstance(value, str)
+                  else value for name, value in given.items()}
+        if executable == 'rviz2':
+            actions.append(Node(
+                package=NODES[executable], executable=executable, name=executable,
+                output='screen', parameters=[values],
+                arguments=['-d', PathJoinSubstitution([FindPackageShare('sphere_twin'), 'rviz',
+                                                       'twin.rviz'])]))
+            continue
+        actions.append(Node(
+            package=NODES[executable], executable=executable, name=executable, output='screen',
+            parameters=[configurations['params_file']] + ([values] if values else []),
+            on_exit=ends_the_launch(executable)))
+    return actions

@@ -132,3 +132,31 @@ def test_controller_reference_and_recorder_stop_cleanly_while_the_loop_runs(
     simulated_s = max(stamps[CLOCK.name])
     assert all(0.0 <= t <= simulated_s + 1.0 for ts in stamps.values() for t in ts), {
         topic: max(ts) for topic, ts in stamps.items()}
+
+
+# Gaps between the two SIGINTs of a Ctrl-C under `ros2 launch` (the terminal's to the whole
+# group, launch's own): together, while the first one's shutdown runs, after the node has
+# finished and Python is finalising.
+DOUBLE_SIGINT_GAPS_S = (0.0, 0.02, 0.3)
+
+
+@pytest.mark.parametrize('gap_s', DOUBLE_SIGINT_GAPS_S)
+def test_every_node_stops_cleanly_when_sigint_comes_twice(ros_nodes, tmp_path, gap_s):
+    nodes = {spec.executable: ros_nodes.start(spec.executable, spec.args)
+             for spec in scenario_nodes(1.0, 'discrete', 5.0, 0, 1, 1)}
+    nodes['recorder'] = ros_nodes.start('recorder', parameter_args(
+        output_dir=str(tmp_path / 'bag')))
+    nodes['monitor'] = ros_nodes.start('monitor')
+    nodes['player'] = ros_nodes.start('player', parameter_args(
+        bag='example', loop=True, publish_clock=False))
+    nodes['simulator'].wait_for_output('publishing /sphere/surface_normal', READY_TIMEOUT_S)
+    nodes['recorder'].wait_for_output('recording ', READY_TIMEOUT_S)
+    for process in nodes.values():
+        process.send_signal(signal.SIGINT)
+    time.sleep(gap_s)
+    for process in nodes.values():
+        if process.running():
+            process.send_signal(signal.SIGINT)
+    for name, process in nodes.items():
+        assert process.wait(EXIT_TIMEOUT_S) == 0, (name, process.stderr_text()[-2000:])
+        assert 'Traceback' not in process.stderr_text() + process.stdout_text(), name

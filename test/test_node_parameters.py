@@ -3,7 +3,6 @@ declare exactly those, and config/twin.yaml, the arguments of launch/twin.launch
 code that takes a choice-valued parameter agree with them. Checked without the `launch`
 packages (not on PyPI)."""
 
-import ast
 import math
 from pathlib import Path
 
@@ -19,19 +18,19 @@ LAUNCH_FILE = ROOT / 'launch' / 'twin.launch.py'
 CONFIG_FILE = ROOT / 'config' / 'twin.yaml'
 
 # Where config/twin.yaml sets a value other than the node's default, on purpose:
-# (node, parameter) -> value. The launch file's argument defaults follow the file.
+# (node, parameter) -> value. The launch file passes no value unless its argument is given.
 INTENDED_DIFFERENCES = {
     # The physics of §3; started alone, the node runs the discrete table, which starts faster.
     ('simulator', 'plant'): 'continuous',
     # The example bag; started alone, the player requires a bag.
     ('player', 'bag'): 'example',
 }
-# Parameters that rclpy declares on every node; the launch file may pass them too.
-ROS_PARAMETERS = {'use_sim_time'}
-# What the launch file's typed(name, <type>) gives a node for each parameter type; arg(name)
-# (a string) is only for string parameters.
+# Parameters that rclpy declares on every node; the params file and the launch file may set
+# them too: name -> the value config/twin.yaml gives, by node.
+ROS_PARAMETERS = {'use_sim_time': {'reference': True, 'controller': True}}
+# The type the launch file converts an argument to for each parameter type.
 LAUNCH_VALUE_TYPES = {ParameterType.BOOL: 'bool', ParameterType.INTEGER: 'int',
-                      ParameterType.DOUBLE: 'float'}
+                      ParameterType.DOUBLE: 'float', ParameterType.STRING: 'str'}
 
 
 def _specs(node):
@@ -130,8 +129,12 @@ def test_the_config_has_a_section_for_each_launched_node():
 def test_the_config_sets_declared_parameters_to_their_defaults(node):
     config = _config()[node]
     specs = _specs(node)
-    assert set(config) <= set(specs)
+    ros = {name: values[node] for name, values in ROS_PARAMETERS.items() if node in values}
+    assert set(config) <= set(specs) | set(ROS_PARAMETERS)
+    assert {name: config[name] for name in set(config) & set(ROS_PARAMETERS)} == ros
     for name, value in config.items():
+        if name in ROS_PARAMETERS:
+            continue
         spec = specs[name]
         assert _has_type(spec, value), f'{node}.{name}: {value!r} is not a {spec.type.value}'
         assert _allowed(spec, value), f'{node}.{name}: {value!r} is out of range'
@@ -149,60 +152,59 @@ def test_every_intended_difference_is_in_the_config_and_differs():
 
 # --- launch/twin.launch.py --------------------------------------------------------------
 
-def _launch_arguments():
+def _launch_file():
     namespace = {}
     exec(compile(LAUNCH_FILE.read_text(), str(LAUNCH_FILE), 'exec'), namespace)
-    return namespace['ARGUMENTS']
-
-
-def _launch_parameters():
-    """(executable, parameter, argument, typed value type or None) of every launch argument
-    passed to one of our nodes as a parameter."""
-    tree = ast.parse(LAUNCH_FILE.read_text())
-    assigned = {n.targets[0].id: n.value for n in ast.walk(tree)
-                if isinstance(n, ast.Assign) and isinstance(n.targets[0], ast.Name)}
-    found = []
-    for call in ast.walk(tree):
-        if not (isinstance(call, ast.Call) and getattr(call.func, 'id', None) == 'Node'):
-            continue
-        kw = {k.arg: k.value for k in call.keywords}
-        if kw['package'].value != 'sphere_twin':
-            continue
-        for item in getattr(kw.get('parameters'), 'elts', []):
-            item = assigned.get(item.id, item) if isinstance(item, ast.Name) else item
-            if not isinstance(item, ast.Dict):
-                continue
-            for key, value in zip(item.keys, item.values, strict=True):
-                assert isinstance(value, ast.Call) and value.func.id in ('arg', 'typed')
-                value_type = value.args[1].id if value.func.id == 'typed' else None
-                found.append((kw['executable'].value, key.value, value.args[0].value,
-                              value_type))
-    return found
-
-
-def _parse(spec, text):
-    return {ParameterType.BOOL: lambda t: {'true': True, 'false': False}[t],
-            ParameterType.INTEGER: int, ParameterType.DOUBLE: float,
-            ParameterType.STRING: str}[spec.type](text)
+    return namespace
 
 
 def test_launch_arguments_passed_to_nodes_agree_with_their_declarations():
-    arguments = _launch_arguments()
-    passed = _launch_parameters()
-    assert {node for node, *_ in passed} >= {'simulator', 'controller', 'recorder', 'player'}
-    for node, name, argument, value_type in passed:
+    launch = _launch_file()
+    arguments, passed = launch['ARGUMENTS'], launch['PARAMETER_ARGUMENTS']
+    takers = {node for _, nodes in passed.values() for node in nodes}
+    assert takers >= {'simulator', 'controller', 'reference', 'recorder', 'player'}
+    for name, (value_type, nodes) in passed.items():
+        default, description = arguments[name]
+        # "Not given": the node keeps the params file's value, and the argument says so.
+        assert default == launch['NOT_GIVEN'] == '', f'launch argument {name}'
+        assert launch['_FROM_FILE'] in description, f'launch argument {name}'
         if name in ROS_PARAMETERS:
+            assert value_type == 'bool'
             continue
-        specs = _specs(node)
-        assert name in specs, f'the launch file passes {name} to {node}, which lacks it'
-        spec = specs[name]
-        assert argument == name
-        assert value_type == LAUNCH_VALUE_TYPES.get(spec.type), f'{node}.{name}'
-        default, description = arguments[argument]
-        assert _same(_parse(spec, default), _expected(node, spec)), (
-            f'launch argument {argument} defaults to {default!r}, the node to '
-            f'{spec.default!r}')
-        assert description == spec.description, f'launch argument {argument}'
+        for node in nodes:
+            specs = _specs(node)
+            assert name in specs, f'the launch file passes {name} to {node}, which lacks it'
+            spec = specs[name]
+            assert value_type == LAUNCH_VALUE_TYPES[spec.type], f'{node}.{name}'
+            assert description == spec.description + launch['_FROM_FILE'], name
+
+
+def test_no_launch_argument_default_overrides_the_params_file():
+    launch = _launch_file()
+    defaults = {name: default for name, (default, _) in launch['ARGUMENTS'].items()
+                if default is not None}
+    for play in ('false', 'true'):
+        for node, given in launch['node_parameters'](
+                defaults | {'play': play, 'record': 'true'}).items():
+            assert given == {}, f'{node} gets {given} with every argument at its default'
+
+
+def test_a_given_launch_argument_reaches_the_node_as_its_parameter_type():
+    """Every argument, given as ``ros2 launch`` gives it (text), is passed to each node that
+    takes it with the value the node's parameter type needs."""
+    launch = _launch_file()
+    samples = {ParameterType.BOOL: ('false', False), ParameterType.INTEGER: ('7', 7),
+               ParameterType.DOUBLE: ('2', 2.0), ParameterType.STRING: ('2', '2')}
+    for name, (_, nodes) in launch['PARAMETER_ARGUMENTS'].items():
+        for node in nodes:
+            if node == 'rviz2':
+                continue
+            kind = ParameterType.BOOL if name in ROS_PARAMETERS else _specs(node)[name].type
+            text, value = samples[kind]
+            play = 'true' if node == 'player' else 'false'
+            given = launch['node_parameters']({name: text, 'play': play, 'record': 'true'})
+            assert _same(given[node][name], value), f'{name}:={text} to {node}'
+            assert set(given[node]) == {name}
 
 
 # --- the nodes declare exactly the specs --------------------------------------------------

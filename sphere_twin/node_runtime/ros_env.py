@@ -53,8 +53,13 @@ _shutdown_signal: list[str] = []
 
 
 def _raise_keyboard_interrupt(signum: int, frame: FrameType | None) -> None:
+    # Only the first signal interrupts. Ctrl-C in a terminal reaches every process of the
+    # group and `ros2 launch` sends its own SIGINT on top: a second KeyboardInterrupt would cut
+    # the clean shutdown the first one started (destroy_node, closing a bag) and escape main.
+    first = not _shutdown_signal
     _shutdown_signal.append(signal.Signals(signum).name)
-    raise KeyboardInterrupt(signal.Signals(signum).name)
+    if first:
+        raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
 def _unraisable_after_shutdown(unraisable: Any) -> None:
@@ -213,7 +218,17 @@ def run_node(build: Callable[[], Any], args: list[str] | None = None,
                 print(farewell(node), flush=True)
             node.destroy_node()
         rclpy.try_shutdown()
+        _ignore_late_signals()
     return status
+
+
+def _ignore_late_signals() -> None:
+    """From here on the node is leaving: SIGINT and SIGTERM are ignored. Python restores their
+    default action while it finalises, so a late Ctrl-C (a terminal's reaching the whole group
+    on top of launch's own SIGINT) would otherwise kill a node that had shut down cleanly,
+    and its exit status would read -2. An ignored signal stays ignored through finalisation."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
 
 def _init_rclpy(node_name: str, args: list[str] | None, rclpy_signal_handlers: bool) -> bool:
