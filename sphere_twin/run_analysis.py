@@ -388,32 +388,37 @@ def statistics(run: RecordedRun, band_rad: float = DEFAULT_BAND_RAD) -> RunStati
 
 def plot_report(run: RecordedRun, path: str | os.PathLike[str],
                 title: str = '') -> str | os.PathLike[str]:
-    """Error against time with the kicks marked, and the x-y path beside the reference."""
-    from sphere_twin.plots import plt
+    """Error against time with the kicks marked (ticks, or a rate where they are dense), and
+    the x-y path in degrees of tilt beside the setpoints and the reference trajectory."""
+    from sphere_twin.plots import SAVE_DPI, draw_kicks, draw_tilt_path, legend_of, plt
 
     times, errors = errors_rad(run)
     fig, (ax_err, ax_xy) = plt.subplots(1, 2, figsize=(11.5, 4.6))
     ax_err.semilogy(times, np.maximum(np.degrees(errors), 1e-6), lw=1, label='error')
-    if run.kicks:
-        ax_err.plot([k[0] for k in run.kicks], np.full(len(run.kicks), ax_err.get_ylim()[0]),
-                    '|', color='tab:red', ms=8, label='kicks')
+    span = (float(run.normal_t_s[0]), float(run.normal_t_s[-1]))
+    marks_ax = draw_kicks(ax_err, [k[0] for k in run.kicks], span)
     ax_err.set_xlabel('time (s)')
     ax_err.set_ylabel('angle to reference (deg)')
     ax_err.grid(alpha=0.3, which='both')
-    ax_err.legend()
-    if run.references.size:
-        ax_xy.plot(run.references[:, 0], run.references[:, 1], 'k--', lw=1, label='reference')
-    ax_xy.plot(run.normals[:, 0], run.normals[:, 1], lw=1, label='surface normal')
-    ax_xy.set_xlabel('$x_{sn}$')
-    ax_xy.set_ylabel('$y_{sn}$')
-    ax_xy.set_aspect('equal', adjustable='datalim')
-    ax_xy.grid(alpha=0.3)
-    ax_xy.legend()
+    legend_of(ax_err, marks_ax, fontsize=8)
+    setpoints, trajectory = reference_parts(run)
+    draw_tilt_path(ax_xy, run.normals, setpoints, trajectory)
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=SAVE_DPI)
     plt.close(fig)
     return path
+
+
+def reference_parts(run: RecordedRun) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(setpoints (k, 3), trajectory (m, 3)): the reference held over each setpoint segment,
+    and the references received outside them (a moving reference), in order."""
+    segments = setpoint_segments(run)
+    held = np.zeros(run.reference_t_s.shape, dtype=bool)
+    for start_s, end_s in segments:
+        held |= (run.reference_t_s >= start_s) & (run.reference_t_s < end_s)
+    starts = [int(np.searchsorted(run.reference_t_s, start_s)) for start_s, _ in segments]
+    return run.references[starts].reshape(-1, 3), run.references[~held].reshape(-1, 3)
 
 
 @dataclasses.dataclass(frozen=True)

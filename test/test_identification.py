@@ -553,3 +553,45 @@ def test_the_study_runs_only_the_devices_named_and_says_so(tmp_path, monkeypatch
     status = cli.main(['synthetic', 'study', '--device', 'device_z', '--out', str(out)])
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 2 and len(err) == 1 and "unknown device 'device_z'" in err[0]
+
+
+def test_identify_says_each_set_up_step_before_its_first_batch(tmp_path, monkeypatch, capsys):
+    """Minutes pass before the first batch of kicks reports: reading the bags, starting the
+    workers (which build the model and load or compile its kernels) and that batch's size are
+    each said on stderr first. The fit itself is stopped where it would start."""
+    from pathlib import Path
+
+    from sphere_twin import cli
+
+    def stop_before_fitting(*args, **kwargs):
+        raise kobs.IdentificationError('stopped where the fit starts')
+
+    monkeypatch.setattr(idf, 'identify', stop_before_fitting)
+    bag = Path(__file__).resolve().parents[1] / 'bags' / 'synthetic_device'
+    status = cli.main(['identify', str(bag), '--fit', 'friction.coulomb',
+                       '--out', str(tmp_path / 'fitted.yaml')])
+    said = [line for line in capsys.readouterr().err.splitlines()
+            if line.startswith('identify: ')]
+    assert status == 2
+    assert said[0] == f'identify: reading {bag} (bag 1 of 1) ...'
+    assert said[1].startswith('identify: starting 2 local process(es); each builds the model')
+    # 40 kicks at the start and at one step of the one fitted parameter
+    assert said[2].startswith('identify: first batch: 80 kick simulations')
+
+
+def test_the_progress_bar_is_redrawn_while_a_batch_runs():
+    import time
+
+    from sphere_twin.commands.identify import redrawn
+
+    class Bar:
+        redraws = 0
+
+        def refresh(self):
+            Bar.redraws += 1
+
+    with redrawn(Bar(), 0.01):
+        time.sleep(0.2)
+    after_block = Bar.redraws
+    time.sleep(0.05)
+    assert after_block >= 3 and Bar.redraws == after_block  # and none once the block is over

@@ -40,6 +40,7 @@ from sphere_twin.nodes.player_node import (
     CLOCK_GAP_TICK_S,
     playback_plan,
     played_line,
+    progress_line,
     recorded_qos,
 )
 from sphere_twin.nodes.recorder_node import summary_line
@@ -116,6 +117,38 @@ def test_rate_and_offset_out_of_range_are_refused():
         playback_plan(BAG, rate=0.0)
     with pytest.raises(ValueError, match='must not be negative'):
         playback_plan(BAG, start_offset_s=-1.0)
+
+
+def test_the_player_logs_its_progress_while_it_plays(context, monkeypatch):
+    """A line through the node's logger at INFO every PROGRESS_PERIOD_S of wall time
+    (here 0: after every publication): messages of the pass played of its total, and the bag
+    time reached; the last one at the bag's end. Nothing subscribes: no graph is needed."""
+    from rclpy.parameter import Parameter
+
+    from sphere_twin.bag.locate import locate_bag
+    from sphere_twin.nodes import player_node
+
+    example = list(read_messages(locate_bag('example').directory))
+    # The last 0.4 s of the example's log time (184 s: it was recorded at a fifth of real time)
+    offset_s = (example[-1].log_time_ns - example[0].log_time_ns) / NS_PER_S - 0.4
+    monkeypatch.setattr(player_node, 'PROGRESS_PERIOD_S', 0.0)
+    node = player_node.PlayerNode(context=context, parameter_overrides=[
+        Parameter('bag', value='example'), Parameter('start_offset_s', value=offset_s),
+        Parameter('rate', value=4.0), Parameter('publish_clock', value=False)])
+    logged = []
+    monkeypatch.setattr(node, 'get_logger', lambda: type('Log', (), {'info': logged.append}))
+    try:
+        node.play_once()
+    finally:
+        node.destroy_node()
+    total = len(node.plan)  # no made-up /clock: every publication is a message
+    assert len(logged) == total > 10
+    span_s = float(logged[-1].rsplit(' of ', 1)[1].split()[0])
+    assert span_s == pytest.approx(offset_s + 0.4, abs=0.05)
+    assert logged[-1] == progress_line(total, total, span_s, span_s)
+    assert logged[0].startswith(f'progress: played 1 of {total} messages, bag time ')
+    first_s = float(logged[0].split('bag time ')[1].split()[0])
+    assert first_s == pytest.approx(offset_s, abs=0.1)
 
 
 def test_a_topic_outside_the_contract_gets_the_qos_it_was_recorded_with():

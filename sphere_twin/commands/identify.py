@@ -9,11 +9,14 @@ values, intervals and per-kick residuals) and a plot of recorded against fitted 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import math
 import os
+import sys
+import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -24,7 +27,13 @@ from tqdm import tqdm
 
 from sphere_sim.kicks.identification import START_PARAMETER_SET
 from sphere_twin.commands.bag import BAG_HELP
-from sphere_twin.commands.options import CommandError, add_params_option, output_file, positive_int
+from sphere_twin.commands.options import (
+    DEFAULT_OUT_DIR,
+    CommandError,
+    add_params_option,
+    output_file,
+    positive_int,
+)
 
 if TYPE_CHECKING:
     from sphere_sim.kicks.identification import Evaluator, IdentificationResult
@@ -32,6 +41,9 @@ if TYPE_CHECKING:
     from sphere_sim.model.parameters import ParameterSet
 
 TRUTH_FILE = 'truth.yaml'
+# Wall seconds between two redraws of the progress bar while a batch of kicks runs: the first
+# batch (the start and a step per fitted parameter) takes minutes before the count first moves.
+BAR_REDRAW_S = 5.0
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -52,8 +64,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         help='parameter paths to fit (default: those the set declares '
                              'uncertain), e.g. beam.damping_phi_nms_per_rad')
     parser.add_argument('--out', type=output_file('.yaml'), default=None,
-                        help='fitted parameter file (default: <bag>_identified.yaml beside the '
-                             'first bag)')
+                        help='fitted parameter file (default: <first bag>_identified.yaml in the '
+                             'working directory)')
     parser.add_argument('--workers', type=positive_int, default=2, help='local processes')
     parser.add_argument('--scheduler', default=None,
                         help='Dask scheduler address, e.g. tcp://host:8786')
@@ -82,11 +94,12 @@ def run(args: argparse.Namespace) -> int:
     bags = [locate_bag(b) for b in args.bags]
     base = args.params
     try:
-        obs = merge_observations([read_observations(b.directory) for b in bags])
+        obs = merge_observations([_read_saying(b.directory, i, len(bags))
+                                  for i, b in enumerate(bags, 1)])
         fits = fit_parameters(base, args.fit)
     except IdentificationError as exc:
         raise CommandError(str(exc)) from None
-    out = args.out or bags[0].output_dir / f'{bags[0].name}_identified.yaml'
+    out = args.out or DEFAULT_OUT_DIR / f'{bags[0].name}_identified.yaml'
     out.parent.mkdir(parents=True, exist_ok=True)
     checkpoint = out.with_suffix('.partial.jsonl')
     print(f'{len(obs.kicks)} kicks from {len(bags)} bag(s) ({obs.dropped} programmes without '
@@ -96,8 +109,9 @@ def run(args: argparse.Namespace) -> int:
         where = 'declared range' if fit.declared else 'search bound, no declared range'
         print(f'fit {fit.path}{" (with " + ", ".join(fit.tied) + ")" if fit.tied else ""}: '
               f'start {base.get(fit.path):.4g}, {where} [{fit.low:.4g}, {fit.high:.4g}]')
+    say_setup(args.workers, args.scheduler, len(fits), len(obs.kicks))
     started = time.perf_counter()
-    with tqdm(desc='identify', unit='kick') as bar:
+    with tqdm(desc='identify', unit='kick') as bar, redrawn(bar, BAR_REDRAW_S):
         def progress(evaluator: Evaluator) -> None:
             bar.n = evaluator.simulated
             bar.set_postfix_str(f'{len(evaluator.cache)} evaluations')
@@ -124,6 +138,46 @@ def run(args: argparse.Namespace) -> int:
     if truth_path.exists():
         report_truth(result, load_parameter_set(str(truth_path.resolve())), fitted)
     return 0
+
+
+def say(line: str) -> None:
+    """A progress line, on stderr: stdout holds the results."""
+    print(f'identify: {line}', file=sys.stderr, flush=True)
+
+
+def _read_saying(bag_dir: Path, number: int, count: int) -> Observations:
+    say(f'reading {bag_dir} (bag {number} of {count}) ...')
+    return read_observations(bag_dir)
+
+
+def say_setup(workers: int, scheduler: str | None, fitted: int, kicks: int) -> None:
+    """What happens before the bar's count first moves, which takes minutes: the engine
+    starts, each worker builds the model and loads its compiled kernels, and the first batch
+    simulates every kick at the start and at a step along each fitted parameter."""
+    where = f'the Dask cluster at {scheduler}' if scheduler else f'{workers} local process(es)'
+    say(f'starting {where}; each builds the model and loads its compiled kernels '
+        '(numba compiles them on first use, a minute or more)')
+    say(f'first batch: {(1 + fitted) * kicks} kick simulations (the start and one step per '
+        f'fitted parameter, {kicks} kicks each) before the count below first moves')
+
+
+@contextlib.contextmanager
+def redrawn(bar: tqdm[Any], period_s: float) -> Iterator[None]:
+    """Redraw ``bar`` every ``period_s`` while the block runs, so that its elapsed time runs
+    on through a batch that has not reported yet."""
+    stop = threading.Event()
+
+    def redraw() -> None:
+        while not stop.wait(period_s):
+            bar.refresh()
+
+    thread = threading.Thread(target=redraw, name='identify-bar', daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join()
 
 
 def print_result(result: IdentificationResult, wall_s: float) -> None:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -83,7 +82,7 @@ def build_replay_plant(kind: str, normal0: NDArray[np.float64], time0_s: float,
 def run(args: argparse.Namespace) -> int:
     from sphere_sim.model.parameters import load_parameter_set
     from sphere_twin.bag.locate import locate_bag
-    from sphere_twin.plots import plot_lines
+    from sphere_twin.plots import plot_replay_errors
     from sphere_twin.run_analysis import load_run, replay_start_index, unclosed_bag_warning
 
     bag = locate_bag(args.bag)
@@ -113,11 +112,13 @@ def run(args: argparse.Namespace) -> int:
     result = results['after']
     labels = {'before': f'{plant} plant, {before.name if before else ""} (before)',
               'after': f'{plant} plant, {args.params.name}' + (' (after)' if before else '')}
-    plot_lines(result.times_s, [[max(math.degrees(e), 1e-12) for e in results[k].error_rad]
-                                for k in results],
-               [labels[k] for k in results], 'time (s)', 'simulated vs recorded normal (deg)',
-               stem.with_suffix('.png'), title=f'open-loop replay of {bag.name}',
-               logy=True)
+    improvement = (improvement_text(results['before'].rms_error_rad, result.rms_error_rad)
+                   if before is not None else '')
+    # In rad, as the lines below print it; the improvement's line is the title's second.
+    plot_replay_errors(result.times_s, {labels[k]: results[k].error_rad for k in results},
+                       stem.with_suffix('.png'),
+                       title='\n'.join(filter(None, (f'open-loop replay of {bag.name}',
+                                                      improvement))))
     data = {'bag': str(args.bag), 'plant': plant, 'samples': int(result.times_s.size),
             'kicks': len(recorded.kicks), 'params': args.params.name,
             'max_error_rad': result.max_error_rad, 'rms_error_rad': result.rms_error_rad,
@@ -136,12 +137,17 @@ def run(args: argparse.Namespace) -> int:
               f'{b.rms_error_rad:.3g} rad')
         print(f'replay error after ({args.params.name}): max {result.max_error_rad:.3g} rad, '
               f'RMS {result.rms_error_rad:.3g} rad')
-        print(f'improvement: RMS {b.rms_error_rad:.3g} -> {result.rms_error_rad:.3g} rad '
-              f'({b.rms_error_rad / max(result.rms_error_rad, 1e-300):.2f}x)')
+        print(improvement)
     else:
         print(f'replay error: max {result.max_error_rad:.3g} rad, RMS '
               f'{result.rms_error_rad:.3g} rad')
     return 0
+
+
+def improvement_text(before_rms_rad: float, after_rms_rad: float) -> str:
+    """The before-and-after line, printed and the plot's title alike."""
+    return (f'improvement: RMS {before_rms_rad:.3g} -> {after_rms_rad:.3g} rad '
+            f'({before_rms_rad / max(after_rms_rad, 1e-300):.2f}x)')
 
 
 def _replay(recorded: RecordedRun, start: int, plant: str, params: ParameterSet,

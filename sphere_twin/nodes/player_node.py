@@ -42,6 +42,11 @@ from sphere_twin.nodes.parameters import MAX_RATE, MIN_RATE, PLAYER_PARAMETERS
 SLEEP_SLICE_S = 0.1
 ACK_TIMEOUT_S = 5.0
 DEFAULT_QOS_DEPTH = 10
+# Wall seconds between two progress lines while a bag plays: a long bag (the example, 33 s
+# recorded) otherwise plays in silence until its last line. The CLI's period
+# (sphere_twin.run_analysis.PROGRESS_PERIOD_S), not imported from there: that module would add
+# a second to the node's start.
+PROGRESS_PERIOD_S = 5.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -175,6 +180,13 @@ def played_line(count: int) -> str:
     return f'played {count} messages'
 
 
+def progress_line(played: int, total: int, bag_time_s: float, bag_span_s: float) -> str:
+    """A progress line while playing: messages of this pass played (made-up /clock ticks not
+    counted) and the bag time reached, from the bag's first message."""
+    return (f'progress: played {played} of {total} messages, bag time {bag_time_s:.1f} of '
+            f'{bag_span_s:.1f} s')
+
+
 
 class PlayerNode(Node):
     """Republishes a bag.
@@ -220,6 +232,10 @@ class PlayerNode(Node):
         types = {m.topic: m.type_name for m in messages}
         self.plan = playback_plan(messages, p['rate'], p['start_offset_s'], topics,
                                   p['publish_clock'])
+        self._bag_start_ns = messages[0].log_time_ns if messages else 0
+        self._bag_span_s = ((messages[-1].log_time_ns - self._bag_start_ns) / NS_PER_S
+                            if messages else 0.0)
+        self._messages_per_pass = sum(item.data is not None for item in self.plan)
         contract = {t.name: t for t in ALL_TOPICS}
         self._playback_publishers: dict[str, Any] = {}
         for item in self.plan:
@@ -269,8 +285,11 @@ class PlayerNode(Node):
             time.sleep(max(0.0, min(deadline - time.monotonic(), SLEEP_SLICE_S)))
 
     def play_once(self) -> None:
-        """Publish :attr:`plan` at its times."""
+        """Publish :attr:`plan` at its times, logging a progress line every
+        PROGRESS_PERIOD_S of wall time."""
         start = time.monotonic()
+        played_before = self.played
+        next_progress_s = start + PROGRESS_PERIOD_S
         for item in self.plan:
             while self.context.ok():
                 remaining = start + item.due_s - time.monotonic()
@@ -280,6 +299,11 @@ class PlayerNode(Node):
             if not self.context.ok():
                 return
             self.publish_item(item)
+            if time.monotonic() >= next_progress_s:
+                self.get_logger().info(progress_line(
+                    self.played - played_before, self._messages_per_pass,
+                    (item.log_time_ns - self._bag_start_ns) / NS_PER_S, self._bag_span_s))
+                next_progress_s = time.monotonic() + PROGRESS_PERIOD_S
 
     def play(self) -> None:
         """Play the bag (for ever with ``loop``), then wait for acknowledgements."""
