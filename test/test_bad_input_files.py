@@ -76,6 +76,10 @@ INPUTS: dict[str, str | bytes | None] = {
     's_perturb_text.yaml': SCENE + 'perturbation: {beam.mass_kg: heavy}\n',
     's_perturb_neg.yaml': SCENE + 'perturbation: {beam.mass_kg: -1.0e-7}\n',
     's_bool_beam.yaml': SCENE.replace('[1, 2, 3, 4]', '[true, 2]'),
+    's_late_pulse.yaml': SCENE + ('duration_s: 0.01\nvoltage_programme:\n  pulses:\n    - {beam: '
+                                  '1, amplitude_v: 50.0, start_s: 0.02, width_s: 0.001}\n'),
+    's_cut_pulse.yaml': SCENE + ('duration_s: 0.01\nvoltage_programme:\n  pulses:\n    - {beam: '
+                                 '1, amplitude_v: 50.0, start_s: 0.008, width_s: 0.004}\n'),
 }
 # SCENE's own `parameters:` line comes first; a later duplicate key replaces it in YAML.
 INPUTS = {name: (text.replace('parameters: calibrated\n', '', 1)
@@ -143,6 +147,11 @@ CASES = [
     _scene('s_bool_duration.yaml', 'duration_s = True: must be a number, not true/false'),
     _scene('s_inf_duration.yaml', 'duration_s = inf s: must be a finite number'),
     _scene('s_latin1.yaml', 'scene file s_latin1.yaml is not UTF-8 text (byte 9)'),
+    # a pulse the run would never apply, or cut short
+    _scene('s_late_pulse.yaml', "'voltage_programme': the pulse on beam 1 from 0.02 to 0.021 s "
+                                'ends after the scene (duration_s = 0.01 s)'),
+    _scene('s_cut_pulse.yaml', "'voltage_programme': the pulse on beam 1 from 0.008 to 0.012 s "
+                               'ends after the scene (duration_s = 0.01 s)'),
     _scene('s_dir.yaml', 's_dir.yaml is a directory, not a scene file'),
     _scene('s_sunk.yaml', 'initial_state.sphere_lift_m = -0.001 m: must be zero or positive'),
     _scene('s_angle.yaml', 'initial_state.sphere_angles_deg[1] = 400 deg: must be at most '

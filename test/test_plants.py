@@ -194,6 +194,25 @@ def test_a_voltage_command_cuts_a_running_programme_and_says_so(table):
     assert runner.counters.cut == 2 and runner.counters.programmes == 1
 
 
+def test_commands_replaced_within_a_sample_period_are_counted_as_dropped(table):
+    """Holds that arrive between two samples: only the latest reaches the plant, each earlier
+    one is counted as replaced, and so is a programme a hold drops before its start."""
+    plant = DiscretePlant(table, window_s=0.05)
+    runner = TwinRunner(plant, period_s=0.01)
+    runner.tick()
+    for _ in range(5):
+        runner.command_voltages([0.0] * 4)
+    assert (runner.waiting, runner.counters.replaced) == (1, 4)
+    runner.tick()
+    assert (runner.waiting, runner.counters.accepted) == (0, 1)
+    runner.command_programme(*table.programme(0, 1.0).segments(), start_s=0.05)
+    runner.command_voltages([0.0] * 4)
+    runner.tick()
+    assert plant.kicks == 0
+    assert (runner.counters.accepted, runner.counters.replaced, runner.counters.dropped) == (
+        2, 5, 5)
+
+
 def test_the_runner_reports_each_programmes_actual_start_and_end(table):
     """A programme that arrives after the start it asked for starts at the next sample, and
     the report says so; its end is reported with the sample that shows it, at the true end."""

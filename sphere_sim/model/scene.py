@@ -235,6 +235,8 @@ def scene_from_dict(data: Any, name: str = 'scene') -> Scene:
     if absent:
         raise SceneError(f"'voltage_programme' drives beam(s) {absent} that the scene lacks")
 
+    duration_s = _number(data.get('duration_s', 0.1), 'duration_s')
+    _check_pulses_within(programme, duration_s)
     parameter_set = str(data.get('parameters', DEFAULT_PARAMETER_SET))
     scene = Scene(
         name=str(data.get('name', name)),
@@ -246,7 +248,7 @@ def scene_from_dict(data: Any, name: str = 'scene') -> Scene:
         capacitance=capacitance,
         initial=initial,
         programme=programme,
-        duration_s=_number(data.get('duration_s', 0.1), 'duration_s'),
+        duration_s=duration_s,
         perturbation=_perturbation(data.get('perturbation')),
     )
     try:
@@ -254,6 +256,17 @@ def scene_from_dict(data: Any, name: str = 'scene') -> Scene:
     except ParameterError as exc:
         raise SceneError(f"'parameters'/'perturbation': {exc}") from exc
     return scene
+
+
+def _check_pulses_within(programme: PulseProgramme, duration_s: float) -> None:
+    """A pulse that starts after the scene ends never acts, and one that ends after it is cut
+    short: either is a mistake the run would hide, so the scene is refused."""
+    for pulse in programme.pulses:
+        if pulse.end_s > duration_s:
+            raise SceneError(
+                f"'voltage_programme': the pulse on beam {pulse.beam} from "
+                f'{pulse.start_s:g} to {pulse.end_s:g} s ends after the scene '
+                f'(duration_s = {duration_s:g} s): lengthen duration_s or move the pulse')
 
 
 def available_scenes() -> list[str]:

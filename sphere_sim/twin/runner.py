@@ -71,12 +71,30 @@ class Sample:
 
 @dataclasses.dataclass
 class TwinCounters:
+    """What became of every command (voltage command or programme).
+
+    Each one the twin received ends as exactly one of ``accepted`` (applied to the plant),
+    ``rejected`` (refused, by the contract, the rules or the plant), ``replaced`` (dropped: a
+    newer voltage command superseded it before the plant held it) or is still waiting for its
+    sample (:attr:`TwinRunner.waiting`). ``lost`` counts the commands that never reached the
+    twin (dropped in the transport's queue); they are not in ``received``. The node books
+    ``received``, ``lost`` and the refusals it makes before the runner sees a command.
+    """
+
     samples: int = 0
+    received: int = 0
     accepted: int = 0
     rejected: int = 0
+    replaced: int = 0
+    lost: int = 0
     programmes: int = 0
     late: int = 0  # programmes whose start time had passed when they arrived
     cut: int = 0  # programmes a later voltage command cut short or dropped
+
+    @property
+    def dropped(self) -> int:
+        """Commands that were neither applied nor refused: replaced or lost."""
+        return self.replaced + self.lost
 
 
 @dataclasses.dataclass
@@ -164,6 +182,11 @@ class TwinRunner:
     def time_s(self) -> float:
         return self._step * self.period_s
 
+    @property
+    def waiting(self) -> int:
+        """Commands received and queued, not yet applied, refused or replaced."""
+        return len(self._queued)
+
     # --- commands ----------------------------------------------------------------------
     def command_voltages(self, voltages_v: ArrayLike) -> str | None:
         """Queue voltages to hold from the next sample on.
@@ -187,7 +210,9 @@ class TwinRunner:
             raise CommandRejectedError(str(error)) from None
         cut = self._cut_by_hold()
         # The hold overrides everything queued: programmes (reported) and earlier holds due at
-        # the same sample (only the latest would count; a burst never fills the queue).
+        # the same sample (only the latest would count; a burst never fills the queue). None
+        # of them reached the plant, so each is counted as dropped by replacement.
+        self.counters.replaced += len(self._queued)
         self._queued.clear()
         self._queue(self.time_s, 'hold', volts, self.time_s)
         return cut

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.event_handler import QoSMessageLostInfo, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
@@ -114,10 +115,16 @@ class SimulatorNode(Node):
         # Every message leaves through one thread of its own, in the order it was made: the
         # next sample integrates (the kernel releases the GIL) while this one is published.
         self._outbox = Outbox(name='simulator publishing', on_error=self._publishing_failed)
+        # A command the transport loses never reaches a callback: the QoS event counts it
+        # (Fast DDS reports what a sender's queue gave up before this reader had it; the
+        # reader's own queue is deep enough not to overflow: msg_defs.topics.COMMAND_QOS).
+        lost_events = SubscriptionEventCallbacks(message_lost=self.on_commands_lost)
         self.create_subscription(VOLTAGE_COMMAND.msg_type, VOLTAGE_COMMAND.name,
-                                 self.on_voltage_command, VOLTAGE_COMMAND.qos.to_profile())
+                                 self.on_voltage_command, VOLTAGE_COMMAND.qos.to_profile(),
+                                 event_callbacks=lost_events)
         self.create_subscription(PULSE_PROGRAM.msg_type, PULSE_PROGRAM.name,
-                                 self.on_pulse_program, PULSE_PROGRAM.qos.to_profile())
+                                 self.on_pulse_program, PULSE_PROGRAM.qos.to_profile(),
+                                 event_callbacks=lost_events)
         self.paced = self.real_time_factor > 0 and not p['lockstep']
         period = (self.period_s / self.real_time_factor / CATCH_UP_SPEEDUP if self.paced
                   else FAST_TIMER_PERIOD_S)
@@ -139,7 +146,12 @@ class SimulatorNode(Node):
         return declare_node_parameters(self, SIMULATOR_PARAMETERS)
 
     # --- commands ----------------------------------------------------------------------
+    def on_commands_lost(self, info: QoSMessageLostInfo) -> None:
+        """Count the commands the transport lost before they reached this node."""
+        self.runner.counters.lost += info.total_count_change
+
     def on_voltage_command(self, msg: Any) -> None:
+        self.runner.counters.received += 1
         # ValueError covers both the contract (conversions) and the runner's CommandRejectedError.
         try:
             cut = self.runner.command_voltages(voltages_from_msg(msg))
@@ -151,6 +163,7 @@ class SimulatorNode(Node):
         self._publish_events()
 
     def on_pulse_program(self, msg: Any) -> None:
+        self.runner.counters.received += 1
         start_s = ns_from_time(msg.header.stamp) / NS_PER_S
         try:
             times, volts = programme_from_msg(msg)
@@ -222,7 +235,11 @@ class SimulatorNode(Node):
         wall = max(time.perf_counter() - self._wall_start_s, 1e-9)
         median_ms, max_ms = (1e3 * v for v in t.latency_summary())
         return (
-            ('accepted', c.accepted), ('rejected', c.rejected), ('programmes', c.programmes),
+            # Every command received is accepted (applied), rejected (refused), dropped as
+            # replaced, or still waiting; the lost ones never arrived (TwinCounters).
+            ('received', c.received), ('accepted', c.accepted), ('rejected', c.rejected),
+            ('dropped', c.dropped), ('dropped_replaced', c.replaced), ('dropped_lost', c.lost),
+            ('waiting', self.runner.waiting), ('programmes', c.programmes),
             ('late', c.late), ('cut', c.cut), ('samples', c.samples),
             ('simulated_time_s', f'{self.runner.time_s:.6f}'), ('wall_time_s', f'{wall:.6f}'),
             ('real_time_factor', f'{self.runner.time_s / wall:.4f}'),
@@ -311,7 +328,8 @@ class SimulatorNode(Node):
         self._outbox.flush()  # what was handed over counts as published
         v = dict(self.status_values())
         return (f'simulator: simulated {self.runner.time_s:.3f} s, {v["samples"]} samples, '
-                f'{v["programmes"]} programmes ({v["late"]} late), {v["rejected"]} rejected; '
+                f'{v["programmes"]} programmes ({v["late"]} late), {v["rejected"]} rejected, '
+                f'{v["dropped"]} dropped; '
                 f'real-time factor {float(v["real_time_factor"]):.3f}; of wall time: '
                 f'integrating {float(v["integrating_fraction"]):.0%} and waiting for '
                 f'publishing {float(v["waiting_for_publishing_fraction"]):.0%} (simulation '
