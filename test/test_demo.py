@@ -142,3 +142,29 @@ def test_sigterm_stops_the_demo_as_sigint_does_on_the_domain_the_environment_nam
     assert 'offline loop' not in text  # no comparison: the run was cut short
     assert lines[-1] == 'demo: STOPPED by SIGTERM, exit status 143'
     assert len(list(tmp_path.glob('demo_*/metadata.yaml'))) == 1  # the bag, closed
+
+
+class _Farewell:
+    """A stopped node as the demo's summary reads it: its name and its farewell line."""
+
+    def __init__(self, name, text):
+        self.name, self._text = name, text
+
+    def stdout_text(self):
+        return self._text
+
+
+@pytest.mark.parametrize(('held', 'slipped'), [(0.17, True), (0.245, False)])
+def test_the_summary_says_when_the_pace_slipped(held, slipped):
+    from sphere_twin.commands.demo import _report_pace
+
+    lines = []
+    simulator = _Farewell('simulator', f'simulator: simulated 33.020 s, 481 programmes (137 '
+                                       f'late), 0 rejected; real-time factor {held}; of wall')
+    _report_pace([simulator, _Farewell('reference', 'real-time factor 0.17')], lines.append,
+                 asked_factor=0.25)
+    assert lines[0] == (f'demo: real-time factor: simulator {held:.2f}, reference 0.17; late '
+                        'programmes: 137')
+    assert (len(lines) == 2) == slipped
+    if slipped:
+        assert lines[1].startswith('demo: the pace slipped: asked 0.25, the simulator held 0.17')

@@ -227,7 +227,7 @@ def run_demo(setpoint_s: float = DEFAULT_SETPOINT_S, trajectory_s: float = DEFAU
         live = _run_live(demo_nodes(bag_dir, setpoint_s, real_time_factor, seed, plant),
                          domain_id, duration_s, real_time_factor, bag_dir, stop, say)
         failures = _report_exits(live.processes, say)
-        _report_pace(live.processes, say)
+        _report_pace(live.processes, say, real_time_factor)
         offline_rms_rad = (None if stop.requested
                            else _offline_rms_rad(setpoint_s, duration_s, plant, stop, say))
         problems = live.problems + failures
@@ -372,19 +372,31 @@ def _report_exits(processes: Iterable[NodeProcess], say: Callable[[str], None]) 
     return problems
 
 
-def _report_pace(processes: Iterable[NodeProcess], say: Callable[[str], None]) -> None:
+# Below this fraction of the pace asked for, the summary says the pace slipped.
+PACE_HELD_FRACTION = 0.95
+
+
+def _report_pace(processes: Iterable[NodeProcess], say: Callable[[str], None],
+                 asked_factor: float) -> None:
     """Say the real-time factor each node saw and the late programmes (those that started
-    later than the controller asked: the simulator fell behind), from their farewell lines."""
-    factors, late = [], None
+    later than the controller asked: the simulator fell behind), from their farewell lines,
+    and whether the simulator held the pace asked for."""
+    factors, late, held = [], None, None
     for process in processes:
         text = process.stdout_text()
         found = REAL_TIME_FACTOR_PATTERN.findall(text)
         if found:
             factors.append(f'{process.name} {float(found[-1]):.2f}')
+            if process.name == 'simulator':
+                held = float(found[-1])
         if process.name == 'simulator' and LATE_PATTERN.search(text):
             late = int(LATE_PATTERN.findall(text)[-1])
     say(f'demo: real-time factor: {", ".join(factors)}; late programmes: '
         f'{"unknown" if late is None else late}')
+    if held is not None and held < PACE_HELD_FRACTION * asked_factor:
+        say(f'demo: the pace slipped: asked {asked_factor:g}, the simulator held {held:.2f} '
+            '(this machine could not integrate faster; a late programme starts at the next '
+            'sample)')
 
 
 def _trajectory_rms_rad(times_s: ArrayLike, errors_rad: ArrayLike, setpoint_s: float) -> float:
