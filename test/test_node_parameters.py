@@ -258,3 +258,21 @@ def test_each_node_declares_its_specs(node, context, tmp_path, monkeypatch):
                 assert _same(built.get_parameter(name).value, spec.default), name
     finally:
         built.destroy_node()
+
+
+@pytest.mark.parametrize('executable', sorted(NODE_PARAMETERS))
+def test_every_executable_prints_its_parameters_with_help_and_starts_nothing(executable):
+    import subprocess
+
+    from sphere_twin.processes import child_environment, fresh_domain_id, resolve_executable
+
+    result = subprocess.run([resolve_executable(executable), '--help'], capture_output=True,
+                            text=True, timeout=60, check=False,
+                            env=child_environment(fresh_domain_id()))
+    assert result.returncode == 0, result.stderr
+    assert result.stderr == ''
+    lines = result.stdout.splitlines()
+    assert lines[0].startswith(f'usage: {executable} [--ros-args -p NAME:=VALUE')
+    listed = [line.split()[0] for line in lines if line.startswith('  ') and
+              not line.startswith('      ')]
+    assert listed == [spec.name for spec in NODE_PARAMETERS[executable]]

@@ -5,7 +5,8 @@ description) without ROS, so ``sphere_twin.nodes.parameters`` can list every nod
 and the tests can read them without rclpy. :func:`declare_node_parameters` declares a node's
 specs on the node, refuses a parameter the node does not have, and checks each value (type,
 finite, range, choices, length, rule), raising :class:`~sphere_twin.node_runtime.ros_env.
-StartupError` with the one line the node prints.
+StartupError` with the one line the node prints. :func:`parameters_help` is what an
+executable's ``--help`` prints.
 """
 
 from __future__ import annotations
@@ -17,10 +18,12 @@ import math
 from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING, Any
 
-from sphere_twin.node_runtime.ros_env import StartupError
-
 if TYPE_CHECKING:
     from rcl_interfaces.msg import ParameterDescriptor
+
+
+class StartupError(ValueError):
+    """A node cannot start with the parameters or files it was given."""
 
 
 class ParameterType(enum.Enum):
@@ -231,3 +234,19 @@ def parameter_descriptor(description: str, float_range: tuple[float, float] | No
         d.integer_range = [IntegerRange(from_value=int(int_range[0]),
                                         to_value=int(int_range[1]), step=1)]
     return d
+
+
+def parameters_help(executable: str, specs: Sequence[ParameterSpec]) -> str:
+    """What ``<executable> --help`` prints: how to set a parameter, then each one's type,
+    default, range or choices and description."""
+    lines = [f'usage: {executable} [--ros-args -p NAME:=VALUE ... | --params-file FILE]', '',
+             'parameters:']
+    for spec in specs:
+        allowed = (f', one of {", ".join(spec.choices)}' if spec.choices
+                   else f', in [{_number_text(spec.range[0])}, {_number_text(spec.range[1])}]'
+                   if spec.range is not None else '')
+        default = ('none' if spec.default is None
+                   else list(spec.default) if isinstance(spec.default, tuple) else spec.default)
+        lines.append(f'  {spec.name} ({spec.type.value}, default {default!r}{allowed})')
+        lines.append(f'      {spec.description}')
+    return '\n'.join(lines)

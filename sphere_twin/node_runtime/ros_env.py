@@ -10,9 +10,11 @@ import os
 import re
 import signal
 import sys
-from collections.abc import Callable, MutableMapping
+from collections.abc import Callable, MutableMapping, Sequence
 from types import FrameType
 from typing import TYPE_CHECKING, Any
+
+from sphere_twin.node_runtime.parameter_specs import ParameterSpec, parameters_help
 
 if TYPE_CHECKING:
     pass
@@ -100,10 +102,6 @@ MODULE_TO_ROSDEP = {'scipy': 'python3-scipy', 'numpy': 'python3-numpy', 'yaml': 
                     'zstandard': 'python3-zstandard', 'tqdm': 'python3-tqdm'}
 
 
-class StartupError(ValueError):
-    """A node cannot start with the parameters or files it was given."""
-
-
 def startup_error_line(node_name: str, error: BaseException) -> str:
     """The one line a node prints when it cannot start, naming what to fix."""
     if isinstance(error, ModuleNotFoundError):
@@ -148,7 +146,8 @@ def _startup_errors() -> tuple[type[BaseException], ...]:
 def run_node(build: Callable[[], Any], args: list[str] | None = None,
              spin: Callable[[Any], object] | None = None,
              farewell: Callable[[Any], str] | None = None, name: str | None = None,
-             own_signal_handling: Callable[[], object] | None = None) -> int:
+             own_signal_handling: Callable[[], object] | None = None,
+             parameters: Sequence[ParameterSpec] = ()) -> int:
     """The ``main()`` of every executable: hygiene, init, build, spin, clean shutdown.
 
     Follows ros2/demos: the node is built inside the ``try`` so that a signal during start-up
@@ -168,6 +167,9 @@ def run_node(build: Callable[[], Any], args: list[str] | None = None,
         by the signal) before the node is destroyed.
     name : str, optional
         The executable's name, for the one line of a start-up error.
+    parameters : sequence of ParameterSpec
+        The node's parameters: ``--help`` (or ``-h``) before any ROS argument prints them
+        and exits 0 without starting the node.
     own_signal_handling : callable, optional
         Installs the node's own SIGINT and SIGTERM handling instead of the KeyboardInterrupt
         handlers and rclpy's (the recorder's: a flag its spin polls, so no write is cut).
@@ -180,6 +182,8 @@ def run_node(build: Callable[[], Any], args: list[str] | None = None,
         ``<name>: error: ...``, no traceback); 1 when the system failed it while it ran (an
         ``OSError``, such as a full disk: one line too).
     """
+    if _printed_help(sys.argv[1:] if args is None else args, name or 'node', parameters):
+        return 0
     import rclpy
     from rclpy.executors import ExternalShutdownException
 
@@ -213,13 +217,34 @@ def run_node(build: Callable[[], Any], args: list[str] | None = None,
         if not shutdown_requested():
             raise
     finally:
-        if node is not None:
-            if farewell is not None:
-                print(farewell(node), flush=True)
-            node.destroy_node()
-        rclpy.try_shutdown()
-        _ignore_late_signals()
+        _leave(node, farewell)
     return status
+
+
+def _leave(node: Any, farewell: Callable[[Any], str] | None) -> None:
+    """The node's farewell, its destruction and rclpy's shutdown, whatever ended it."""
+    import rclpy
+
+    if node is not None:
+        if farewell is not None:
+            print(farewell(node), flush=True)
+        node.destroy_node()
+    rclpy.try_shutdown()
+    _ignore_late_signals()
+
+
+def _printed_help(command_line: Sequence[str], node_name: str,
+                  parameters: Sequence[ParameterSpec]) -> bool:
+    """Print the node's parameters if ``--help`` or ``-h`` comes before any ROS argument."""
+    own = command_line[:list(command_line).index('--ros-args')] if '--ros-args' in \
+        command_line else command_line
+    if '--help' not in own and '-h' not in own:
+        return False
+    try:
+        print(parameters_help(node_name, parameters), flush=True)
+    except BrokenPipeError:  # `simulator --help | head`: the reader has what it wanted
+        sys.stdout = None  # nothing more to flush at exit
+    return True
 
 
 def _ignore_late_signals() -> None:

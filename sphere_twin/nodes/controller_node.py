@@ -213,7 +213,8 @@ class ControllerNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(ControllerNode, args, farewell=ControllerNode.summary, name='controller')
+    return run_node(ControllerNode, args, farewell=ControllerNode.summary, name='controller',
+                    parameters=CONTROLLER_PARAMETERS)
 
 
 if __name__ == '__main__':

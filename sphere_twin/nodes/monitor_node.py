@@ -83,7 +83,8 @@ def main(args: list[str] | None = None) -> int:
     # Never completes when max_messages is 0, so the node then runs until signalled.
     return run_node(MonitorNode, args,
                     spin=lambda node: rclpy.spin_until_future_complete(node, node.done),
-                    farewell=MonitorNode.summary, name='monitor')
+                    farewell=MonitorNode.summary, name='monitor',
+                    parameters=MONITOR_PARAMETERS)
 
 
 if __name__ == '__main__':

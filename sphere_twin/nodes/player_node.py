@@ -34,8 +34,8 @@ from sphere_twin.bag.reader import (
     read_messages,
     read_metadata,
 )
-from sphere_twin.node_runtime.parameter_specs import declare_node_parameters
-from sphere_twin.node_runtime.ros_env import StartupError, run_node
+from sphere_twin.node_runtime.parameter_specs import StartupError, declare_node_parameters
+from sphere_twin.node_runtime.ros_env import run_node
 from sphere_twin.nodes.parameters import MAX_RATE, MIN_RATE, PLAYER_PARAMETERS
 
 # Longest single sleep, so that a stop signal is handled promptly.
@@ -326,7 +326,8 @@ class PlayerNode(Node):
 def main(args: list[str] | None = None) -> int:
     """Play a bag; exit status 2, with one line, if it cannot be read or a parameter is bad."""
     return run_node(PlayerNode, args, spin=PlayerNode.play, farewell=PlayerNode.summary,
-                    name='player')
+                    name='player',
+                    parameters=PLAYER_PARAMETERS)
 
 
 if __name__ == '__main__':

@@ -32,8 +32,8 @@ from rclpy.qos import QoSProfile
 from msg_defs.topics import Topic, topic_by_name
 from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.writer import BagWriter
-from sphere_twin.node_runtime.parameter_specs import declare_node_parameters
-from sphere_twin.node_runtime.ros_env import StartupError, run_node
+from sphere_twin.node_runtime.parameter_specs import StartupError, declare_node_parameters
+from sphere_twin.node_runtime.ros_env import run_node
 from sphere_twin.nodes.parameters import DEFAULT_BAG_PARENT, RECORDER_PARAMETERS
 
 # Depth of the recorder's subscriptions. History does not affect QoS compatibility; a
@@ -249,6 +249,7 @@ def main(args: list[str] | None = None) -> int:
     stop = StopRequest()
     return run_node(RecorderNode, args, spin=lambda node: node.spin_until(stop),
                     farewell=RecorderNode.finish, name='recorder',
+                    parameters=RECORDER_PARAMETERS,
                     own_signal_handling=stop.install)
 
 

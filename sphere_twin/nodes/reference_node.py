@@ -92,7 +92,8 @@ class ReferenceNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(ReferenceNode, args, farewell=ReferenceNode.summary, name='reference')
+    return run_node(ReferenceNode, args, farewell=ReferenceNode.summary, name='reference',
+                    parameters=REFERENCE_PARAMETERS)
 
 
 if __name__ == '__main__':

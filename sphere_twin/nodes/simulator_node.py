@@ -48,8 +48,8 @@ from msg_defs.topics import (
 )
 from sphere_sim.twin.report_limit import ReportLimit
 from sphere_twin.node_runtime.outbox import Outbox
-from sphere_twin.node_runtime.parameter_specs import declare_node_parameters
-from sphere_twin.node_runtime.ros_env import DISCOVERY_RANGE_VAR, StartupError, run_node
+from sphere_twin.node_runtime.parameter_specs import StartupError, declare_node_parameters
+from sphere_twin.node_runtime.ros_env import DISCOVERY_RANGE_VAR, run_node
 from sphere_twin.nodes.parameters import SIMULATOR_PARAMETERS
 
 if TYPE_CHECKING:
@@ -343,7 +343,8 @@ class SimulatorNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(SimulatorNode, args, farewell=SimulatorNode.summary, name='simulator')
+    return run_node(SimulatorNode, args, farewell=SimulatorNode.summary, name='simulator',
+                    parameters=SIMULATOR_PARAMETERS)
 
 
 if __name__ == '__main__':
