@@ -510,21 +510,26 @@ def _checked_uncertain(item: dict[str, Any]) -> dict[str, Any]:
             'high': check_parameter(item['path'], item['high'])}
 
 
-def _read_yaml(path: Path) -> dict[str, Any]:
-    """A parameter file's mapping; every way it can fail to be one is a ParameterError."""
+def read_yaml_file(path: Path, kind: str, error: type[Exception]) -> Any:
+    """The content of the YAML file ``path`` (a ``kind``: 'parameter file', 'scene file'),
+    read with :class:`YamlLoader`; every way it cannot be read is one ``error``, in one line."""
     if path.is_dir():
-        raise ParameterError(f'{path} is a directory, not a parameter file')
+        raise error(f'{path} is a directory, not a {kind}')
     try:
         with open(path, encoding='utf-8') as stream:
-            data = yaml.load(stream, Loader=YamlLoader)  # a SafeLoader
+            return yaml.load(stream, Loader=YamlLoader)  # a SafeLoader
     except FileNotFoundError as exc:
-        raise ParameterError(f'parameter file not found: {path}') from exc
+        raise error(f'{kind} not found: {path}') from exc
     except UnicodeDecodeError as exc:
-        raise ParameterError(f'parameter file {path} is not UTF-8 text (byte {exc.start}): '
-                             'save it as UTF-8') from exc
+        raise error(f'{kind} {path} is not UTF-8 text (byte {exc.start}): save it as '
+                    'UTF-8') from exc
     except yaml.YAMLError as exc:
-        raise ParameterError(f'parameter file {path} is not valid YAML: '
-                             f'{" ".join(str(exc).split())}') from exc
+        raise error(f'{kind} {path} is not valid YAML: {" ".join(str(exc).split())}') from exc
+
+
+def _read_yaml(path: Path) -> dict[str, Any]:
+    """A parameter file's mapping; every way it can fail to be one is a ParameterError."""
+    data = read_yaml_file(path, 'parameter file', ParameterError)
     if not isinstance(data, dict):
         raise ParameterError(f'parameter file {path} must hold a mapping')
     return data

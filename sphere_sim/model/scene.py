@@ -12,17 +12,15 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, Self, overload
 
-import yaml
-
 from msg_defs.device import BEAM_IDS, DEFAULT_PARAMETER_SET, VOLTAGE_LIMIT_V
 from sphere_sim.model.parameters import (
     ParameterError,
     ParameterRule,
     ParameterSet,
-    YamlLoader,
     check_number,
     check_parameter,
     load_parameter_set,
+    read_yaml_file,
 )
 from sphere_sim.model.programme import ProgrammeError, PulseProgramme
 
@@ -281,17 +279,7 @@ def load_scene(name_or_path: str | Path) -> Scene:
         path = SCENES_DIR / f'{name_or_path}.yaml'
     if not path.exists():
         raise SceneError(f'scene {name_or_path!r} not found; shipped scenes: {available_scenes()}')
-    if path.is_dir():
-        raise SceneError(f'{path} is a directory, not a scene file')
-    try:
-        with open(path, encoding='utf-8') as stream:
-            data = yaml.load(stream, Loader=YamlLoader)  # a SafeLoader
-    except UnicodeDecodeError as exc:
-        raise SceneError(f'scene file {path} is not UTF-8 text (byte {exc.start}): save it as '
-                         'UTF-8') from exc
-    except yaml.YAMLError as exc:
-        raise SceneError(f'scene file {path} is not valid YAML: '
-                         f'{" ".join(str(exc).split())}') from exc
+    data = read_yaml_file(path, 'scene file', SceneError)
     if data is None:
         raise SceneError(f'scene file {path} is empty')
     try:
