@@ -32,27 +32,31 @@ def bare_mcap(tmp_path):
 
 def test_the_mcap_file_of_a_bag_is_its_bag():
     bag = locate_bag(EXAMPLE_MCAP)
-    assert (bag.directory, bag.name, bag.output_dir, bag.note) == (
-        EXAMPLE, 'example', EXAMPLE.parent, None)
+    assert (bag.directory, bag.name, bag.note) == (EXAMPLE, 'example', None)
 
 
 def test_a_bare_mcap_file_is_read_from_its_records_and_left_untouched(bare_mcap,
                                                                       example_count):
     before = bare_mcap.read_bytes()
     bag = locate_bag(bare_mcap)
-    assert bag.name == 'run' and bag.output_dir == bare_mcap.parent
+    assert bag.name == 'run'
     assert f'({example_count} messages on ' in bag.note and 'closed cleanly' in bag.note
     assert _count(bag.directory) == example_count
     assert sorted(p.name for p in bare_mcap.parent.iterdir()) == ['run.mcap']
     assert bare_mcap.read_bytes() == before
 
 
-def test_report_takes_a_bare_mcap_file_and_writes_beside_it(bare_mcap, capsys):
+def test_report_takes_a_bare_mcap_file_and_writes_into_the_working_directory(
+        bare_mcap, capsys, tmp_path, monkeypatch):
+    work = tmp_path / 'work'
+    work.mkdir()
+    monkeypatch.chdir(work)
     assert main(['report', str(bare_mcap)]) == 0
     out = capsys.readouterr().out
     assert out.startswith(f'{bare_mcap} has no metadata.yaml: read from its own records')
     assert 'kicks: ' in out
-    assert (bare_mcap.parent / 'run_report.json').is_file()
+    assert (work / 'run_report.json').is_file()
+    assert sorted(p.name for p in bare_mcap.parent.iterdir()) == ['run.mcap', 'work']
 
 
 def test_bag_repair_of_a_bare_mcap_file_makes_its_directory_a_bag(bare_mcap, capsys,
@@ -68,7 +72,7 @@ def test_an_installed_bag_is_found_by_name_and_reports_into_the_working_director
         tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     found = locate_bag('example')
-    assert found.directory.name == 'example' and found.output_dir == tmp_path
+    assert found.directory.name == 'example'
     assert _count(found.directory) == _count(EXAMPLE)
     assert main(['report', 'example']) == 0
     assert (tmp_path / 'example_report.json').is_file()

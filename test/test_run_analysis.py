@@ -239,3 +239,24 @@ def test_a_moving_reference_is_interpolated_and_a_jump_is_not_spread_back():
     np.testing.assert_allclose(at[3, :2], [0.0075, 0.02], atol=1e-9)
     np.testing.assert_allclose(at[4, :2], xy[-1], atol=1e-12)
     np.testing.assert_allclose(np.linalg.norm(at, axis=1), 1.0, atol=1e-12)
+
+
+def test_replay_check_replays_on_the_plant_that_recorded_the_bag(tmp_path):
+    """bags/example was recorded from the physics: the plain replay-check replays it there,
+    not on the kick table; a bag without the sphere's state came from the table."""
+    import yaml
+
+    from msg_defs.topics import SPHERE_STATE
+    from sphere_twin.bag.locate import locate_bag
+    from sphere_twin.commands.replay_check import default_plant
+
+    example = locate_bag('example').directory
+    assert default_plant(example, shipped_set=True) == 'continuous'
+    metadata = yaml.safe_load((example / 'metadata.yaml').read_text())
+    topics = metadata['rosbag2_bagfile_information']['topics_with_message_count']
+    metadata['rosbag2_bagfile_information']['topics_with_message_count'] = [
+        t for t in topics if t['topic_metadata']['name'] != SPHERE_STATE.name]
+    (tmp_path / 'metadata.yaml').write_text(yaml.safe_dump(metadata))
+    assert default_plant(tmp_path, shipped_set=True) == 'discrete'
+    # Any set but the shipped one: the table cannot hold its kicks.
+    assert default_plant(tmp_path, shipped_set=False) == 'continuous'

@@ -24,7 +24,8 @@ SOURCE_BAGS_DIR = Path(__file__).resolve().parents[2] / 'bags'
 
 @dataclasses.dataclass(frozen=True)
 class BagLocation:
-    """Where a bag's directory is, what to call it, and where its outputs go.
+    """Where a bag's directory is and what to call it (a command's outputs are named after it
+    and go into the working directory, never beside the bag).
 
     Attributes
     ----------
@@ -32,15 +33,12 @@ class BagLocation:
         A bag directory the readers take (metadata.yaml and the MCAP file).
     name : str
         What the user's bag is called (outputs are named after it).
-    output_dir : pathlib.Path
-        Where outputs go by default: beside what the user passed.
     note : str or None
         What was done to read it, to say to the user (a bare MCAP file's recovered summary).
     """
 
     directory: Path
     name: str
-    output_dir: Path
     note: str | None = None
 
 
@@ -103,16 +101,16 @@ def locate_bag(given: str | os.PathLike[str]) -> BagLocation:
     """
     path = Path(given)
     if path.is_dir():
-        return BagLocation(path, path.name, path.parent)
+        return BagLocation(path, path.name)
     if path.is_file() and path.suffix == MCAP_SUFFIX:
         if lists_file(path.parent, path.name):
-            return BagLocation(path.parent, path.parent.name, path.parent.parent)
+            return BagLocation(path.parent, path.parent.name)
         view, note = _read_bare_mcap(path)
-        return BagLocation(view, path.stem, path.parent, note)
+        return BagLocation(view, path.stem, note)
     if path.is_file():
         raise BagError(f'{given} is not a bag: give a bag directory or an {MCAP_SUFFIX} file')
     installed = _installed(str(given))
     if installed is not None:
-        return BagLocation(installed, installed.name, Path.cwd())
+        return BagLocation(installed, installed.name)
     raise BagError(f'{given} is not a bag: no such directory or {MCAP_SUFFIX} file, and no bag '
                    'of that name is installed with sphere_twin')

@@ -41,9 +41,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                     'way to hold the twin against recordings of the real device.')
     parser.add_argument('bag', help=BAG_HELP)
     parser.add_argument('--plant', choices=('discrete', 'continuous'), default=None,
-                        help='the plant replayed (default: discrete with the shipped set, '
-                             'continuous with any other: the kick table holds only the '
-                             'shipped set\'s kicks)')
+                        help='the plant replayed (default: the one that recorded the bag, '
+                             'and continuous with any set but the shipped one: the kick table '
+                             'holds only the shipped set\'s kicks)')
     parser.add_argument('--tables', nargs='*', default=[],
                         help='kick tables of the discrete plant (default: the shipped one)')
     add_params_option(parser)
@@ -79,6 +79,25 @@ def build_replay_plant(kind: str, normal0: NDArray[np.float64], time0_s: float,
     return plant
 
 
+def recorded_from_the_physics(bag_dir: Path) -> bool:
+    """Whether the bag was recorded from the continuous plant: only it publishes the sphere's
+    and the beams' full state (the discrete plant knows the normal alone)."""
+    from msg_defs.topics import SPHERE_STATE
+    from sphere_twin.bag.reader import read_metadata
+
+    counts = {t['topic_metadata']['name']: t['message_count']
+              for t in read_metadata(bag_dir).get('topics_with_message_count', [])}
+    return counts.get(SPHERE_STATE.name, 0) > 0
+
+
+def default_plant(bag_dir: Path, shipped_set: bool) -> str:
+    """The plant a replay uses unless told: the one that recorded the bag, and the continuous
+    one for any set but the shipped one (the kick table holds only the shipped set's kicks)."""
+    if recorded_from_the_physics(bag_dir) or not shipped_set:
+        return 'continuous'
+    return 'discrete'
+
+
 def run(args: argparse.Namespace) -> int:
     from sphere_sim.model.parameters import load_parameter_set
     from sphere_twin.bag.locate import locate_bag
@@ -97,8 +116,7 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f'{args.bag}: the recording ends before a kick that began before '
                            'it settles')
     shipped = load_parameter_set(DEFAULT_PARAMETER_SET)
-    plant = args.plant or ('discrete' if args.params.digest() == shipped.digest()
-                           else 'continuous')
+    plant = args.plant or default_plant(bag.directory, args.params.digest() == shipped.digest())
     before = args.before
     if before is None and args.params.digest() != shipped.digest():
         before = shipped
