@@ -8,6 +8,7 @@ from msg_defs.topics import (
     BEAM_NAMES,
     BEAM_STATE_JOINT_NAMES,
     CLOCK,
+    COMMAND_BURST_LIMIT,
     PULSE_PROGRAM,
     SPHERE_REFERENCE,
     SURFACE_NORMAL,
@@ -44,9 +45,12 @@ def test_qos_specs_become_the_intended_profiles():
     command = VOLTAGE_COMMAND.qos.to_profile()
     assert command.reliability == ReliabilityPolicy.RELIABLE
     assert command.durability == DurabilityPolicy.VOLATILE
-    assert command.depth == 10
+    # Deep enough that a burst of commands within a sample is counted, not lost in the queue.
+    assert command.depth == COMMAND_BURST_LIMIT == 10_000
     # A programme is a one-off kick: never replayed to a late joiner.
-    assert PULSE_PROGRAM.qos.to_profile().durability == DurabilityPolicy.VOLATILE
+    programme = PULSE_PROGRAM.qos.to_profile()
+    assert programme.durability == DurabilityPolicy.VOLATILE
+    assert programme.depth == COMMAND_BURST_LIMIT
     reference = SPHERE_REFERENCE.qos.to_profile()
     assert reference.durability == DurabilityPolicy.TRANSIENT_LOCAL
     assert reference.depth == 1
