@@ -94,9 +94,10 @@ def run(args: argparse.Namespace) -> int:
     bags = [locate_bag(b) for b in args.bags]
     base = args.params
     try:
+        # The request first: a parameter that cannot be fitted is refused before any reading.
+        fits = fit_parameters(base, args.fit)
         obs = merge_observations([_read_saying(b.directory, i, len(bags))
                                   for i, b in enumerate(bags, 1)])
-        fits = fit_parameters(base, args.fit)
     except IdentificationError as exc:
         raise CommandError(str(exc)) from None
     out = args.out or DEFAULT_OUT_DIR / f'{bags[0].name}_identified.yaml'
