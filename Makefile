@@ -10,7 +10,11 @@ PYTEST_ARGS ?=
 
 .PHONY: setup demo test lint typecheck bench clean clean-cache
 
+# The physics (numba's machine code, cached once per install location) is compiled after the
+# install, so that neither a node's first start nor `make demo` waits a minute for it; `setup`
+# checks again each time (a second, unless a kernel changed or `make clean-cache` ran).
 setup: $(STAMP)
+	@$(BIN)/sphere-twin compile
 
 # Reinstall only when a pin or the package metadata changed.
 $(STAMP): requirements.txt requirements-dev.txt constraints.txt setup.py setup.cfg package.xml
@@ -18,6 +22,7 @@ $(STAMP): requirements.txt requirements-dev.txt constraints.txt setup.py setup.c
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check \
 		-r requirements-dev.txt -c constraints.txt
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation --use-pep517 -e .
+	$(BIN)/sphere-twin compile
 	@touch $(STAMP)
 	@echo "setup: .venv ready"
 

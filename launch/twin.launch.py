@@ -26,8 +26,9 @@ _FROM_FILE = ' Default "": the params file\'s value.'
 # parameter's description (sphere_twin/nodes/parameters.py) followed by _FROM_FILE;
 # test/test_node_parameters.py checks that they agree.
 ARGUMENTS = {
-    'plant': (NOT_GIVEN, 'Plant to run: discrete or continuous (the lookup table of '
-                         'kicks).' + _FROM_FILE),
+    'plant': (NOT_GIVEN, 'Plant to run: continuous (the physics of §3) or discrete (the '
+                         'lookup table of kicks: it starts faster; its sphere and beams rest '
+                         'between kicks).' + _FROM_FILE),
     'controller': (NOT_GIVEN, 'Control law: basic or extended (§4.2).' + _FROM_FILE),
     'scene': (NOT_GIVEN, 'Scene (shipped name or YAML path): parameters, beams, sphere and '
                          'initial state.' + _FROM_FILE),

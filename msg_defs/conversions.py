@@ -9,17 +9,19 @@ something: here by a sender, in the twin by the receiver. No rclpy here; stamps 
 ``builtin_interfaces/Time`` (a node passes ``self.get_clock().now().to_msg()``).
 """
 
-from collections.abc import Iterable
+import functools
+from collections.abc import Callable, Iterable
 from typing import Any
 
 import numpy as np
-from actionlib_msgs.msg import GoalID, GoalStatus, GoalStatusArray
+from action_msgs.msg import GoalInfo, GoalStatus, GoalStatusArray
 from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Vector3Stamped
 from nav_msgs.msg import Odometry
 from numpy.typing import ArrayLike, NDArray
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from unique_identifier_msgs.msg import UUID
 
 from msg_defs.device import BEAM_COUNT, NS_PER_S, VOLTAGE_LIMIT_V
 from msg_defs.programme_events import ProgrammeEvent, ProgrammeState
@@ -375,47 +377,120 @@ def sphere_state_from_msg(msg: Any) -> tuple[NDArray[np.float64], NDArray[np.flo
     return position, finite_vector((o.w, o.x, o.y, o.z), 4, 'quaternion')
 
 
-# How a programme's states map onto actionlib's goal states (the programme is the goal).
+# How a programme's states map onto an action's goal states (the programme is the goal).
 _GOAL_STATUS_OF_STATE = {
-    ProgrammeState.STARTED: GoalStatus.ACTIVE,
-    ProgrammeState.ENDED: GoalStatus.SUCCEEDED,
-    ProgrammeState.CUT: GoalStatus.PREEMPTED,
-    ProgrammeState.REFUSED: GoalStatus.REJECTED,
+    ProgrammeState.STARTED: GoalStatus.STATUS_EXECUTING,
+    ProgrammeState.ENDED: GoalStatus.STATUS_SUCCEEDED,
+    ProgrammeState.CUT: GoalStatus.STATUS_CANCELED,
+    ProgrammeState.REFUSED: GoalStatus.STATUS_ABORTED,
 }
 _STATE_OF_GOAL_STATUS = {v: k for k, v in _GOAL_STATUS_OF_STATE.items()}
+_UUID_HALF = 8  # bytes: the asked stamp in ns, then the count, each a big-endian uint64
+
+
+def programme_uuid(asked_s: float, number: int) -> list[int]:
+    """The 16 bytes of ``goal_id.uuid`` that name a programme: the stamp it was sent with in
+    ns, then the receiver's count, each a big-endian unsigned 64-bit integer.
+
+    Raises
+    ------
+    ValueError
+        For a count below 0 or beyond 64 bits.
+    """
+    try:
+        count = int(number).to_bytes(_UUID_HALF, 'big')
+    except OverflowError:
+        raise ValueError(f'programme count {number} does not fit 64 unsigned bits') from None
+    return list(round(max(asked_s, 0.0) * NS_PER_S).to_bytes(_UUID_HALF, 'big') + count)
+
+
+def programme_of_uuid(uuid: Iterable[int]) -> tuple[float, int]:
+    """(asked_s, number) of a ``goal_id.uuid`` made by :func:`programme_uuid`."""
+    raw = bytes(int(b) for b in uuid)
+    if len(raw) != 2 * _UUID_HALF:
+        raise ValueError(f'goal id of {len(raw)} bytes, expected {2 * _UUID_HALF}')
+    return (int.from_bytes(raw[:_UUID_HALF], 'big') / NS_PER_S,
+            int.from_bytes(raw[_UUID_HALF:], 'big'))
+
+
+def _state_of(status: int, known: dict[int, ProgrammeState]) -> ProgrammeState:
+    state = known.get(status)
+    if state is None:
+        raise ValueError(f'goal status {status} is none of a programme\'s states')
+    return state
 
 
 def programme_event_to_msg(event: ProgrammeEvent) -> Any:
     """Message for ``/beams/programme_status`` from a :class:`ProgrammeEvent`.
 
-    ``header.stamp`` is when it happened; the one goal status names the programme by the stamp
-    it was sent with (``goal_id.stamp``) and the receiver's count (``goal_id.id``).
+    One goal status: ``goal_info.stamp`` is when it happened, ``goal_info.goal_id`` names the
+    programme (:func:`programme_uuid`). ``event.text`` is not carried.
     """
-    msg = GoalStatusArray()
-    msg.header.stamp = time_from_ns(round(event.time_s * NS_PER_S))
-    goal = GoalID(stamp=time_from_ns(round(max(event.asked_s, 0.0) * NS_PER_S)),
-                  id=str(event.number))
-    msg.status_list = [GoalStatus(goal_id=goal, status=_GOAL_STATUS_OF_STATE[event.state],
-                                  text=event.text)]
-    return msg
+    info = GoalInfo(goal_id=UUID(uuid=programme_uuid(event.asked_s, event.number)),
+                    stamp=time_from_ns(round(event.time_s * NS_PER_S)))
+    return GoalStatusArray(status_list=[
+        GoalStatus(goal_info=info, status=_GOAL_STATUS_OF_STATE[event.state])])
 
 
 def programme_events_from_msg(msg: Any) -> list[ProgrammeEvent]:
-    """The :class:`ProgrammeEvent` s a ``/beams/programme_status`` message carries.
+    """The :class:`ProgrammeEvent` s a ``/beams/programme_status`` message carries, in the
+    contract's action_msgs/GoalStatusArray or the actionlib_msgs one of older bags.
 
     Raises
     ------
     ValueError
-        For a goal status that is not one of the four a programme can be in, or an id that is
-        not a count.
+        For a goal status that is not one of the four a programme can be in, or a goal id
+        that does not name a programme.
     """
+    if hasattr(msg, 'header'):  # only the legacy layout has one
+        return _legacy_programme_events(msg)
+    events: list[ProgrammeEvent] = []
+    for status in msg.status_list:
+        asked_s, number = programme_of_uuid(status.goal_info.goal_id.uuid)
+        events.append(ProgrammeEvent(_state_of(status.status, _STATE_OF_GOAL_STATUS), asked_s,
+                                     number, ns_from_time(status.goal_info.stamp) / NS_PER_S))
+    return events
+
+
+# Until 2026-11-27 the topic was actionlib_msgs/GoalStatusArray, which leaves ROS after Jazzy;
+# bags recorded before are still read, by field names, so the package need not be installed.
+# Each status was one event: header.stamp its time, goal_id.stamp the start asked for,
+# goal_id.id the count as decimal text, status ACTIVE 1, PREEMPTED 2, SUCCEEDED 3, REJECTED 5.
+LEGACY_PROGRAMME_STATUS_TYPE = 'actionlib_msgs/msg/GoalStatusArray'
+_LEGACY_STATE_OF_STATUS = {1: ProgrammeState.STARTED, 3: ProgrammeState.ENDED,
+                           2: ProgrammeState.CUT, 5: ProgrammeState.REFUSED}
+# Its ros2msg definition, constants and comments left out (the layout is frozen).
+_LEGACY_SCHEMA = f'\n{"=" * 80}\nMSG: '.join((
+    'std_msgs/Header header\nGoalStatus[] status_list',
+    'actionlib_msgs/GoalStatus\nGoalID goal_id\nuint8 status\nstring text',
+    'actionlib_msgs/GoalID\nbuiltin_interfaces/Time stamp\nstring id',
+    'std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id',
+    'builtin_interfaces/Time\nint32 sec\nuint32 nanosec'))
+
+
+@functools.cache
+def _legacy_decoder() -> Callable[[bytes], Any]:
+    from mcap.records import Schema
+    from mcap_ros2.decoder import DecoderFactory
+
+    decoder = DecoderFactory().decoder_for('cdr', Schema(
+        id=0, name=LEGACY_PROGRAMME_STATUS_TYPE, encoding='ros2msg',
+        data=_LEGACY_SCHEMA.encode()))
+    assert decoder is not None  # it takes CDR with a ros2msg schema
+    return decoder
+
+
+def legacy_programme_status_from_cdr(data: bytes) -> Any:
+    """A recorded (CDR) actionlib_msgs/GoalStatusArray as an object with its field names,
+    for :func:`programme_events_from_msg`."""
+    return _legacy_decoder()(data)
+
+
+def _legacy_programme_events(msg: Any) -> list[ProgrammeEvent]:
     time_s = ns_from_time(msg.header.stamp) / NS_PER_S
     events: list[ProgrammeEvent] = []
     for status in msg.status_list:
-        state = _STATE_OF_GOAL_STATUS.get(status.status)
-        if state is None:
-            raise ValueError(f'goal status {status.status} is none of a programme\'s states '
-                             '(ACTIVE, SUCCEEDED, PREEMPTED, REJECTED)')
+        state = _state_of(status.status, _LEGACY_STATE_OF_STATUS)
         try:
             number = int(status.goal_id.id)
         except ValueError:

@@ -14,7 +14,7 @@ class ProgrammeState(enum.Enum):
     STARTED = 'started'  # its first segment is on the beams (``time_s``: the actual start)
     ENDED = 'ended'  # its last segment has run (``time_s``: the actual end)
     CUT = 'cut'  # a later voltage command or programme replaced it before it ended
-    REFUSED = 'refused'  # it never ran (``text`` says why)
+    REFUSED = 'refused'  # it never ran
 
 
 class ProgrammeEvent(typing.NamedTuple):
@@ -31,7 +31,9 @@ class ProgrammeEvent(typing.NamedTuple):
     time_s : float
         When it happened (simulated s).
     text : str
-        A line for people.
+        A line for people (why it was refused or cut, ...); the status topic does not carry
+        it since it moved to action_msgs, so a report read from the topic has '' (one read
+        from an older bag has the recorded line).
     """
 
     state: ProgrammeState

@@ -19,12 +19,20 @@ Pulse programme (``/beams/pulse_program``, trajectory_msgs/JointTrajectory)
     in V from its ``time_from_start`` until the next point's (zero-order hold, the last
     point's voltages hold until the programme is replaced). ``header.stamp`` is when the
     programme starts.
-Programme status (``/beams/programme_status``, actionlib_msgs/GoalStatusArray)
-    Each received programme is a goal: ``goal_id.stamp`` is the stamp it was sent with (the
-    start it asked for), ``goal_id.id`` the receiver's count of programmes. One status per
-    event, ``header.stamp`` the simulated time of the event: ACTIVE when it started, SUCCEEDED
-    when its last segment ended, PREEMPTED when a later command cut it, REJECTED when refused
-    (``text`` says why). Kick cycles are timed from these, not from the start asked for.
+Programme status (``/beams/programme_status``, action_msgs/GoalStatusArray)
+    Each received programme is a goal, one status per event. ``goal_info.goal_id.uuid`` names
+    the programme and is the same in all its events: bytes 0-7 the stamp it was sent with (the
+    start it asked for) in ns, bytes 8-15 the receiver's count of programmes, each a
+    big-endian unsigned 64-bit integer. ``goal_info.stamp`` is the simulated time of the event
+    (the message has no header, and this is the one stamp a status has): EXECUTING when it
+    started, SUCCEEDED when its last segment ended, CANCELED when a later command cut it,
+    ABORTED when refused. Kick cycles are timed from these, not from the start asked for. A
+    status has no text: the simulator reports refusals with their reasons, and cuts by a
+    voltage command, on ``/diagnostics`` (ten a second, the rest counted); a cut by a later
+    programme is that programme's start. Until 2026-11-27 this was
+    actionlib_msgs/GoalStatusArray (``header.stamp`` the event's time, ``goal_id.stamp`` the
+    start asked for, ``goal_id.id`` the count as text, ``text`` why);
+    :func:`msg_defs.conversions.programme_events_from_msg` still reads those bags.
 Sphere state (``/sphere/state``, nav_msgs/Odometry)
     Pose of the sphere frame ``sphere`` in ``world``: the sphere centre in m and the
     orientation quaternion; the twist (m/s, rad/s) is expressed in ``sphere`` as the message
@@ -36,7 +44,7 @@ from __future__ import annotations
 import dataclasses
 from typing import TYPE_CHECKING
 
-from actionlib_msgs.msg import GoalStatusArray
+from action_msgs.msg import GoalStatusArray
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Vector3Stamped
 from nav_msgs.msg import Odometry

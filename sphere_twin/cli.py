@@ -21,6 +21,7 @@ from sphere_twin.node_runtime.ros_env import ensure_localhost_discovery
 # Modules under sphere_twin.commands, in the order `--help` lists them.
 COMMAND_MODULES = (
     'doctor',
+    'compile',
     'demo',
     'kick',
     'pullin',

@@ -23,6 +23,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from msg_defs.conversions import (
+    LEGACY_PROGRAMME_STATUS_TYPE,
+    legacy_programme_status_from_cdr,
     ns_from_time,
     programme_events_from_msg,
     programme_from_msg,
@@ -150,7 +152,11 @@ class _Messages:
         elif topic == PROGRAMME_STATUS.name:
             self.reports.extend(programme_events_from_msg(msg))
         elif topic == CONTROLLER_STATUS.name:
-            if status_values(msg.status[0]).get('phase') in DECIDING_PHASES:
+            values = status_values(msg.status[0])
+            if 'decided_s' in values:
+                self.decisions.extend(float(t) for t in values['decided_s'].split())
+            elif values.get('phase') in DECIDING_PHASES:
+                # Recorded before the status was batched: one status per decision.
                 self.decisions.append(ns_from_time(msg.header.stamp) / NS_PER_S)
         else:
             self.holds.append((log_time_ns, check_voltages(voltages_from_msg(msg))))
@@ -172,7 +178,9 @@ def load_run(bag_dir: str | os.PathLike[str],
     read = _Messages()
     for raw in read_messages(bag_dir, list(topics)):
         try:
-            read.add(raw.topic, raw.log_time_ns, deserialize(raw))
+            read.add(raw.topic, raw.log_time_ns,
+                     legacy_programme_status_from_cdr(raw.data)
+                     if raw.type_name == LEGACY_PROGRAMME_STATUS_TYPE else deserialize(raw))
         except ValueError:
             # A message that breaks the contract or the command rules: the twin refused it too.
             continue

@@ -163,8 +163,7 @@ def run_twin_bench(plant: str = 'continuous', duration_s: float = DEFAULT_DURATI
     BenchError
         When the loop does not start, or the run does not finish in time.
     """
-    from msg_defs.conversions import ns_from_time, programme_events_from_msg
-    from msg_defs.device import NS_PER_S
+    from msg_defs.conversions import programme_events_from_msg, status_values
     from msg_defs.programme_events import ProgrammeState
     from msg_defs.topics import CONTROLLER_STATUS, DIAGNOSTICS, PROGRAMME_STATUS, SURFACE_NORMAL
     from sphere_twin.scenario import RunLog
@@ -207,9 +206,8 @@ def run_twin_bench(plant: str = 'continuous', duration_s: float = DEFAULT_DURATI
         finally:
             probe.close()
         status = _simulator_status(diagnostics)
-        decisions = [ns_from_time(m.header.stamp) / NS_PER_S
-                     for m in probe.messages[CONTROLLER_STATUS.name]
-                     if m.status[0].message.startswith('kick')]
+        decisions = [float(t) for m in probe.messages[CONTROLLER_STATUS.name]
+                     for t in status_values(m.status[0]).get('kicked_s', '').split()]
     farewell = next((line for line in process.stdout_text().splitlines()
                      if line.startswith('simulator:')), '')
     cycle = None

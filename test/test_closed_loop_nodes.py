@@ -34,7 +34,8 @@ def test_lockstep_closed_loop_reaches_the_setpoint_and_rests(ros_nodes, controll
     # The extended one runs with reference preview: on a setpoint it aims at the setpoint.
     ros_nodes.start('controller', parameter_args(controller=controller,
                                                  phi_min_deg=phi_min_deg,
-                                                 preview=controller == 'extended'))
+                                                 preview=controller == 'extended',
+                                                 hold_each_sample=True))
     probe = TopicProbe(ros_nodes.domain_id, (CONTROLLER_STATUS, SURFACE_NORMAL), simulator)
     statuses = probe.messages[CONTROLLER_STATUS.name]
     try:

@@ -189,21 +189,99 @@ def test_sphere_state_message_carries_the_body_frame_twist():
 
 @pytest.mark.parametrize('state', ['started', 'ended', 'cut', 'refused'])
 def test_a_programme_report_round_trips_and_names_its_programme_by_its_stamp(state):
-    from actionlib_msgs.msg import GoalStatus
+    from action_msgs.msg import GoalStatus, GoalStatusArray
 
     from msg_defs.conversions import programme_event_to_msg, programme_events_from_msg
     from msg_defs.programme_events import ProgrammeEvent, ProgrammeState
 
     event = ProgrammeEvent(ProgrammeState(state), 12.345678901, 17, 12.36, 'why')
     msg = programme_event_to_msg(event)
-    assert msg.status_list[0].goal_id.stamp.sec == 12
-    assert msg.status_list[0].goal_id.stamp.nanosec == 345678901
-    assert msg.status_list[0].status == {'started': GoalStatus.ACTIVE,
-                                         'ended': GoalStatus.SUCCEEDED,
-                                         'cut': GoalStatus.PREEMPTED,
-                                         'refused': GoalStatus.REJECTED}[state]
-    (back,) = programme_events_from_msg(msg)
-    assert back == event
-    msg.status_list[0].status = GoalStatus.PENDING
+    assert isinstance(msg, GoalStatusArray)
+    (status,) = msg.status_list
+    # The event's time is the status's stamp; the goal id names the programme.
+    assert (status.goal_info.stamp.sec, status.goal_info.stamp.nanosec) == (12, 360_000_000)
+    assert bytes(status.goal_info.goal_id.uuid) == ((12_345_678_901).to_bytes(8, 'big')
+                                                    + (17).to_bytes(8, 'big'))
+    assert status.status == {'started': GoalStatus.STATUS_EXECUTING,
+                             'ended': GoalStatus.STATUS_SUCCEEDED,
+                             'cut': GoalStatus.STATUS_CANCELED,
+                             'refused': GoalStatus.STATUS_ABORTED}[state]
+    # The text has no field in action_msgs: it is all that does not come back.
+    assert programme_events_from_msg(msg) == [event._replace(text='')]
+
+
+@pytest.mark.parametrize('number', [0, 1, 2**64 - 1])
+def test_the_goal_id_carries_the_count_in_its_last_eight_bytes(number):
+    from msg_defs.conversions import programme_of_uuid, programme_uuid
+
+    uuid = programme_uuid(0.0, number)
+    assert uuid[:8] == [0] * 8 and int.from_bytes(bytes(uuid[8:]), 'big') == number
+    assert programme_of_uuid(uuid) == (0.0, number)
+
+
+@pytest.mark.parametrize('number', [-1, 2**64])
+def test_a_count_that_does_not_fit_the_goal_id_is_refused(number):
+    from msg_defs.conversions import programme_uuid
+
+    with pytest.raises(ValueError, match='64 unsigned bits'):
+        programme_uuid(1.0, number)
+
+
+@pytest.mark.parametrize('status', [0, 1, 3])  # UNKNOWN, ACCEPTED, CANCELING
+def test_a_goal_status_no_programme_is_in_is_refused(status):
+    from msg_defs.conversions import programme_event_to_msg, programme_events_from_msg
+    from msg_defs.programme_events import ProgrammeEvent, ProgrammeState
+
+    msg = programme_event_to_msg(ProgrammeEvent(ProgrammeState.STARTED, 1.0, 1, 1.0))
+    msg.status_list[0].status = status
     with pytest.raises(ValueError, match='none of a programme'):
         programme_events_from_msg(msg)
+
+
+def test_a_goal_id_of_another_length_is_refused():
+    from msg_defs.conversions import programme_of_uuid
+
+    with pytest.raises(ValueError, match='15 bytes'):
+        programme_of_uuid([0] * 15)
+
+
+def _legacy_status_array(stamp_ns, statuses):
+    """An actionlib_msgs/GoalStatusArray as a decoder of its recorded schema gives it: only
+    the field names, no actionlib_msgs package."""
+    from types import SimpleNamespace as Ns
+
+    def time(ns):
+        return Ns(sec=ns // 10**9, nanosec=ns % 10**9)
+
+    return Ns(header=Ns(stamp=time(stamp_ns), frame_id=''), status_list=[
+        Ns(goal_id=Ns(stamp=time(asked_ns), id=goal_id), status=status, text=text)
+        for asked_ns, goal_id, status, text in statuses])
+
+
+def test_a_legacy_actionlib_report_gives_the_same_events():
+    from msg_defs.conversions import programme_event_to_msg, programme_events_from_msg
+    from msg_defs.programme_events import ProgrammeEvent, ProgrammeState
+
+    # actionlib_msgs/GoalStatus: ACTIVE 1, PREEMPTED 2, SUCCEEDED 3, REJECTED 5.
+    legacy = _legacy_status_array(12_360_000_000, [
+        (12_345_678_901, '17', 1, 'started'), (12_345_678_901, '17', 3, 'ended'),
+        (12_345_678_901, '17', 2, 'cut'), (0, '18', 5, 'refused: too late')])
+    events = programme_events_from_msg(legacy)
+    assert events == [
+        ProgrammeEvent(ProgrammeState.STARTED, 12.345678901, 17, 12.36, 'started'),
+        ProgrammeEvent(ProgrammeState.ENDED, 12.345678901, 17, 12.36, 'ended'),
+        ProgrammeEvent(ProgrammeState.CUT, 12.345678901, 17, 12.36, 'cut'),
+        ProgrammeEvent(ProgrammeState.REFUSED, 0.0, 18, 12.36, 'refused: too late')]
+    # What the new contract carries of them is the same.
+    assert [e for event in events
+            for e in programme_events_from_msg(programme_event_to_msg(event))] == [
+        event._replace(text='') for event in events]
+
+
+@pytest.mark.parametrize('status, goal_id, match', [(0, '17', 'none of a programme'),
+                                                    (1, 'abc', 'not a programme count')])
+def test_a_legacy_report_that_names_no_programme_is_refused(status, goal_id, match):
+    from msg_defs.conversions import programme_events_from_msg
+
+    with pytest.raises(ValueError, match=match):
+        programme_events_from_msg(_legacy_status_array(1, [(1, goal_id, status, '')]))

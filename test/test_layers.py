@@ -169,13 +169,21 @@ def test_the_libraries_use_no_ros():
     """sphere_sim and sphere_control: no rclpy, no message types, no node runtime."""
     ros_packages = ('rclpy', 'std_msgs', 'geometry_msgs', 'sensor_msgs', 'nav_msgs',
                     'trajectory_msgs', 'visualization_msgs', 'diagnostic_msgs', 'rosgraph_msgs',
-                    'rcl_interfaces', 'builtin_interfaces', 'action_msgs', 'actionlib_msgs')
+                    'rcl_interfaces', 'builtin_interfaces', 'action_msgs',
+                    'unique_identifier_msgs')
     libraries = [name for name in MODULES
                  if in_package(name, 'sphere_sim') or in_package(name, 'sphere_control')]
     bad = [f'{name} -> {target}' for name in libraries for target in sorted(IMPORTS[name])
            if target.split('.')[0] in ros_packages or in_package(target, NODE_RUNTIME)
            or target in ('msg_defs.topics', 'msg_defs.conversions', 'msg_defs.markers')]
     assert bad == []
+
+
+def test_nothing_imports_actionlib_msgs():
+    """Deprecated in Jazzy and gone after it: its old bags are read by field names
+    (msg_defs.conversions), the contract uses action_msgs."""
+    assert [name for name, targets in IMPORTS.items()
+            if any(t.split('.')[0] == 'actionlib_msgs' for t in targets)] == []
 
 
 def test_only_nodes_import_nodes_and_the_runtime_imports_no_project_module():

@@ -5,6 +5,7 @@ import signal
 import pytest
 
 from msg_defs.topics import SURFACE_NORMAL
+from msg_defs.transforms import NO_TF_LINE, tf_message_type
 from sphere_twin.monitor_summary import parse_summaries
 from sphere_twin.processes import parameter_args, stop
 
@@ -37,6 +38,9 @@ def test_simulator_exits_cleanly_on_signal_to_its_pid(ros_nodes, signum):
     simulator.send_signal(signum)
     assert simulator.wait(EXIT_TIMEOUT_S) == 0
     assert 'Traceback' not in simulator.stderr_text()
+    # Started alone it runs the physics; without tf2_msgs it says once where the pose is.
+    assert 'continuous plant' in simulator.stderr_text()
+    assert simulator.stderr_text().count(NO_TF_LINE) == (tf_message_type() is None)
 
 
 def test_monitor_stopped_by_sigterm_exits_cleanly_and_reports_its_count(ros_nodes):

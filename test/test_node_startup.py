@@ -13,7 +13,7 @@ pytestmark = pytest.mark.ros
 EXIT_TIMEOUT_S = 60.0
 
 BAD_STARTS = [
-    ('simulator', dict(plant='foo'), "parameter plant = 'foo' is not one of: discrete, continuous"),
+    ('simulator', dict(plant='foo'), "parameter plant = 'foo' is not one of: continuous, discrete"),
     ('simulator', dict(scene='no_such_scene'), 'no_such_scene'),
     ('simulator', dict(tables=['/nonexistent/table.npz']), '/nonexistent/table.npz'),
     ('simulator', dict(publish_rate_hz=0.5),

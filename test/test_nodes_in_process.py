@@ -144,14 +144,47 @@ def test_simulator_rejects_bad_programmes_before_the_plant(simulator, bad):
     assert simulator.runner.counters.rejected == 1
 
 
-def test_simulator_rate_comes_from_the_parameter_and_is_read_only(context):
+def test_rate_noise_and_pace_change_at_run_time_and_the_fixed_parameters_say_why(context):
     node = SimulatorNode(plant=RecordingPlant(), context=context,
-                         parameter_overrides=[Parameter('publish_rate_hz', value=200.0)])
+                         parameter_overrides=[Parameter('publish_rate_hz', value=200.0),
+                                              Parameter('real_time_factor', value=0.0)])
     try:
-        assert node.period_s == pytest.approx(0.005)
-        result = node.set_parameters([Parameter('publish_rate_hz', value=10.0)])[0]
-        assert not result.successful
-        assert node.get_parameter('publish_rate_hz').value == 200.0
+        for _ in range(3):
+            node.on_timer()
+        assert node.runner.time_s == pytest.approx(0.010)
+        # As `ros2 param set /simulator publish_rate_hz 20` sends it: an integer.
+        assert node.set_parameters([Parameter('publish_rate_hz', value=20)])[0].successful
+        node.on_timer()
+        node.on_timer()
+        # The grid continues from the simulated now at the new period.
+        assert node.runner.time_s == pytest.approx(0.010 + 2 * 0.05, abs=1e-12)
+
+        assert node.runner.measure(TILTED_NORMAL) == pytest.approx(TILTED_NORMAL)
+        assert node.set_parameters([Parameter('noise_std_rad', value=0.01)])[0].successful
+        errors = [np.arccos(np.clip(node.runner.measure(TILTED_NORMAL) @ TILTED_NORMAL, -1, 1))
+                  for _ in range(400)]
+        # Two tangential axes of 0.01 rad each: the angle's RMS is 0.01 * sqrt(2).
+        assert np.sqrt(np.mean(np.square(errors))) == pytest.approx(0.01 * np.sqrt(2), rel=0.15)
+
+        # Paced from the simulated now on: no burst to catch up on the time run unpaced.
+        assert node.set_parameters([Parameter('real_time_factor', value=1.0)])[0].successful
+        assert node.paced
+        before, started = node.runner.time_s, time.perf_counter()
+        while time.perf_counter() - started < 0.3:
+            node.on_timer()
+        assert node.runner.time_s - before == pytest.approx(0.3, abs=0.05 + 1e-9)
+
+        # Checked as at start-up, and left as it was when refused.
+        refused = node.set_parameters([Parameter('publish_rate_hz', value='fast')])[0]
+        assert not refused.successful and 'must be a number' in refused.reason
+        assert not node.set_parameters([Parameter('noise_std_rad', value=0.5)])[0].successful
+        assert node.runner.period_s == 0.05 and node.runner.noise_std_rad == 0.01
+        fixed = node.set_parameters([Parameter('seed', value=3)])[0]
+        assert not fixed.successful and 'read-only' in fixed.reason
+        (seed,) = node.describe_parameters(['seed'])
+        assert seed.read_only and 'reproducible' in seed.additional_constraints
+        (plant,) = node.describe_parameters(['plant'])
+        assert plant.read_only and 'start-up' in plant.additional_constraints
     finally:
         node.destroy_node()
 
@@ -172,3 +205,48 @@ def test_monitor_completes_at_max_messages_and_stops_counting(context):
         assert node.summary() == 'received 3 messages on /sphere/surface_normal'
     finally:
         node.destroy_node()
+
+
+@pytest.mark.parametrize('hold_each_sample', [False, True])
+def test_a_resting_controller_sends_0_v_once_per_rest_and_batches_its_status(context,
+                                                                             hold_each_sample):
+    """At rest on the reference, 0 V goes out when the rest begins (for every sample only
+    when asked: a lockstep simulator's time runs on those); the status, at its own wall-clock
+    rate, lists every sample decided on since the one before."""
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    from msg_defs.conversions import status_values
+    from sphere_twin.nodes.controller_node import ControllerNode
+
+    node = ControllerNode(context=context, parameter_overrides=[
+        Parameter('hold_each_sample', value=hold_each_sample)])
+    holds, statuses = [], []
+    node._voltage_pub.publish = holds.append
+    node._status_pub.publish = statuses.append
+    try:
+        level = np.array([0.0, 0.0, 1.0])
+        node.on_reference(surface_normal_to_msg(level))
+        stamps_s = [0.01 * k for k in range(1, 21)]
+        for t_s in stamps_s[:10]:
+            node.on_normal(surface_normal_to_msg(level, _stamp(t_s)))
+        node.on_status_timer()
+        for t_s in stamps_s[10:]:
+            node.on_normal(surface_normal_to_msg(level, _stamp(t_s)))
+        node.on_status_timer()
+    finally:
+        node.destroy_node()
+    assert len(holds) == (20 if hold_each_sample else 1)
+    assert all(list(msg.effort) == [0.0] * 4 for msg in holds)
+    assert len(statuses) == 2
+    decided = [[float(t) for t in status_values(msg.status[0])['decided_s'].split()]
+               for msg in statuses]
+    assert decided == [pytest.approx(stamps_s[:10]), pytest.approx(stamps_s[10:])]
+    assert all(status_values(msg.status[0])['kicked_s'] == '' for msg in statuses)
+    last = statuses[-1].status[0]
+    assert last.message == 'resting' and last.level == DiagnosticStatus.OK
+
+
+def _stamp(t_s):
+    from msg_defs.conversions import time_from_ns
+
+    return time_from_ns(round(t_s * 1e9))

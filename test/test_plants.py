@@ -19,7 +19,7 @@ from sphere_sim.kicks.plants import (
     decode_kick,
 )
 from sphere_sim.model.programme import Pulse, PulseProgramme, VoltageSchedule
-from sphere_sim.model.rotations import angle_between
+from sphere_sim.model.rotations import angle_between, quat_to_matrix
 from sphere_sim.twin.plant_setup import build_plant
 from sphere_sim.twin.runner import MAX_START_AHEAD_S, CommandRejectedError, TwinRunner
 
@@ -88,6 +88,37 @@ def test_discrete_plant_jumps_to_the_tables_outcome_at_the_end_of_the_window(tab
     np.testing.assert_array_equal(plant.snapshot().normal, expected)
     with pytest.raises(PlantError, match='kicks only'):
         plant.hold([10.0, 0.0, 0.0, 0.0])
+
+
+def test_the_discrete_plant_reports_the_physics_rest_and_turns_the_sphere_with_its_normal():
+    """Built as the node builds it, the discrete plant starts in the continuous plant's state
+    (sphere and beams), and a landed kick turns the sphere about its unmoved geometric centre
+    so that its orientation carries the table's normal."""
+    discrete, continuous = build_plant('discrete'), build_plant('continuous')
+    first, physics = discrete.snapshot(), continuous.snapshot()
+    for ours, theirs in zip(first.sphere + first.beams, physics.sphere + physics.beams,
+                            strict=True):
+        np.testing.assert_allclose(ours, theirs, rtol=0.0, atol=1e-12)
+
+    start = discrete.normal
+    discrete.run_programme(discrete.kick_plant.programme(1, 1.0, start))
+    discrete.advance(discrete.busy_until_s)
+    landed = discrete.snapshot()
+    assert angle_between(landed.normal, start) > math.radians(0.3)
+    position, quaternion, velocity, omega = landed.sphere
+    rotation = quat_to_matrix(quaternion)
+    np.testing.assert_allclose(rotation @ rotation.T, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(rotation[:, 2], landed.normal, atol=1e-12)
+    d = continuous.model.params.sphere.cog_offset_m
+    centre_before = first.sphere[0] + first.normal * d
+    np.testing.assert_allclose(position + landed.normal * d, centre_before, atol=1e-15)
+    # The shortest turn: no twist about the normal beyond what the tilt itself needs.
+    turn = rotation @ quat_to_matrix(first.sphere[1]).T
+    angle = math.acos(np.clip((np.trace(turn) - 1.0) / 2.0, -1.0, 1.0))
+    assert angle == pytest.approx(angle_between(landed.normal, start), abs=1e-12)
+    assert not np.any(velocity) and not np.any(omega)
+    for ours, theirs in zip(landed.beams, first.beams, strict=True):
+        np.testing.assert_array_equal(ours, theirs)
 
 
 def test_continuous_plant_reproduces_a_direct_simulation_of_the_kick():

@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from msg_defs.conversions import status_values
 from msg_defs.topics import CONTROLLER_STATUS, PULSE_PROGRAM
 from sphere_sim.kicks.discrete import normal_from_xy
 from sphere_sim.kicks.plants import LIVE_ERROR_BOUND_RAD
@@ -93,9 +94,13 @@ def test_lockstep_recording_reports_and_replays_exactly(ros_nodes, tmp_path):
     bag = tmp_path / 'run'
     ros_nodes.start('recorder', parameter_args(output_dir=str(bag)))
     ros_nodes.start('reference', parameter_args(setpoint_xy=[0.01, 0.02]))
-    ros_nodes.start('controller', parameter_args(controller='extended'))
+    ros_nodes.start('controller', parameter_args(controller='extended', hold_each_sample=True))
     probe = TopicProbe(ros_nodes.domain_id, (CONTROLLER_STATUS,))
     statuses = probe.messages[CONTROLLER_STATUS.name]
+
+    def decided():
+        return sum(len(status_values(m.status[0])['decided_s'].split()) for m in statuses)
+
     try:
         # A lockstep run is over in a few seconds: the simulator starts only once the
         # controller's programmes have their recorder, or the bag may hold no kick.
@@ -105,7 +110,7 @@ def test_lockstep_recording_reports_and_replays_exactly(ros_nodes, tmp_path):
         # Resting long enough that the setpoint's stretch counts for a settle time (lockstep
         # time runs one sample per hold).
         probe.spin_until(lambda: any(m.status[0].message == 'resting' for m in statuses[-3:])
-                         and len(statuses) > 80, 90.0, 'resting controller')
+                         and decided() > 80, 90.0, 'resting controller')
     finally:
         probe.close()
     ros_nodes.stop_all()
@@ -135,7 +140,7 @@ def test_continuous_plant_replays_a_recording_to_the_integrator_tolerance(ros_no
 
     bag = tmp_path / 'continuous'
     ros_nodes.start('recorder', parameter_args(output_dir=str(bag)))
-    ros_nodes.start('controller', parameter_args(controller='extended'))
+    ros_nodes.start('controller', parameter_args(controller='extended', hold_each_sample=True))
     # 3.2 deg away, so the first six kicks are full ones: a short kick can fall on the high
     # pair's pull-in, where a state 1e-5 deg apart lands up to 0.1 deg apart (README, "An
     # example recording"), and what is tested here is the integrator, not that step.

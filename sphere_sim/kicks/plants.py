@@ -20,6 +20,7 @@ from sphere_sim.kicks.discrete import PAPER_FULL_KICK_RAD
 from sphere_sim.model.assembly import Model
 from sphere_sim.model.initial_state import initial_state
 from sphere_sim.model.programme import PulseProgramme, VoltageSchedule
+from sphere_sim.model.rotations import matrix_to_quat, quat_to_matrix
 
 if TYPE_CHECKING:
     from sphere_sim.kicks.lookup_table import ProgrammedKickPlant
@@ -150,6 +151,62 @@ class ContinuousPlant:
             self.time_s), sphere, beams)
 
 
+@dataclasses.dataclass(frozen=True)
+class RestPose:
+    """A resting sphere and its beams as the physics puts them: what the discrete plant
+    reports beside its normal, so that /sphere/state and /beams/state show the device.
+
+    A kick table knows only where the normal lands. The sphere then rests on the same tips
+    about the same geometric centre, turned by the shortest rotation from the normal it
+    started at (a table has no twist about the normal); the beams rest as they started.
+
+    Attributes
+    ----------
+    centre_m : ndarray, shape (3,)
+        The sphere's geometric centre (the centre of its spherical face).
+    rotation : ndarray, shape (3, 3)
+        The sphere's orientation at ``normal`` (its third column).
+    cog_offset_m : float
+        From the geometric centre to the centre of gravity, along the normal (inwards).
+    beam_z_m, beam_phi_rad : ndarray, shape (4,)
+    """
+
+    centre_m: NDArray[np.float64]
+    rotation: NDArray[np.float64]
+    cog_offset_m: float
+    beam_z_m: NDArray[np.float64]
+    beam_phi_rad: NDArray[np.float64]
+
+    @classmethod
+    def of_state(cls, model: Model, x: NDArray[np.float64]) -> RestPose:
+        """The pose of a resting state ``x`` of ``model`` (velocities are not kept)."""
+        o = model.sphere_offset
+        rotation = quat_to_matrix(np.ascontiguousarray(x[o + 3:o + 7]))
+        d = model.params.sphere.cog_offset_m
+        z, phi, _, _ = model.beam_coordinates(x)
+        # The state holds the centre of gravity, which lies d along -normal from the centre.
+        return cls(x[o:o + 3] + rotation[:, 2] * d, rotation, d, np.array(z, dtype=float),
+                   np.array(phi, dtype=float))
+
+    def turned_to(self, normal: ArrayLike) -> tuple[NDArray[np.float64], ...]:
+        """(position_m of the centre of gravity, quaternion_wxyz, velocity, omega): the
+        sphere at rest with its normal at ``normal``, as :attr:`PlantSnapshot.sphere`."""
+        n0, n = self.rotation[:, 2], np.asarray(normal, dtype=float)
+        axis, cos_angle = np.cross(n0, n), float(np.dot(n0, n))
+        # Rodrigues for the shortest rotation taking n0 to n (no kick turns the normal over).
+        k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]],
+                      [-axis[1], axis[0], 0.0]])
+        turn = np.eye(3) + k + k @ k / (1.0 + cos_angle)
+        rotation = turn @ self.rotation
+        return (self.centre_m - rotation[:, 2] * self.cog_offset_m, matrix_to_quat(rotation),
+                np.zeros(3), np.zeros(3))
+
+    def beams(self) -> tuple[NDArray[np.float64], ...]:
+        """(z_m, phi_rad, zdot, phidot) of the resting beams, as :attr:`PlantSnapshot.beams`."""
+        return (self.beam_z_m.copy(), self.beam_phi_rad.copy(), np.zeros_like(self.beam_z_m),
+                np.zeros_like(self.beam_phi_rad))
+
+
 def decode_kick(kick_plant: ProgrammedKickPlant, programme: PulseProgramme,
                 normal: NDArray[np.float64]) -> tuple[int, float]:
     """(action, intensity) of the kick of ``kick_plant`` that ``programme`` is from rest at
@@ -189,11 +246,15 @@ class DiscretePlant:
     normal0 : ndarray, shape (3,), optional
     window_s : float
         Delay from the programme's start to the new resting normal.
+    rest : RestPose, optional
+        The physics' resting sphere and beams at ``normal0``: with it, snapshots carry the
+        sphere's pose and the beams' state (the landed state), not only the normal.
     """
 
     def __init__(self, kick_plant: ProgrammedKickPlant, normal0: ArrayLike | None = None,
-                 window_s: float = KICK_WINDOW_S) -> None:
+                 window_s: float = KICK_WINDOW_S, rest: RestPose | None = None) -> None:
         self.kick_plant = kick_plant
+        self.rest = rest
         self.normal = np.array([0.0, 0.0, 1.0] if normal0 is None else normal0, dtype=float)
         self.window_s = window_s
         self.time_s = 0.0
@@ -228,5 +289,8 @@ class DiscretePlant:
         self.schedule.forget_before(self.time_s)
 
     def snapshot(self) -> PlantSnapshot:
+        rest = self.rest
         return PlantSnapshot(self.time_s, self.normal.copy(),
-                             self.schedule.voltages_at(self.time_s))
+                             self.schedule.voltages_at(self.time_s),
+                             None if rest is None else rest.turned_to(self.normal),
+                             None if rest is None else rest.beams())

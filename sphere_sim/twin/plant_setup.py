@@ -15,9 +15,10 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
     from sphere_sim.kicks.lookup_table import ProgrammedKickPlant
-    from sphere_sim.kicks.plants import ContinuousPlant, DiscretePlant
+    from sphere_sim.kicks.plants import ContinuousPlant, DiscretePlant, RestPose
 
-PLANT_KINDS = ('discrete', 'continuous')
+# The first is the simulator's default: the physics, which publishes every topic.
+PLANT_KINDS = ('continuous', 'discrete')
 
 
 def build_plant(kind: str, scene_name: str = 'rest', table_paths: Iterable[str | Path] = (),
@@ -37,8 +38,9 @@ def build_plant(kind: str, scene_name: str = 'rest', table_paths: Iterable[str |
     """
     from sphere_sim.kicks.discrete import kick_period_s, normal_from_cardan
     from sphere_sim.kicks.lookup_table import load_kick_model
-    from sphere_sim.kicks.plants import ContinuousPlant, PlantError
+    from sphere_sim.kicks.plants import ContinuousPlant, PlantError, RestPose
     from sphere_sim.model.assembly import assemble
+    from sphere_sim.model.initial_state import initial_state
     from sphere_sim.model.parameters import load_parameter_set
     from sphere_sim.model.scene import load_scene
 
@@ -52,16 +54,22 @@ def build_plant(kind: str, scene_name: str = 'rest', table_paths: Iterable[str |
         # for this parameter set.
         return ContinuousPlant(assemble(scene, params),
                                kick_period_s=kick_period_s(load_kick_model(table_paths)))
-    return discrete_plant(load_kick_model(table_paths, params),
-                          normal_from_cardan(alpha, beta))
+    kicks = load_kick_model(table_paths, params)
+    # The sphere and beams it reports rest where the continuous plant starts (the scene's
+    # initial state), so both plants publish the same state until the first kick.
+    model = assemble(scene, params)
+    return discrete_plant(kicks, normal_from_cardan(alpha, beta),
+                          RestPose.of_state(model, initial_state(model)))
 
 
-def discrete_plant(kicks: ProgrammedKickPlant, normal0: NDArray[np.float64]) -> DiscretePlant:
-    """The discrete plant of the kick model ``kicks``, resting at ``normal0``."""
+def discrete_plant(kicks: ProgrammedKickPlant, normal0: NDArray[np.float64],
+                   rest: RestPose | None = None) -> DiscretePlant:
+    """The discrete plant of the kick model ``kicks``, resting at ``normal0`` (and, given
+    ``rest``, reporting the sphere's and beams' resting state too)."""
     from sphere_sim.kicks.discrete import kick_period_s
     from sphere_sim.kicks.plants import DiscretePlant
 
     # A kick lands when it has settled (every kick of the shipped tables is within 0.005 deg
     # of its outcome by 45 ms), after the kick period the offline loop and the controller
     # use, not at the end of the longer window the table was built with.
-    return DiscretePlant(kicks, normal0, kick_period_s(kicks))
+    return DiscretePlant(kicks, normal0, kick_period_s(kicks), rest)

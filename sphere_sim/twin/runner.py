@@ -156,13 +156,12 @@ class TwinRunner:
     def __init__(self, plant: TwinPlant, period_s: float, noise_std_rad: float = 0.0,
                  seed: int = 0, lockstep: bool = False,
                  voltage_limit_v: float = VOLTAGE_LIMIT_V) -> None:
-        if not (np.isfinite(period_s) and period_s > 0):
-            raise ValueError(f'period_s must be a positive number, got {period_s}')
-        if not (np.isfinite(noise_std_rad) and noise_std_rad >= 0):
-            raise ValueError(f'noise_std_rad must be >= 0, got {noise_std_rad}')
         self.plant = plant
-        self.period_s = period_s
-        self.noise_std_rad = noise_std_rad
+        # Sample times are counted from the last change of period, not summed: no drift.
+        self._grid_origin_s = 0.0
+        self._step = 0
+        self.set_period(period_s)
+        self.set_noise(noise_std_rad)
         self.rng = np.random.default_rng(seed)
         self.lockstep = lockstep
         self.voltage_limit_v = voltage_limit_v
@@ -175,12 +174,25 @@ class TwinRunner:
         self._running: _Running | None = None
         self._received = 0  # programmes received, refused ones included
         self._events: list[ProgrammeEvent] = []  # not yet taken by take_events()
-        self._step = 0
         self._idle_published = False
 
     @property
     def time_s(self) -> float:
-        return self._step * self.period_s
+        return self._grid_origin_s + self._step * self.period_s
+
+    def set_period(self, period_s: float) -> None:
+        """Sample every ``period_s`` from now on (the node's publish rate, set at run time)."""
+        if not (np.isfinite(period_s) and period_s > 0):
+            raise ValueError(f'period_s must be a positive number, got {period_s}')
+        if self._step:
+            self._grid_origin_s, self._step = self.time_s, 0
+        self.period_s = period_s
+
+    def set_noise(self, noise_std_rad: float) -> None:
+        """Measure with this standard deviation per tangential axis (rad) from now on."""
+        if not (np.isfinite(noise_std_rad) and noise_std_rad >= 0):
+            raise ValueError(f'noise_std_rad must be >= 0, got {noise_std_rad}')
+        self.noise_std_rad = noise_std_rad
 
     @property
     def waiting(self) -> int:

@@ -418,3 +418,28 @@ def deserialize(message: RecordedMessage) -> Any:
     from rclpy.serialization import deserialize_message
 
     return deserialize_message(message.data, message_class(message.type_name))
+
+
+def in_current_contract(message: RecordedMessage) -> RecordedMessage:
+    """``message`` as the topic contract carries it today: a programme status recorded before
+    the contract moved to action_msgs (docs/twin.md, "Contract changes") is re-encoded, so a
+    player republishes old bags on the types today's nodes subscribe to; every other message
+    is returned as it is."""
+    from msg_defs.conversions import (
+        LEGACY_PROGRAMME_STATUS_TYPE,
+        legacy_programme_status_from_cdr,
+        programme_event_to_msg,
+        programme_events_from_msg,
+    )
+    from msg_defs.topics import PROGRAMME_STATUS
+
+    if message.type_name != LEGACY_PROGRAMME_STATUS_TYPE:
+        return message
+    from rclpy.serialization import serialize_message
+
+    events = programme_events_from_msg(legacy_programme_status_from_cdr(message.data))
+    status_list = [status for event in events
+                   for status in programme_event_to_msg(event).status_list]
+    current = PROGRAMME_STATUS.msg_type(status_list=status_list)
+    return dataclasses.replace(message, type_name=bag_format.type_name_of(
+                                   PROGRAMME_STATUS.msg_type), data=serialize_message(current))

@@ -18,6 +18,10 @@ one worker, and on a process pool and a Dask cluster of each worker count asked 
 2,4``; 2 by default), against the bare integration rate of their kicks and a CPU loop's scaling
 on as many processes, and writes ``throughput.{json,md}``. Its last line is
 ``throughput vs bare integration: <a> table build, <b> optimisation``.
+
+``bench startup`` installs the package as colcon does into a scratch prefix and times a
+simulator from there to its first ``/sphere/surface_normal``, cold (compiling the physics) and
+warm, and writes ``startup.{json,md}`` (``sphere_twin/commands/bench_startup.py``).
 """
 
 from __future__ import annotations
@@ -50,7 +54,7 @@ from sphere_sim.studies.work_precision import (
     Plan,
     work_precision,
 )
-from sphere_twin.commands import bench_levers, bench_twin
+from sphere_twin.commands import bench_levers, bench_startup, bench_twin
 from sphere_twin.commands.bench_scenes import optimised_design, scenes_of_this_tree
 from sphere_twin.commands.options import DEFAULT_OUT_DIR, output_directory, worker_counts
 
@@ -262,6 +266,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     thr.set_defaults(func=run_throughput)
     bench_twin.register(sub)
     bench_levers.register(sub)
+    bench_startup.register(sub)
 
 
 def run_work_precision(args: argparse.Namespace) -> int:

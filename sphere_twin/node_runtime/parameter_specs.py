@@ -37,6 +37,10 @@ class ParameterType(enum.Enum):
     STRING_ARRAY = 'string_array'
 
 
+# Why most parameters are read-only: the node builds its plant, tables or files from them once.
+READ_AT_START = 'read once at start-up (what it builds cannot change under a running node)'
+SETTABLE = 'can be set while the node runs (ros2 param set), checked as at start-up'
+
 # What a parameter's default may be; arrays are tuples here and lists once declared.
 ParameterValue = bool | int | float | str | tuple[float, ...] | tuple[str, ...]
 
@@ -57,6 +61,11 @@ class ParameterSpec:
     choices : tuple of str, optional
         The values a string parameter takes (said in ``description``; checked when declared).
     read_only : bool
+        False for a parameter the node takes again at run time (``ros2 param set``), checked
+        as at start-up; a read-only one says why in ``fixed_because``.
+    fixed_because : str
+        Why a read-only parameter cannot change while the node runs (its descriptor's
+        ``additional_constraints``, which ``ros2 param describe`` shows).
     length : int, optional
         How many values an array parameter holds (checked when declared).
     rule : callable, optional
@@ -72,19 +81,62 @@ class ParameterSpec:
     range: tuple[float, float] | None = None
     choices: tuple[str, ...] | None = None
     read_only: bool = True
+    fixed_because: str = READ_AT_START
     length: int | None = None
     rule: Callable[[Any], str | None] | None = None
 
 
 def spec_descriptor(spec: ParameterSpec) -> ParameterDescriptor:
-    """The ``ParameterDescriptor`` of ``spec``: description, range, read-only."""
+    """The ``ParameterDescriptor`` of ``spec``: description, range, read-only and why."""
     bounds = spec.range
-    return parameter_descriptor(
+    descriptor = parameter_descriptor(
         spec.description,
         float_range=bounds if spec.type is ParameterType.DOUBLE else None,
         int_range=((int(bounds[0]), int(bounds[1]))
                    if bounds is not None and spec.type is ParameterType.INTEGER else None),
         read_only=spec.read_only)
+    descriptor.additional_constraints = (f'read-only: {spec.fixed_because}' if spec.read_only
+                                         else SETTABLE)
+    return descriptor
+
+
+def accept_parameter_changes(node: Any, specs: Iterable[ParameterSpec],
+                             apply: Callable[[str, Any], None]) -> None:
+    """Let ``ros2 param set`` change ``node``'s parameters that are not read-only.
+
+    A new value is checked as at start-up (:func:`value_problem`; refused with that line) and
+    then handed to ``apply(name, value)``, doubles as floats. rclpy itself refuses the
+    read-only ones ("Trying to set a read-only parameter"); their descriptors say why.
+    """
+    from rcl_interfaces.msg import SetParametersResult
+
+    settable = {spec.name: spec for spec in specs if not spec.read_only}
+
+    def check(parameters: list[Any]) -> SetParametersResult:
+        for parameter in parameters:
+            spec = settable.get(parameter.name)
+            problem = None if spec is None else value_problem(spec, parameter.value)
+            if problem is not None:
+                return SetParametersResult(successful=False, reason=problem)
+        return SetParametersResult(successful=True)
+
+    def applied(parameters: list[Any]) -> None:
+        for parameter in parameters:
+            spec = settable.get(parameter.name)
+            if spec is not None:
+                apply(spec.name, _as_declared(spec, parameter.value))
+
+    node.add_on_set_parameters_callback(check)
+    node.add_post_set_parameters_callback(applied)
+
+
+def _as_declared(spec: ParameterSpec, value: Any) -> Any:
+    """``value`` in the spec's own type: a double given as an integer becomes a float."""
+    if spec.type is ParameterType.DOUBLE:
+        return float(value)
+    if spec.type is ParameterType.DOUBLE_ARRAY:
+        return [float(v) for v in value]
+    return value
 
 
 def declare_node_parameters(node: Any, specs: Iterable[ParameterSpec]) -> dict[str, Any]:
@@ -149,11 +201,7 @@ def _declare(node: Any, spec: ParameterSpec) -> Any:
     problem = value_problem(spec, value)
     if problem is not None:
         raise StartupError(problem)
-    if spec.type is ParameterType.DOUBLE:
-        return float(value)
-    if spec.type is ParameterType.DOUBLE_ARRAY:
-        return [float(v) for v in value]
-    return value
+    return _as_declared(spec, value)
 
 
 _TYPE_WORDS = {ParameterType.BOOL: 'true or false', ParameterType.INTEGER: 'an integer',
@@ -247,6 +295,7 @@ def parameters_help(executable: str, specs: Sequence[ParameterSpec]) -> str:
                    if spec.range is not None else '')
         default = ('none' if spec.default is None
                    else list(spec.default) if isinstance(spec.default, tuple) else spec.default)
-        lines.append(f'  {spec.name} ({spec.type.value}, default {default!r}{allowed})')
+        settable = '' if spec.read_only else ', settable at run time'
+        lines.append(f'  {spec.name} ({spec.type.value}, default {default!r}{allowed}{settable})')
         lines.append(f'      {spec.description}')
     return '\n'.join(lines)

@@ -4,10 +4,12 @@ Subscribes to the measured ``/sphere/surface_normal``, ``/sphere/reference`` and
 ``/beams/programme_status``; when the plant has reported the last kick's start and end and a
 kick period has passed since that start, it runs the basic or the extended controller (§4.2) on
 that sample and publishes the chosen kick as a ``/beams/pulse_program`` — the same voltages a
-real device's drivers take. While resting it sends 0 V on ``/beams/voltage_command`` (which
-also lets a lockstep simulator's time run on). ``/controller/status`` says what it did and
-why: chosen action, Phi, Theta, learned directions and widths, and the kicks sent, landed,
-cut, refused and unanswered; when the state is stale it holds, sends nothing, and says so.
+real device's drivers take. When a rest begins it sends 0 V on ``/beams/voltage_command``
+(with ``hold_each_sample``, for every sample: a lockstep simulator's time runs on those).
+``/controller/status`` (5 Hz) says what it did and why: the newest decision (action, Phi,
+Theta), learned directions and widths, the kicks sent, landed, cut, refused and unanswered,
+and the samples decided on since the last status; when the state is stale it holds, sends
+nothing, and says so.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
 from msg_defs.conversions import (
@@ -32,6 +35,7 @@ from msg_defs.device import BEAM_COUNT, NS_PER_S
 from msg_defs.programme_events import ProgrammeState
 from msg_defs.topics import (
     CONTROLLER_STATUS,
+    DIAGNOSTICS,
     PROGRAMME_STATUS,
     PULSE_PROGRAM,
     SPHERE_REFERENCE,
@@ -41,14 +45,22 @@ from msg_defs.topics import (
 from sphere_control.controllers import controller_for
 from sphere_control.kick_cycle import KickCycle, Phase
 from sphere_twin.node_runtime.pace import PaceMeter
-from sphere_twin.node_runtime.parameter_specs import declare_node_parameters
+from sphere_twin.node_runtime.parameter_specs import (
+    accept_parameter_changes,
+    declare_node_parameters,
+)
 from sphere_twin.node_runtime.ros_env import run_node
 from sphere_twin.nodes.parameters import CONTROLLER_PARAMETERS
 
 if TYPE_CHECKING:
     from sphere_control.kick_cycle import Decision
 
+WARNING_PHASES = (Phase.STALE, Phase.NO_STATE, Phase.NO_REFERENCE)
+
 STALE_CHECK_PERIOD_S = 0.25
+# /controller/status goes out at this wall-clock period (5 Hz), not at the sample rate: each
+# one carries the newest decision and the stamps of every sample decided on since the last.
+STATUS_PERIOD_S = 0.2
 
 
 
@@ -64,6 +76,7 @@ class ControllerNode(Node):
 
         super().__init__('controller', **node_kwargs)
         p = declare_node_parameters(self, CONTROLLER_PARAMETERS)
+        accept_parameter_changes(self, CONTROLLER_PARAMETERS, self._parameter_changed)
         # The controller's intensities are calibrated on the tables' own level-state width
         # curves, as in the offline studies (sphere_control.intensity_calibration).
         table = calibrated(load_kick_model([t for t in p['tables'] if t]))
@@ -89,13 +102,28 @@ class ControllerNode(Node):
         self.create_subscription(PROGRAMME_STATUS.msg_type, PROGRAMME_STATUS.name,
                                  self.on_programme_status, PROGRAMME_STATUS.qos.to_profile())
         self.create_timer(STALE_CHECK_PERIOD_S, self.on_stale_check)
+        # The status is the wall's, whatever clock the node runs on (a paced simulator's
+        # /clock may crawl).
+        self.create_timer(STATUS_PERIOD_S, self.on_status_timer,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._last_phase: Phase | None = None
+        self._latest: tuple[Decision, Any] | None = None  # (decision, stamp) for the status
+        self._decided_s: list[float] = []  # samples decided on since the last status
+        self._kicked_s: list[float] = []  # those of them that kicked
+        self.hold_each_sample = p['hold_each_sample']
         self._hold_sent_at_s = -1.0
+        self._resting = False  # a rest's 0 V command has gone out
         self.pace = PaceMeter()
         self.get_logger().info(f'{self.controller_kind} controller, Phi_min '
                                f'{p["phi_min_deg"]:g} deg, {len(table.directions_rad)} actions, '
                                f'kick period {self.kick_period_s * 1e3:.0f} ms, preview '
                                f'{"on" if p["preview"] else "off"}')
+
+    def _parameter_changed(self, name: str, value: Any) -> None:
+        """Take a ``ros2 param set`` of preview (the one settable parameter): the next kick
+        aims with it."""
+        self.cycle.preview = value
+        self.get_logger().info(f'{name} set to {value}')
 
     def on_reference(self, msg: Any) -> None:
         try:
@@ -123,8 +151,10 @@ class ControllerNode(Node):
         for event in events:
             if self.cycle.concerns(event) and event.state in (ProgrammeState.REFUSED,
                                                               ProgrammeState.CUT):
+                # The status topic carries no reason; the simulator's /diagnostics does.
+                reason = event.text or f'the reason is on {DIAGNOSTICS.name}'
                 self.get_logger().warning(f'our kick (programme {event.number}) '
-                                          f'{event.state.value}: {event.text}')
+                                          f'{event.state.value}: {reason}')
             decision = self.cycle.on_programme_event(event)
             if decision is not None:
                 self._act(decision)
@@ -140,12 +170,38 @@ class ControllerNode(Node):
                                              decision.command.intensity, self.cycle.latest[1])
             start = time_from_ns(round(decision.start_s * NS_PER_S))
             self._programme_pub.publish(programme_to_msg(*programme.segments(), stamp=start))
-        elif decision.phase is Phase.RESTING and sample_s > self._hold_sent_at_s:
-            # One hold in flight at a time: a lockstep simulator advances one sample per
-            # command, and holds queued behind a later kick would delay it.
+        elif decision.phase is Phase.RESTING and self._hold_due(sample_s):
             self._hold_sent_at_s = sample_s
             self._voltage_pub.publish(voltages_to_msg([0.0] * BEAM_COUNT, stamp))
-        self._publish_status(decision, stamp)
+        self._note(decision, sample_s, stamp)
+
+    def _hold_due(self, sample_s: float) -> bool:
+        """Whether a resting decision on the sample at ``sample_s`` sends 0 V: once per rest,
+        or (hold_each_sample) once per sample, one in flight at a time, since a lockstep
+        simulator advances one sample per command and holds queued behind a later kick
+        would delay it."""
+        if self.hold_each_sample:
+            return sample_s > self._hold_sent_at_s
+        due, self._resting = not self._resting, True
+        return due
+
+    def _note(self, decision: Decision, sample_s: float, stamp: Any) -> None:
+        """Keep what the next status says; a warning phase is logged when it begins."""
+        phase = decision.phase
+        if phase in WARNING_PHASES and phase != self._last_phase:
+            self.get_logger().warning(f'holding: {phase.value}; sending nothing')
+        self._last_phase = phase
+        if phase is not Phase.RESTING:
+            self._resting = False
+        if phase in (Phase.RESTING, Phase.KICKING):
+            self._decided_s.append(sample_s)
+            if decision.command is not None:
+                self._kicked_s.append(sample_s)
+        self._latest = (decision, stamp)
+
+    def on_status_timer(self) -> None:
+        if self._latest is not None:
+            self._publish_status(*self._latest)
 
     def on_stale_check(self) -> None:
         decision = self.cycle.check_stale(time.monotonic())
@@ -155,20 +211,20 @@ class ControllerNode(Node):
             self._act(decision)
 
     def _publish_status(self, decision: Decision, stamp: Any) -> None:
+        """The newest decision, the counts so far and the samples decided on since the last
+        status (their stamps, simulated s: where the loop saw a settled state)."""
         phase = decision.phase
-        level = DiagnosticStatus.OK
-        if phase in (Phase.STALE, Phase.NO_STATE, Phase.NO_REFERENCE):
-            level = DiagnosticStatus.WARN
-            if phase != self._last_phase:
-                self.get_logger().warning(f'holding: {phase.value}; sending nothing')
-        self._last_phase = phase
+        level = DiagnosticStatus.WARN if phase in WARNING_PHASES else DiagnosticStatus.OK
         counts = self.cycle.counts
         values = [('phase', phase.value), ('kicks', counts.kicks), ('landed', counts.landed),
                   ('cut', counts.cut), ('refused', counts.refused),
                   ('unanswered', counts.unanswered),
                   ('phi_deg', f'{math.degrees(decision.phi_rad):.5f}'),
                   ('theta_deg', f'{math.degrees(decision.theta_rad):.3f}'),
-                  ('reference_speed_ratio', f'{self._speed_check():.3f}')]
+                  ('reference_speed_ratio', f'{self._speed_check():.3f}'),
+                  ('decided_s', ' '.join(f'{t:.6f}' for t in self._decided_s)),
+                  ('kicked_s', ' '.join(f'{t:.6f}' for t in self._kicked_s))]
+        self._decided_s, self._kicked_s = [], []
         if decision.command is not None:
             values += [('action', decision.command.action),
                        ('intensity', f'{decision.command.intensity:.4f}')]

@@ -29,8 +29,9 @@ MAX_INT32 = 2**31 - 1
 MAX_PUBLISH_RATE_HZ = 1000.0
 
 SIMULATOR_PARAMETERS = (
-    ParameterSpec('plant', STRING, 'discrete',
-                  f'Plant to run: {" or ".join(PLANT_KINDS)} (the lookup table of kicks).',
+    ParameterSpec('plant', STRING, PLANT_KINDS[0],
+                  'Plant to run: continuous (the physics of §3) or discrete (the lookup table '
+                  'of kicks: it starts faster; its sphere and beams rest between kicks).',
                   choices=PLANT_KINDS),
     ParameterSpec('scene', STRING, 'rest', 'Scene (shipped name or YAML path): parameters, '
                   'beams, sphere and initial state.'),
@@ -42,14 +43,16 @@ SIMULATOR_PARAMETERS = (
                   'diagonal and the axis-parallel tables give 8 directions); [""] for the '
                   'shipped default.'),
     ParameterSpec('publish_rate_hz', DOUBLE, SENSOR_RATE_HZ,
-                  'Samples per simulated second (Hz).', range=(1.0, MAX_PUBLISH_RATE_HZ)),
+                  'Samples per simulated second (Hz).', range=(1.0, MAX_PUBLISH_RATE_HZ),
+                  read_only=False),
     ParameterSpec('real_time_factor', DOUBLE, 1.0,
                   'Simulated seconds per wall second; 0 runs as fast as possible.',
-                  range=(0.0, 1000.0)),
-    ParameterSpec('seed', INTEGER, 0, 'Seed of the measurement noise.', range=(0, MAX_INT32)),
+                  range=(0.0, 1000.0), read_only=False),
+    ParameterSpec('seed', INTEGER, 0, 'Seed of the measurement noise.', range=(0, MAX_INT32),
+                  fixed_because='a run is reproducible only from its one seed'),
     ParameterSpec('noise_std_rad', DOUBLE, 0.0,
                   'Standard deviation of the measured normal per tangential axis (rad).',
-                  range=(0.0, 0.1)),
+                  range=(0.0, 0.1), read_only=False),
     ParameterSpec('wait_for_subscribers', INTEGER, 0,
                   f'Hold simulated time at 0 until {SURFACE_NORMAL.name} has this many '
                   'subscribers (DDS discovery takes seconds; a scenario should not start before '
@@ -92,7 +95,11 @@ CONTROLLER_PARAMETERS = (
     ParameterSpec('preview', BOOL, True,
                   'Aim where the reference will be when the kick has settled, estimated '
                   'from its recent samples (a jump is not extrapolated), not at its newest '
-                  'sample (the paper; docs/control.md).'),
+                  'sample (the paper; docs/control.md).', read_only=False),
+    ParameterSpec('hold_each_sample', BOOL, False,
+                  'While resting, send 0 V for every sample decided on, as a lockstep '
+                  'simulator needs (it advances one sample per command); otherwise one 0 V '
+                  'command when a rest begins.'),
 )
 
 # --- reference ---------------------------------------------------------------------------
@@ -121,7 +128,8 @@ REFERENCE_PARAMETERS = (
     ParameterSpec('amplitude', DOUBLE, 0.44, 'A_max of eq. (64).', range=(0.0, 1.0)),
     ParameterSpec('frequency_hz', DOUBLE, 0.02, 'f1 of eq. (64) (Hz).', range=(0.0, 10.0)),
     ParameterSpec('publish_rate_hz', DOUBLE, DEFAULT_PUBLISH_RATE_HZ,
-                  'Publications per second of the node clock (Hz).', range=(0.1, 1000.0)),
+                  'Publications per second of the node clock (Hz).', range=(0.1, 1000.0),
+                  read_only=False),
 )
 
 # --- recorder ----------------------------------------------------------------------------

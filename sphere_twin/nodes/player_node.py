@@ -30,6 +30,7 @@ from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.locate import locate_bag
 from sphere_twin.bag.reader import (
     RecordedMessage,
+    in_current_contract,
     message_class,
     read_messages,
     read_metadata,
@@ -227,7 +228,7 @@ class PlayerNode(Node):
         listed = {t['topic_metadata']['name']: t['topic_metadata']
                   for t in metadata.get('topics_with_message_count') or []}
         topics = [t for t in (p['topics'] or []) if t] or None
-        messages = list(read_messages(self.bag))
+        messages = [in_current_contract(m) for m in read_messages(self.bag)]
         check_selection(self.bag, messages, p['start_offset_s'], topics)
         types = {m.topic: m.type_name for m in messages}
         self.plan = playback_plan(messages, p['rate'], p['start_offset_s'], topics,

@@ -17,7 +17,10 @@ from msg_defs.markers import reference_markers
 from msg_defs.topics import CLOCK, MARKERS, SPHERE_REFERENCE
 from sphere_control.reference import CircleTrajectory, ScheduledReference, Setpoint, sample
 from sphere_twin.node_runtime.pace import PaceMeter
-from sphere_twin.node_runtime.parameter_specs import declare_node_parameters
+from sphere_twin.node_runtime.parameter_specs import (
+    accept_parameter_changes,
+    declare_node_parameters,
+)
 from sphere_twin.node_runtime.ros_env import run_node
 from sphere_twin.nodes.parameters import REFERENCE_PARAMETERS
 
@@ -43,13 +46,20 @@ class ReferenceNode(Node):
         self._warned_clamp = False
         self._clock_checked = False
         self.pace = PaceMeter()
-        self.create_timer(1.0 / p['publish_rate_hz'], self.on_timer)
+        self._timer = self.create_timer(1.0 / p['publish_rate_hz'], self.on_timer)
+        accept_parameter_changes(self, REFERENCE_PARAMETERS, self._parameter_changed)
         # Latched at once: with use_sim_time the timer waits for /clock, and a controller
         # should hold the reference before the simulator starts. Created at simulated time 0,
         # before any /clock, the timer still fires once /clock passes its period (rcl checks
         # a ROS-time timer on every jump of the clock), so the reference follows /clock as
         # soon as it hears it; one that never hears it holds its setpoint (test_clock_wait).
         self.on_timer()
+
+    def _parameter_changed(self, name: str, value: Any) -> None:
+        """Take a ``ros2 param set`` of the publish rate (the one settable parameter)."""
+        self.destroy_timer(self._timer)
+        self._timer = self.create_timer(1.0 / value, self.on_timer)
+        self.get_logger().info(f'{name} set to {value:g}')
 
     def reference_at(self, elapsed_s: float) -> tuple[ReferenceSample, str]:
         """(sample, phase name) at ``elapsed_s`` since the first publication."""

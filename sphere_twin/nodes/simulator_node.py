@@ -46,9 +46,20 @@ from msg_defs.topics import (
     SURFACE_NORMAL,
     VOLTAGE_COMMAND,
 )
+from msg_defs.transforms import (
+    NO_TF_LINE,
+    TF_QUEUE_DEPTH,
+    TF_TOPIC,
+    sphere_transform_msg,
+    tf_message_type,
+)
 from sphere_sim.twin.report_limit import ReportLimit
 from sphere_twin.node_runtime.outbox import Outbox
-from sphere_twin.node_runtime.parameter_specs import StartupError, declare_node_parameters
+from sphere_twin.node_runtime.parameter_specs import (
+    StartupError,
+    accept_parameter_changes,
+    declare_node_parameters,
+)
 from sphere_twin.node_runtime.ros_env import DISCOVERY_RANGE_VAR, run_node
 from sphere_twin.nodes.parameters import SIMULATOR_PARAMETERS
 
@@ -93,6 +104,7 @@ class SimulatorNode(Node):
 
     def __init__(self, plant: TwinPlant | None = None, **node_kwargs: Any) -> None:
         from sphere_sim.twin.plant_setup import build_plant
+        from sphere_sim.twin.precompile import announce_compile
         from sphere_sim.twin.runner import TwinRunner
 
         super().__init__('simulator', **node_kwargs)
@@ -104,14 +116,21 @@ class SimulatorNode(Node):
         self.period_s = 1.0 / self.publish_rate_hz
         self.real_time_factor = p['real_time_factor']
         if plant is None:
-            plant = build_plant(p['plant'], p['scene'], [t for t in p['tables'] if t],
-                                p['params'])
+            # A cold numba cache is compiled here, said in a line before and after.
+            with announce_compile(self.get_logger().info):
+                plant = build_plant(p['plant'], p['scene'], [t for t in p['tables'] if t],
+                                    p['params'])
         self.runner = TwinRunner(plant, self.period_s, p['noise_std_rad'], p['seed'],
                                  p['lockstep'])
         self._topic_publishers = {topic.name: self.create_publisher(
             topic.msg_type, topic.name, topic.qos.to_profile())
             for topic in (SURFACE_NORMAL, SPHERE_STATE, BEAM_STATE, BEAM_VOLTAGE, MARKERS,
                           CLOCK, DIAGNOSTICS, PROGRAMME_STATUS)}
+        self._tf_type = tf_message_type()
+        self._tf_publisher = (None if self._tf_type is None else
+                              self.create_publisher(self._tf_type, TF_TOPIC, TF_QUEUE_DEPTH))
+        if self._tf_type is None:
+            self.get_logger().info(NO_TF_LINE)
         # Every message leaves through one thread of its own, in the order it was made: the
         # next sample integrates (the kernel releases the GIL) while this one is published.
         self._outbox = Outbox(name='simulator publishing', on_error=self._publishing_failed)
@@ -125,10 +144,9 @@ class SimulatorNode(Node):
         self.create_subscription(PULSE_PROGRAM.msg_type, PULSE_PROGRAM.name,
                                  self.on_pulse_program, PULSE_PROGRAM.qos.to_profile(),
                                  event_callbacks=lost_events)
-        self.paced = self.real_time_factor > 0 and not p['lockstep']
-        period = (self.period_s / self.real_time_factor / CATCH_UP_SPEEDUP if self.paced
-                  else FAST_TIMER_PERIOD_S)
-        self.create_timer(period, self.on_timer)
+        self.lockstep = p['lockstep']
+        self._sample_timer: Any = None
+        self._start_sample_timer()
         self.create_timer(STATUS_PERIOD_S, self.on_status_timer)
         self.wait_for_subscribers = p['wait_for_subscribers']
         self.wait_for_clock_subscribers = p['wait_for_clock_subscribers']
@@ -136,6 +154,9 @@ class SimulatorNode(Node):
         self._reports = ReportLimit()
         self._last_repeat_wall_s = 0.0
         self._wall_start_s = time.perf_counter()
+        # (wall, simulated) time from which the pace is kept: the first sample, or the last
+        # change of the real-time factor.
+        self._pace_anchor = (self._wall_start_s, 0.0)
         self.get_logger().info(
             f'{DISCOVERY_RANGE_VAR}={os.environ.get(DISCOVERY_RANGE_VAR, "(unset)")}, domain id '
             f'{self.context.get_domain_id()}; {p["plant"]} plant, scene {p["scene"]}, '
@@ -143,7 +164,32 @@ class SimulatorNode(Node):
             f'{", lockstep" if p["lockstep"] else ""}; publishing {SURFACE_NORMAL.name}')
 
     def _declare_parameters(self) -> dict[str, Any]:
-        return declare_node_parameters(self, SIMULATOR_PARAMETERS)
+        parameters = declare_node_parameters(self, SIMULATOR_PARAMETERS)
+        accept_parameter_changes(self, SIMULATOR_PARAMETERS, self._parameter_changed)
+        return parameters
+
+    def _start_sample_timer(self) -> None:
+        """(Re)start the sampling timer for the current pace and period."""
+        if self._sample_timer is not None:
+            self.destroy_timer(self._sample_timer)
+        self.paced = self.real_time_factor > 0 and not self.lockstep
+        period = (self.period_s / self.real_time_factor / CATCH_UP_SPEEDUP if self.paced
+                  else FAST_TIMER_PERIOD_S)
+        self._sample_timer = self.create_timer(period, self.on_timer)
+
+    def _parameter_changed(self, name: str, value: Any) -> None:
+        """Take a ``ros2 param set`` of a settable parameter (already checked)."""
+        if name == 'noise_std_rad':
+            self.runner.set_noise(value)
+        elif name == 'publish_rate_hz':
+            self.publish_rate_hz, self.period_s = value, 1.0 / value
+            self.runner.set_period(self.period_s)
+        elif name == 'real_time_factor':
+            self.real_time_factor = value
+            # The new pace counts from the simulated now: no burst to catch up.
+            self._pace_anchor = (time.perf_counter(), self.runner.time_s)
+        self._start_sample_timer()
+        self.get_logger().info(f'{name} set to {value:g}')
 
     # --- commands ----------------------------------------------------------------------
     def on_commands_lost(self, info: QoSMessageLostInfo) -> None:
@@ -279,8 +325,9 @@ class SimulatorNode(Node):
             self.wait_for_subscribers = self.wait_for_clock_subscribers = 0
         if self.runner.counters.samples == 0:
             self._wall_start_s = time.perf_counter()  # simulated time 0 is now
-        elif self.paced and self.runner.time_s >= (
-                time.perf_counter() - self._wall_start_s) * self.real_time_factor:
+            self._pace_anchor = (self._wall_start_s, 0.0)
+        elif self.paced and self.runner.time_s - self._pace_anchor[1] >= (
+                time.perf_counter() - self._pace_anchor[0]) * self.real_time_factor:
             return  # ahead of the wall clock
         sample, refused = self.runner.tick()
         for reason in refused:
@@ -312,6 +359,9 @@ class SimulatorNode(Node):
             centre, quaternion, velocity, omega = snap.sphere
             pub[SPHERE_STATE.name].publish(sphere_state_to_msg(centre, quaternion, velocity,
                                                                omega, stamp=stamp))
+            if self._tf_publisher is not None and self._tf_type is not None:
+                self._tf_publisher.publish(self._tf_type(
+                    transforms=[sphere_transform_msg(centre, quaternion, stamp)]))
         if snap.beams is not None:
             z, phi, z_rate, phi_rate = snap.beams
             pub[BEAM_STATE.name].publish(beam_state_to_msg(z, phi, z_rate, phi_rate,
