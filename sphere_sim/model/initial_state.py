@@ -333,12 +333,13 @@ def _acceleration_index(model: Model, free: NDArray[np.intp]) -> NDArray[np.intp
     return np.array(index)
 
 
-def initial_state(model: Model) -> NDArray[np.float64]:
-    """The scene's initial state, shape (n_states,)."""
+def initial_state(model: Model, relaxation: str = 'radau') -> NDArray[np.float64]:
+    """The scene's initial state, shape (n_states,); a rest state is relaxed with
+    ``relaxation`` (:func:`rest_state`)."""
     init = model.scene.initial
     if init.mode == 'explicit':
         return explicit_state(model)
-    x = rest_state(model)
+    x = rest_state(model, relaxation=relaxation)
     if model.has_sphere and init.sphere_lift_m:
         x[model.sphere_offset + 2] += init.sphere_lift_m
     if model.has_sphere:
