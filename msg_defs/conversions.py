@@ -323,6 +323,15 @@ def programme_from_msg(msg: Any) -> tuple[NDArray[np.float64], NDArray[np.float6
 
 # --- sphere state (nav_msgs/Odometry) -----------------------------------------------------
 
+def unit_quaternion(quaternion_wxyz: ArrayLike) -> NDArray[np.float64]:
+    """``quaternion_wxyz`` normalised; ValueError if it is not finite or has zero length."""
+    q = finite_vector(quaternion_wxyz, 4, 'quaternion')
+    norm = float(np.linalg.norm(q))
+    if norm == 0.0:
+        raise ValueError('quaternion: zero length')
+    return q / norm
+
+
 def sphere_state_to_msg(position_m: ArrayLike, quaternion_wxyz: ArrayLike,
                         velocity_m_per_s: ArrayLike, omega_body_rad_per_s: ArrayLike,
                         stamp: Any = None) -> Any:
@@ -340,11 +349,7 @@ def sphere_state_to_msg(position_m: ArrayLike, quaternion_wxyz: ArrayLike,
     omega_body_rad_per_s : array_like, shape (3,)
         Angular velocity in ``sphere`` (rad/s).
     """
-    q = finite_vector(quaternion_wxyz, 4, 'quaternion')
-    norm = float(np.linalg.norm(q))
-    if norm == 0.0:
-        raise ValueError('quaternion: zero length')
-    q = q / norm
+    q = unit_quaternion(quaternion_wxyz)
     p = finite_vector(position_m, 3, 'position')
     v_world = finite_vector(velocity_m_per_s, 3, 'velocity')
     w = finite_vector(omega_body_rad_per_s, 3, 'angular velocity')

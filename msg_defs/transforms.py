@@ -9,11 +9,10 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
 from numpy.typing import ArrayLike
 
+from msg_defs.conversions import finite_vector, unit_quaternion
 from msg_defs.topics import SPHERE_FRAME, WORLD_FRAME
-from msg_defs.voltage_rules import finite_vector
 
 TF_TOPIC = '/tf'
 # tf2's own publishers use a reliable, volatile queue of this depth.
@@ -36,11 +35,7 @@ def sphere_transform_msg(position_m: ArrayLike, quaternion_wxyz: ArrayLike, stam
     ``/sphere/state`` carries (the quaternion normalised here)."""
     from geometry_msgs.msg import TransformStamped
 
-    q = finite_vector(quaternion_wxyz, 4, 'quaternion')
-    norm = float(np.linalg.norm(q))
-    if norm == 0.0:
-        raise ValueError('quaternion: zero length')
-    q = q / norm
+    q = unit_quaternion(quaternion_wxyz)
     p = finite_vector(position_m, 3, 'position')
     msg = TransformStamped()
     msg.header.stamp = stamp
