@@ -42,6 +42,23 @@ def test_an_error_a_shutdown_signal_caused_is_the_shutdown(fresh_signals):
     assert ros_env.shutdown_requested() and node.destroyed
 
 
+def test_an_interrupt_that_reaches_past_the_shutdown_still_exits_cleanly(fresh_signals):
+    """Signals in a burst: the first ends the spin, and an interrupt that still escapes the
+    shutdown under way (here from the farewell) is the same clean stop, status 0, with the
+    late signals ignored from then on."""
+    node = FakeNode()
+
+    def spin(_):
+        ros_env._raise_keyboard_interrupt(signal.SIGINT, None)
+
+    def farewell(_):
+        raise KeyboardInterrupt('SIGINT')
+
+    assert ros_env.run_node(lambda: node, spin=spin, farewell=farewell) == 0
+    assert ros_env.shutdown_requested()
+    assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+
+
 def test_without_a_shutdown_signal_an_error_is_a_bug(fresh_signals):
     node = FakeNode()
 

@@ -184,12 +184,29 @@ def run_node(build: Callable[[], Any], args: list[str] | None = None,
     """
     if _printed_help(sys.argv[1:] if args is None else args, name or 'node', parameters):
         return 0
+    try:
+        return _run(build, args, spin, farewell, name or 'node', own_signal_handling)
+    except KeyboardInterrupt:
+        # The first signal's interrupt ends the spin inside _run; one that still reaches here
+        # came on top of a shutdown already under way (signals in a burst, as a terminal's
+        # Ctrl-C and launch's own SIGINT): the node is leaving anyway, and a traceback with
+        # exit status -2 would report a clean stop as a crash.
+        import rclpy
+
+        _ignore_late_signals()
+        rclpy.try_shutdown()  # where the interrupted shutdown did not get to it
+        return 0
+
+
+def _run(build: Callable[[], Any], args: list[str] | None,
+         spin: Callable[[Any], object] | None, farewell: Callable[[Any], str] | None,
+         node_name: str, own_signal_handling: Callable[[], object] | None) -> int:
+    """:func:`run_node` after ``--help``: init, build, spin, and the clean shutdown."""
     import rclpy
     from rclpy.executors import ExternalShutdownException
 
     ensure_localhost_discovery()
     (own_signal_handling or install_shutdown_signal_handlers)()
-    node_name = name or 'node'
     if not _init_rclpy(node_name, args, rclpy_signal_handlers=own_signal_handling is None):
         return 2
     node = None
