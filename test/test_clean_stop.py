@@ -27,7 +27,7 @@ pytestmark = pytest.mark.ros
 
 READY_TIMEOUT_S = 60.0
 # A stop that takes long is not what these tests judge (exit status, no traceback): a node's
-# shutdown waits up to 4 s for its publishing thread, and a loaded machine (six nodes at 5x
+# shutdown waits up to 6 s for its publishing thread, and a loaded machine (six nodes at 5x
 # real time beside the suite) can take several more seconds to leave the interpreter.
 EXIT_TIMEOUT_S = 30.0
 SIGNALS = [signal.SIGINT, signal.SIGTERM]
