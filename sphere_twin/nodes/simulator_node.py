@@ -181,14 +181,15 @@ class SimulatorNode(Node):
         """Take a ``ros2 param set`` of a settable parameter (already checked)."""
         if name == 'noise_std_rad':
             self.runner.set_noise(value)
-        elif name == 'publish_rate_hz':
-            self.publish_rate_hz, self.period_s = value, 1.0 / value
-            self.runner.set_period(self.period_s)
-        elif name == 'real_time_factor':
-            self.real_time_factor = value
-            # The new pace counts from the simulated now: no burst to catch up.
-            self._pace_anchor = (time.perf_counter(), self.runner.time_s)
-        self._start_sample_timer()
+        else:
+            if name == 'publish_rate_hz':
+                self.publish_rate_hz, self.period_s = value, 1.0 / value
+                self.runner.set_period(self.period_s)
+            else:  # real_time_factor
+                self.real_time_factor = value
+                # The new pace counts from the simulated now: no burst to catch up.
+                self._pace_anchor = (time.perf_counter(), self.runner.time_s)
+            self._start_sample_timer()  # its period follows both
         self.get_logger().info(f'{name} set to {value:g}')
 
     # --- commands ----------------------------------------------------------------------
