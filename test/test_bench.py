@@ -53,6 +53,9 @@ QUICK_RUN_REPEATS = 2  # so that the passes of further timed runs are exercised 
 # machine and three times that on a loaded one, where the bench's own 30 s would end it and
 # the test would read the machine's load, not the bench.
 QUICK_RUN_TEST_BUDGET_S = 180.0
+# The quick plan's methods but Python-stepped Radau: a minute of the run at 1e-7 with its
+# repeats, and its bookkeeping is the other methods' (the plan itself is `make bench`'s).
+TEST_METHODS = tuple(m for m in wp.QUICK_METHODS if m != 'Radau')
 
 
 @pytest.fixture(scope='module')
@@ -62,13 +65,14 @@ def quick_run(tmp_path_factory):
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(wp, 'QUICK_REPEATS', QUICK_RUN_REPEATS)
         patch.setattr(wp, 'QUICK_RUN_BUDGET_S', QUICK_RUN_TEST_BUDGET_S)
+        patch.setattr(wp, 'QUICK_METHODS', TEST_METHODS)
         rows, summary = bench.run_work_precision_bench(quick=True, out_dir=out, stream=stream)
     return out, stream.getvalue(), rows, summary
 
 
 def test_quick_run_times_every_point_as_often_as_asked(quick_run):
     _, _, rows, _ = quick_run
-    assert len(rows) == len(wp.QUICK_METHODS) * len(wp.QUICK_TOLERANCES)
+    assert len(rows) == len(TEST_METHODS) * len(wp.QUICK_TOLERANCES)
     for r in rows:
         assert r['status'] == 'ok' and 'times' not in r
         assert r['note'] == f'{QUICK_RUN_REPEATS} timed run(s)'
@@ -104,7 +108,7 @@ def test_quick_run_errors_fall_with_the_tolerance(quick_run):
     _, _, rows, summary = quick_run
     # The two reference methods agree far below the errors being measured.
     assert summary['agreement']['diagonal_kick'][0] < 1e-8
-    for method in wp.QUICK_METHODS:
+    for method in TEST_METHODS:
         errors = [r['angle_error_rad'] for r in sorted(rows, key=lambda r: -r['rtol'])
                   if r['method'] == method]
         assert errors[-1] < errors[0] / 100, method

@@ -153,6 +153,8 @@ def test_a_start_that_fails_loading_the_physics_compiles_no_further(announced):
 
 
 # --- end to end, from an install location ------------------------------------------------------
+# The install and its compile are made once for the module; the node test among these runs in
+# make test's one-process pass, so the others are marked to run there with it (`serial`).
 @pytest.fixture(scope='module')
 def install(tmp_path_factory):
     return install_into(tmp_path_factory.mktemp('first_start') / 'install')
@@ -176,6 +178,7 @@ def compile_runs(install):
     return before, first, after, second
 
 
+@pytest.mark.serial
 @pytest.mark.slow
 def test_a_fresh_install_is_cold_whatever_the_source_tree_holds(compile_runs):
     before = compile_runs[0]
@@ -183,6 +186,7 @@ def test_a_fresh_install_is_cold_whatever_the_source_tree_holds(compile_runs):
     assert before.stdout.startswith('not compiled:')
 
 
+@pytest.mark.serial
 @pytest.mark.slow
 def test_the_compile_command_compiles_into_the_install_location(install, compile_runs):
     first = compile_runs[1]
@@ -195,6 +199,7 @@ def test_the_compile_command_compiles_into_the_install_location(install, compile
     assert any(own_cache.rglob('__pycache__/*.nbc'))
 
 
+@pytest.mark.serial
 @pytest.mark.slow
 def test_after_compiling_the_detector_says_warm_and_a_second_compile_has_nothing_to_do(
         compile_runs):

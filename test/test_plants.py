@@ -146,12 +146,14 @@ def test_continuous_plant_reproduces_a_direct_simulation_of_the_kick():
 @pytest.mark.parametrize('tilt_deg', [5.0, 35.0])
 def test_the_live_tolerance_lands_a_kick_within_a_hundredth_of_the_sensor_noise(tilt_deg):
     """LIVE_RTOL is chosen by this error (docs/twin.md): a whole kick window at the live
-    tolerance against the same kick at rtol 1e-9."""
+    tolerance against the same kick at rtol 1e-7."""
     plant = build_plant('continuous')
     normal = normal_from_xy(math.sin(math.radians(tilt_deg)), 0.0)
     programme = LookupTable.load_current().spec.design.programme(1.0)
     live, _ = simulate_kick(plant.model, normal, programme, rtol=LIVE_RTOL)
-    exact, _ = simulate_kick(plant.model, normal, programme, rtol=1e-9)
+    # The reference's own error: 4.5e-10 and 7.7e-11 rad against rtol 1e-9 (5 and 35 deg),
+    # under a ten-thousandth of the bound, for a fifth of the time.
+    exact, _ = simulate_kick(plant.model, normal, programme, rtol=1e-7)
     assert angle_between(live.normal, exact.normal) < LIVE_ERROR_BOUND_RAD
     assert angle_between(live.normal, normal) > math.radians(0.2)  # and it did kick
 

@@ -34,6 +34,7 @@ import dataclasses
 import hashlib
 import json
 import math
+import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from functools import lru_cache
 from pathlib import Path
@@ -304,13 +305,23 @@ class Evaluator:
     def _append(self, entries: Iterable[tuple[tuple[str, ...], NDArray[np.float64]]]) -> None:
         if self.checkpoint is None:
             return
-        fresh = not self.checkpoint.exists() or (not self.resumed and not self._written)
-        with open(self.checkpoint, 'w' if fresh else 'a') as stream:
-            if fresh:
-                stream.write(json.dumps({'digest': self.digest}) + '\n')
-            for key, r in entries:
-                stream.write(json.dumps({'u': list(key), 'r': r.tolist()}) + '\n')
+        if self._written:
+            with open(self.checkpoint, 'a') as stream:
+                stream.writelines(self._line(key, r) for key, r in entries)
+            return
+        # This run's first write starts the file anew with every evaluation it holds (those read
+        # back included): appended to a line an interruption cut short, they would be lost on
+        # the next resume. The old file stays whole until the new one replaces it.
+        fresh = self.checkpoint.with_name(self.checkpoint.name + '.tmp')
+        with open(fresh, 'w') as stream:
+            stream.write(json.dumps({'digest': self.digest}) + '\n')
+            stream.writelines(self._line(key, r) for key, r in self.cache.items())
+        os.replace(fresh, self.checkpoint)
         self._written = True
+
+    @staticmethod
+    def _line(key: tuple[str, ...], r: NDArray[np.float64]) -> str:
+        return json.dumps({'u': list(key), 'r': r.tolist()}) + '\n'
 
     def values(self, u: Iterable[float]) -> list[float]:
         return [fit.from_unit(v) for fit, v in zip(self.fits, u, strict=True)]
