@@ -37,8 +37,9 @@ typecheck: $(STAMP)
 	$(BIN)/mypy
 
 # Two passes: the physics, numerics and control tests on two workers (each file on one, so a
-# module's fixture is built once), then the node tests and those that time the wall clock in one
-# process, alone on the machine. A pass that selects nothing (status 5) is not a failure.
+# module's fixture is built once); then, alone on the machine, the node tests, which measure gaps
+# and timeouts in wall time, with those that share a fixture with one (`serial`). A pass that
+# selects nothing (status 5) is not a failure.
 test: lint typecheck
 	@parallel=0; serial=0; \
 	$(BIN)/python -m pytest -m 'not ros and not serial' -n 2 --dist loadfile $(PYTEST_ARGS) \
