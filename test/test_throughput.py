@@ -159,19 +159,21 @@ def test_engines_map_in_order_and_a_passed_engine_stays_open():
     assert SerialEngine()(_square, items) == pool(_square, items)
 
 
-def test_optimisation_on_a_pool_and_on_dask_finds_the_same_kick():
+def test_optimisation_on_one_worker_a_pool_and_dask_finds_the_same_kick():
+    """The same seed evaluates the same designs on any engine: a generation at a time."""
     from distributed import LocalCluster
 
     from sphere_sim.kicks.engine import DaskEngine
 
     search = {'popsize': 2, 'maxiter': 1, 'seed': 3}
+    alone = optimization.optimise_kick(workers=1, **search)
     with PoolEngine(2) as pool:
         pooled = optimization.optimise_kick(workers=pool, **search)
     with LocalCluster(n_workers=2, threads_per_worker=1, host='127.0.0.1',
                       dashboard_address=None, processes=True) as cluster, \
             DaskEngine(cluster.scheduler_address) as dask:
         spread = optimization.optimise_kick(workers=dask, **search)
-    assert pooled == spread
+    assert alone == pooled == spread
     assert pooled.evaluations == 2 * 3 * 2
 
 

@@ -104,8 +104,9 @@ def optimise_kick(template: KickDesign | None = None, params: ParameterSet | Non
     params : ParameterSet, optional
         The default set unless given (the calibration passes candidates).
     workers : int or engine
-        Local processes, or a started engine of :mod:`sphere_sim.kicks.engine` (left open);
-        with more than one worker the population is evaluated a generation at a time.
+        Local processes, or a started engine of :mod:`sphere_sim.kicks.engine` (left open).
+        The population is evaluated a generation at a time whatever the count, so that the
+        same seed finds the same kick on one worker as on many.
 
     Returns
     -------
@@ -124,7 +125,7 @@ def optimise_kick(template: KickDesign | None = None, params: ParameterSet | Non
         result = differential_evolution(objective, bounds, seed=seed, popsize=popsize,
                                         maxiter=maxiter, tol=1e-3, polish=False,
                                         workers=engine if parallel else 1,
-                                        updating='deferred' if parallel else 'immediate',
+                                        updating='deferred',
                                         callback=callback)
         # On a worker, which has the model and rest state already.
         best = engine(objective.outcome, [result.x])[0]
