@@ -38,13 +38,14 @@ typecheck: $(STAMP)
 
 # Two passes: the physics, numerics and control tests on two workers (each file on one, so a
 # module's fixture is built once); then, alone on the machine, the node tests, which measure gaps
-# and timeouts in wall time, with those that share a fixture with one (`serial`). A pass that
-# selects nothing (status 5) is not a failure.
+# and timeouts in wall time (but those marked `load_tolerant`, which run in the first). A pass
+# that selects nothing (status 5) is not a failure.
 test: lint typecheck
 	@parallel=0; serial=0; \
-	$(BIN)/python -m pytest -m 'not ros and not serial' -n 2 --dist loadfile $(PYTEST_ARGS) \
+	$(BIN)/python -m pytest -m 'not ros or load_tolerant' -n 2 --dist loadfile $(PYTEST_ARGS) \
 		|| [ $$? -eq 5 ] || parallel=1; \
-	$(BIN)/python -m pytest -m 'ros or serial' $(PYTEST_ARGS) || [ $$? -eq 5 ] || serial=1; \
+	$(BIN)/python -m pytest -m 'ros and not load_tolerant' $(PYTEST_ARGS) \
+		|| [ $$? -eq 5 ] || serial=1; \
 	if [ $$parallel -ne 0 ]; then \
 		echo 'make test: the two-worker pass failed (its summary is above the node tests)'; fi; \
 	exit $$((parallel + serial))
