@@ -121,11 +121,9 @@ def optimise_kick(template: KickDesign | None = None, params: ParameterSet | Non
             progress(-intermediate_result.fun)
 
     with engine_for(workers) as engine:
-        parallel = engine.workers > 1
         result = differential_evolution(objective, bounds, seed=seed, popsize=popsize,
                                         maxiter=maxiter, tol=1e-3, polish=False,
-                                        workers=engine if parallel else 1,
-                                        updating='deferred',
+                                        workers=engine, updating='deferred',
                                         callback=callback)
         # On a worker, which has the model and rest state already.
         best = engine(objective.outcome, [result.x])[0]
