@@ -11,7 +11,14 @@ import time
 
 import pytest
 
-from msg_defs.topics import CLOCK, DIAGNOSTICS, PULSE_PROGRAM, SPHERE_REFERENCE
+from msg_defs.topics import (
+    CLOCK,
+    CONTROLLER_STATUS,
+    DIAGNOSTICS,
+    PULSE_PROGRAM,
+    SPHERE_REFERENCE,
+    SURFACE_NORMAL,
+)
 from sphere_twin.bag.reader import (
     deserialize,
     has_footer,
@@ -26,6 +33,9 @@ from sphere_twin.testing import TopicProbe
 pytestmark = pytest.mark.ros
 
 READY_TIMEOUT_S = 60.0
+# Every topic with a stamp that the stopped nodes publish, and the simulator's own two: the bag
+# must hold each (the nodes are stopped once the recorder has said it records them all).
+RECORDED_BEFORE_STOP = (SURFACE_NORMAL, CLOCK, SPHERE_REFERENCE, CONTROLLER_STATUS, PULSE_PROGRAM)
 # A stop that takes long is not what these tests judge (exit status, no traceback): a node's
 # shutdown waits up to 6 s for its publishing thread, and a loaded machine (six nodes at 5x
 # real time beside the suite) can take several more seconds to leave the interpreter.
@@ -87,7 +97,6 @@ def test_the_simulator_stops_cleanly_in_the_middle_of_integrating(ros_nodes, sig
 @pytest.mark.parametrize('signum', SIGNALS, ids=SIGNAL_IDS)
 def test_controller_reference_and_recorder_stop_cleanly_while_the_loop_runs(
         ros_nodes, tmp_path, signum):
-    from msg_defs.topics import CONTROLLER_STATUS, SURFACE_NORMAL
 
     recorder = ros_nodes.start('recorder', parameter_args(output_dir=str(tmp_path / 'bag')))
     nodes = {spec.executable: ros_nodes.start(spec.executable, spec.args)
@@ -98,8 +107,10 @@ def test_controller_reference_and_recorder_stop_cleanly_while_the_loop_runs(
         log = RunLog(probe)
         probe.spin_until(lambda: log.kicks() >= 3, READY_TIMEOUT_S, 'three kicks')
         # The probe hearing kicks does not mean the recorder does (discovery matches each
-        # pair on its own): it says so with its first programme, and the loop kicks on.
-        recorder.wait_for_output(f'recording {PULSE_PROGRAM.name}', READY_TIMEOUT_S)
+        # pair on its own): it says so with each topic's first message, and the loop kicks on.
+        # The controller's status goes out at 5 Hz of wall time, so it may come last.
+        for topic in RECORDED_BEFORE_STOP:
+            recorder.wait_for_output(f'recording {topic.name} ', READY_TIMEOUT_S)
     finally:
         probe.close()
     # Each while the others still run: the controller amid samples, the reference on its
@@ -130,8 +141,7 @@ def test_controller_reference_and_recorder_stop_cleanly_while_the_loop_runs(
         if stamp is not None:
             stamp = getattr(stamp, 'stamp', stamp)
             stamps.setdefault(message.topic, []).append(stamp.sec + stamp.nanosec * 1e-9)
-    assert {SURFACE_NORMAL.name, CLOCK.name, SPHERE_REFERENCE.name, CONTROLLER_STATUS.name,
-            PULSE_PROGRAM.name} <= stamps.keys()
+    assert {topic.name for topic in RECORDED_BEFORE_STOP} <= stamps.keys()
     simulated_s = max(stamps[CLOCK.name])
     assert all(0.0 <= t <= simulated_s + 1.0 for ts in stamps.values() for t in ts), {
         topic: max(ts) for topic, ts in stamps.items()}
