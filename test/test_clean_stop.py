@@ -97,7 +97,6 @@ def test_the_simulator_stops_cleanly_in_the_middle_of_integrating(ros_nodes, sig
 @pytest.mark.parametrize('signum', SIGNALS, ids=SIGNAL_IDS)
 def test_controller_reference_and_recorder_stop_cleanly_while_the_loop_runs(
         ros_nodes, tmp_path, signum):
-
     recorder = ros_nodes.start('recorder', parameter_args(output_dir=str(tmp_path / 'bag')))
     nodes = {spec.executable: ros_nodes.start(spec.executable, spec.args)
              for spec in scenario_nodes(1.0, 'discrete', 5.0, 0, NORMAL_SUBSCRIBERS,
