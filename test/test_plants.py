@@ -134,9 +134,16 @@ def test_continuous_plant_reproduces_a_direct_simulation_of_the_kick():
     plant.advance(0.02)
     direct, _ = simulate_kick(plant.model, plant.model.surface_normal(x0), programme,
                               window_s=0.02, x_rest=x0, rtol=1e-8)
-    # Measured 6.3e-7 rad: a kick from level lies on its mirror line, where the other steps
-    # taken by advancing in pieces tip the landing (the paper's friction; docs/parameters.md).
-    assert angle_between(plant.snapshot().normal, direct.normal) < 2e-6
+    # A kick from level lies on its mirror line, where the other steps taken by advancing in
+    # pieces tip the landing to one side (the paper's friction; docs/parameters.md). Across the
+    # line that does not converge with rtol: measured 2.0e-6, 0.9e-6 and 0.2e-6 rad at 1e-8,
+    # 1e-9 and 1e-10 on one machine, 6.3e-7 at 1e-8 on another. Along the kick it does (3e-7 at
+    # 1e-8, 8e-8 at 1e-10); one pulse's start moved by 1 us moves it by 3.6e-6 (the angle by
+    # 1.8e-5).
+    ours = plant.snapshot().normal
+    along = direct.normal[:2] / np.linalg.norm(direct.normal[:2])
+    assert abs(np.dot(ours[:2] - direct.normal[:2], along)) < 1e-6
+    assert angle_between(ours, direct.normal) < 5e-6
     assert plant.snapshot().sphere[0].shape == (3,)
 
 
