@@ -5,6 +5,7 @@ sensor noise of the noise study) and identifies it from the bag alone; the other
 parts on data whose answer is known by construction.
 """
 
+import json
 import math
 
 import numpy as np
@@ -555,7 +556,9 @@ def test_the_study_runs_only_the_devices_named_and_says_so(tmp_path, monkeypatch
     assert fitted == [['beam.damping_phi_nms_per_rad', 'beam.stiffness_z_n_per_m',
                        'friction.coulomb']]
     table = out.read_text()
-    assert '--device device_b`' in table and '## device_b' in table and 'device_a' not in table
+    assert '--device device_b`' in table and '## device_b: `dry_contact` with' in table
+    assert 'device_a' not in table and 'calibrated' not in table
+    assert json.loads(out.with_suffix('.json').read_text())[0]['base'] == 'dry_contact'
     # Start values: the changed damping (x 1.25) and k_z (x 0.85) lie inside a factor 1.5,
     # the unchanged friction coefficient too.
     assert printed.strip().splitlines()[-1] == (
@@ -563,6 +566,34 @@ def test_the_study_runs_only_the_devices_named_and_says_so(tmp_path, monkeypatch
     status = cli.main(['synthetic', 'study', '--device', 'device_z', '--out', str(out)])
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 2 and len(err) == 1 and "unknown device 'device_z'" in err[0]
+
+
+def test_a_device_of_the_papers_set_is_recorded_on_it_with_its_truth(tmp_path, capsys):
+    """paper_a to paper_e are the paper's device (`calibrated`) with two of the beams'
+    declared-uncertain parameters changed, each inside its declared range; the bag's
+    truth.yaml is that set with those changes, and the recording holds what the device did."""
+    from sphere_twin import cli
+    from sphere_twin.commands.identify import read_observations
+    from sphere_twin.synthetic_device import PAPER_DEVICES
+
+    calibrated = load_parameter_set('calibrated')
+    declared = {u.path: (u.low, u.high) for u in calibrated.uncertain}
+    for device in PAPER_DEVICES:
+        assert device.base == 'calibrated' and len(device.factors) == 2
+        for path, value in device.truth_overrides(calibrated).items():
+            low, high = declared[path]
+            assert min(low, high) < value < max(low, high), (device.name, path, value)
+    bag = tmp_path / 'paper_c'
+    status = cli.main(['synthetic', 'record', str(bag), '--device', 'paper_c', '--kicks', '2'])
+    assert status == 0 and 'paper_c' in capsys.readouterr().out
+    truth = load_parameter_set(str(bag / 'truth.yaml'))
+    expected = PAPER_DEVICES[2].truth(calibrated)
+    for path in ('beam.stiffness_phi_nm_per_rad', 'beam.ground_z_m', 'friction.reading',
+                 'beam.stiffness_z_n_per_m'):
+        assert truth.get(path) == expected.get(path)
+    assert truth.get('beam.stiffness_phi_nm_per_rad') == pytest.approx(
+        1.35 * calibrated.beam.stiffness_phi_nm_per_rad, rel=1e-12)
+    assert len(read_observations(bag).kicks) == 2
 
 
 def test_identify_says_each_set_up_step_before_its_first_batch(tmp_path, monkeypatch, capsys):

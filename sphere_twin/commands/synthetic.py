@@ -48,7 +48,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                                         'the study (or of --truth) into OUT, with truth.yaml.')
     record.add_argument('out', type=output_directory, help='bag directory to create')
     record.add_argument('--device', default='device_a',
-                        help='a device of the study (device_a to device_e)')
+                        help="a device of the study: device_a to device_e (dry_contact), "
+                             "paper_a to paper_e (the paper's device, calibrated)")
     record.add_argument('--kicks', type=positive_int, default=DEFAULT_KICKS)
     record.add_argument('--seed', type=seed, default=None,
                         help="seed of the kicks and the noise (default: the device's)")
@@ -59,7 +60,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                                        'its JSON.')
     study.add_argument('--kicks', type=positive_int, default=DEFAULT_KICKS)
     study.add_argument('--device', action='append', dest='devices', metavar='NAME',
-                       help='study only this device (repeatable; default: all five)')
+                       help='study only this device (repeatable; default: device_a to '
+                            "device_e; paper_a to paper_e are the paper's device's)")
     study.add_argument('--workers', type=positive_int, default=2)
     study.add_argument('--scheduler', default=None)
     study.add_argument('--out', type=output_file('.md'), default=DEFAULT_STUDY,
@@ -68,30 +70,30 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 
 def _device(name: str) -> SyntheticDevice:
-    from sphere_twin.synthetic_device import DEVICES
+    from sphere_twin.synthetic_device import DEVICES, PAPER_DEVICES
 
-    for device in DEVICES:
+    known = DEVICES + PAPER_DEVICES
+    for device in known:
         if device.name == name:
             return device
     raise CommandError(f'unknown device {name!r}; the study has '
-                       f'{", ".join(d.name for d in DEVICES)}')
+                       f'{", ".join(d.name for d in known)}')
 
 
 def record(device: SyntheticDevice, out: str | os.PathLike[str], kicks: int,
            seed: int | None = None) -> int:
     """Record ``device`` into the bag ``out`` with its truth.yaml; returns the sample count."""
-    from sphere_sim.kicks.identification import START_PARAMETER_SET
     from sphere_sim.model.parameters import load_parameter_set
     from sphere_twin.synthetic_device import record_device
 
     if Path(out).exists():
         raise CommandError(f'{out} exists: give a new bag directory')
-    base = load_parameter_set(START_PARAMETER_SET)
+    base = load_parameter_set(device.base)
     with tqdm(total=kicks, desc=device.name, unit='kick', leave=False) as bar:
         samples = record_device(out, device.truth(base), kicks,
                                 device.seed if seed is None else seed,
                                 progress=lambda done, total: bar.update())
-    device.write_truth(Path(out) / 'truth.yaml', START_PARAMETER_SET, base)
+    device.write_truth(Path(out) / 'truth.yaml', base)
     return samples
 
 
@@ -105,23 +107,18 @@ def run_record(args: argparse.Namespace) -> int:
 
 def run_study(args: argparse.Namespace) -> int:
     from sphere_sim.kicks.engine import engine_of
-    from sphere_sim.kicks.identification import (
-        START_PARAMETER_SET,
-        fit_parameters,
-        identify,
-        within_truth,
-    )
+    from sphere_sim.kicks.identification import fit_parameters, identify, within_truth
     from sphere_sim.model.parameters import load_parameter_set
     from sphere_twin.commands.identify import read_observations
     from sphere_twin.synthetic_device import DEVICES, NOISE_STUDY_STD_RAD
 
-    base = load_parameter_set(START_PARAMETER_SET)
     devices = [_device(name) for name in args.devices] if args.devices else DEVICES
     rows: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory() as tmp, engine_of(args.workers, args.scheduler) as eng:
         for device in devices:
             bag = Path(tmp) / device.name
             record(device, bag, args.kicks)
+            base = load_parameter_set(device.base)
             obs = read_observations(bag)
             fits = fit_parameters(base, device.fit)
             started = time.perf_counter()
@@ -134,7 +131,7 @@ def run_study(args: argparse.Namespace) -> int:
             wall = time.perf_counter() - started
             truth = device.truth(base)
             checks = within_truth(result, truth)
-            rows.append({'device': device.name, 'factors': device.factors,
+            rows.append({'device': device.name, 'base': device.base, 'factors': device.factors,
                          'kicks': len(obs.kicks), 'noise_rad': obs.noise_std_rad,
                          'wall_s': wall, 'simulated_kicks': result.simulated_kicks,
                          'evaluations': result.evaluations,
@@ -181,17 +178,18 @@ def _parameter_line(p: Mapping[str, Any]) -> str:
 
 def _markdown(rows: Sequence[Mapping[str, Any]], args: argparse.Namespace, noise: float) -> str:
     only = ''.join(f' --device {name}' for name in args.devices or ())
+    bases = ', '.join(f'`{base}`' for base in dict.fromkeys(r['base'] for r in rows))
     lines = ['# Identification of synthetic devices', '',
              f'Made by `sphere-twin synthetic study --kicks {args.kicks} --workers '
-             f'{args.workers}{only}`: each device is the `dry_contact` set with two physical '
-             f'parameters changed; {args.kicks} kicks recorded open loop by the continuous twin '
-             f'(one a second, {PUBLISH_RATE_HZ:g} Hz samples, sensor noise {noise:.3g} rad per '
-             'axis: the noise '
-             'study\'s 0.1 of the paper\'s kick), then identified from the bag alone. '
+             f'{args.workers}{only}`: each device is a shipped set ({bases}) with two '
+             f'physical parameters changed; {args.kicks} kicks recorded open loop by the '
+             f'continuous twin (one a second, {PUBLISH_RATE_HZ:g} Hz samples, sensor noise '
+             f'{noise:.3g} rad per axis: the noise study\'s 0.1 of the paper\'s kick), then '
+             'identified from the bag alone. '
              'Intervals are 2 standard errors either side. See docs/identification.md.', '']
     for r in rows:
         factors = ', '.join(f'`{p}` x {f:g}' for p, f in r['factors'].items())
-        lines += [f'## {r["device"]}: {factors}', '',
+        lines += [f'## {r["device"]}: `{r["base"]}` with {factors}', '',
                   f'{r["kicks"]} kicks, {r["wall_s"]:.0f} s wall on {args.workers} workers '
                   f'({r["simulated_kicks"]} kicks simulated, {r["evaluations"]} evaluations); '
                   f'per-kick residual RMS {r["residual_rms_start_rad"]:.3g} rad at the start, '
