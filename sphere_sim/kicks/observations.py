@@ -96,6 +96,24 @@ class Observations:
     # draw enters both kicks' residuals, with opposite signs.
     shared: tuple[int, ...] = ()
 
+    def without(self, left_out: Iterable[int]) -> Observations:
+        """These observations less the kicks ``left_out`` (indices into ``kicks``). A stretch
+        stays shared only between two kicks that both remain."""
+        gone = set(left_out)
+        keep = [i for i in range(len(self.kicks)) if i not in gone]
+        index = {old: new for new, old in enumerate(keep)}
+        return dataclasses.replace(
+            self, kicks=tuple(self.kicks[i] for i in keep),
+            shared=tuple(index[i] for i in self.shared if i in index and i + 1 in index))
+
+    def residual_std_rad(self, i: int) -> float:
+        """Standard deviation (rad, per axis) of kick ``i``'s residual: the sensor noise of
+        its two means and the restart's error."""
+        k = self.kicks[i]
+        var = (self.noise_std_rad or NOISELESS_STD_RAD) ** 2
+        return math.sqrt(var * (1.0 / k.samples_before + 1.0 / k.samples_after)
+                         + RESTART_STD_RAD ** 2)
+
     def digest(self) -> str:
         text = json.dumps([k.to_dict() for k in self.kicks], sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
@@ -108,9 +126,8 @@ class Observations:
         var = (self.noise_std_rad or NOISELESS_STD_RAD) ** 2
         n = len(self.kicks)
         cov = np.zeros((2 * n, 2 * n))
-        for i, k in enumerate(self.kicks):
-            cov[2 * i, 2 * i] = cov[2 * i + 1, 2 * i + 1] = var * (
-                1.0 / k.samples_before + 1.0 / k.samples_after) + RESTART_STD_RAD ** 2
+        for i in range(n):
+            cov[2 * i, 2 * i] = cov[2 * i + 1, 2 * i + 1] = self.residual_std_rad(i) ** 2
         for i in self.shared:
             for axis in (0, 1):
                 a, b = 2 * i + axis, 2 * i + 2 + axis

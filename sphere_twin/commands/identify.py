@@ -37,7 +37,7 @@ from sphere_twin.commands.options import (
 
 if TYPE_CHECKING:
     from sphere_sim.kicks.identification import Evaluator, IdentificationResult
-    from sphere_sim.kicks.observations import Observations
+    from sphere_sim.kicks.observations import KickObservation, Observations
     from sphere_sim.model.parameters import ParameterSet
 
 TRUTH_FILE = 'truth.yaml'
@@ -126,13 +126,15 @@ def run(args: argparse.Namespace) -> int:
             raise CommandError(str(exc)) from None
     wall_s = time.perf_counter() - started
     print_result(result, wall_s)
-    write_fitted(out, args.params, result, obs, [str(b.directory) for b in bags], wall_s)
+    fitted_obs = result.observations or obs
+    write_fitted(out, args.params, result, fitted_obs, [str(b.directory) for b in bags], wall_s,
+                 [obs.kicks[i] for i in result.undetermined])
     load_parameter_set.cache_clear()
     try:
         fitted = load_parameter_set(str(out))
     except ParameterError as exc:  # pragma: no cover - a bug, said plainly
         raise CommandError(f'the fitted file does not load: {exc}') from None
-    png = plot_fit(out.with_suffix('.png'), obs, result, bags[0].name)
+    png = plot_fit(out.with_suffix('.png'), fitted_obs, result, bags[0].name)
     checkpoint.unlink(missing_ok=True)
     print(f'wrote {out} and {png}')
     truth_path = bags[0].directory / TRUTH_FILE
@@ -158,8 +160,10 @@ def say_setup(workers: int, scheduler: str | None, fitted: int, kicks: int) -> N
     where = f'the Dask cluster at {scheduler}' if scheduler else f'{workers} local process(es)'
     say(f'starting {where}; each builds the model and loads its compiled kernels '
         '(numba compiles them on first use, a minute or more)')
-    say(f'first batch: {(1 + fitted) * kicks} kick simulations (the start and one step per '
-        f'fitted parameter, {kicks} kicks each) before the count below first moves')
+    say(f'first: {2 * kicks} kick simulations (every kick at the start values, at the fit\'s '
+        'tolerance and a tenth of it, to leave out those the model does not determine), then '
+        f'a batch of {(1 + fitted) * kicks} (the start and one step per fitted parameter) '
+        'before the count below first moves')
 
 
 @contextlib.contextmanager
@@ -185,6 +189,10 @@ def print_result(result: IdentificationResult, wall_s: float) -> None:
     print(f'{result.evaluations} evaluations, {result.simulated_kicks} kicks simulated '
           f'({result.resumed_evaluations} evaluations read back from the checkpoint) in '
           f'{wall_s:.1f} s; optimiser: {result.converged}')
+    if result.undetermined:
+        print(f'{len(result.undetermined)} kick(s) left out: the model does not determine '
+              'their end (a tenth of the tolerance moves it by more than the residual\'s '
+              'noise)')
     print(f'per-kick residual RMS: {_rms(result.residuals_before):.3g} rad at the start, '
           f'{_rms(result.residuals_after):.3g} rad fitted; sum of squares '
           f'{result.cost_ratio:.2f} x what the sensor noise explains')
@@ -231,7 +239,8 @@ def json_safe(data: Any) -> Any:
 
 
 def write_fitted(path: Path, params: ParameterSet, result: IdentificationResult,
-                 obs: Observations, bags: Sequence[str], wall_s: float) -> Path:
+                 obs: Observations, bags: Sequence[str], wall_s: float,
+                 undetermined: Sequence[KickObservation] = ()) -> Path:
     """The fitted parameter file: ``base:`` + ``overrides:``, and what the fit found."""
     overrides: dict[str, float] = {}
     for p in result.parameters:
@@ -247,6 +256,7 @@ def write_fitted(path: Path, params: ParameterSet, result: IdentificationResult,
         'identification': {
             'bags': bags,
             'kicks': len(obs.kicks),
+            'undetermined_kicks_s': [round(float(k.time_s), 6) for k in undetermined],
             'sensor_noise_rad': float(obs.noise_std_rad),
             'interval': '2 standard errors either side in the scaled (logarithmic) '
                         'coordinate, from the curvature of the misfit measured over the '

@@ -92,7 +92,8 @@ def record(device: SyntheticDevice, out: str | os.PathLike[str], kicks: int,
     with tqdm(total=kicks, desc=device.name, unit='kick', leave=False) as bar:
         samples = record_device(out, device.truth(base), kicks,
                                 device.seed if seed is None else seed,
-                                progress=lambda done, total: bar.update())
+                                progress=lambda done, total: bar.update(),
+                                intensity_range=device.intensity_range)
     device.write_truth(Path(out) / 'truth.yaml', base)
     return samples
 
@@ -132,7 +133,8 @@ def run_study(args: argparse.Namespace) -> int:
             truth = device.truth(base)
             checks = within_truth(result, truth)
             rows.append({'device': device.name, 'base': device.base, 'factors': device.factors,
-                         'kicks': len(obs.kicks), 'noise_rad': obs.noise_std_rad,
+                         'kicks': len(obs.kicks), 'undetermined': len(result.undetermined),
+                         'noise_rad': obs.noise_std_rad,
                          'wall_s': wall, 'simulated_kicks': result.simulated_kicks,
                          'evaluations': result.evaluations,
                          'residual_rms_start_rad': _rms(result.residuals_before),
@@ -158,7 +160,8 @@ def _rms(values: Sequence[float] | NDArray[np.float64]) -> float:
 
 
 def _print_device(row: Mapping[str, Any]) -> None:
-    print(f'{row["device"]}: {row["kicks"]} kicks, {row["wall_s"]:.0f} s '
+    print(f'{row["device"]}: {row["kicks"]} kicks ({row["undetermined"]} undetermined), '
+          f'{row["wall_s"]:.0f} s '
           f'({row["simulated_kicks"]} kicks simulated), residual RMS '
           f'{row["residual_rms_start_rad"]:.3g} -> {row["residual_rms_fitted_rad"]:.3g} rad')
     for p in row['parameters']:
@@ -190,7 +193,8 @@ def _markdown(rows: Sequence[Mapping[str, Any]], args: argparse.Namespace, noise
     for r in rows:
         factors = ', '.join(f'`{p}` x {f:g}' for p, f in r['factors'].items())
         lines += [f'## {r["device"]}: `{r["base"]}` with {factors}', '',
-                  f'{r["kicks"]} kicks, {r["wall_s"]:.0f} s wall on {args.workers} workers '
+                  f'{r["kicks"]} kicks ({r["undetermined"]} left out: the model does not '
+                  f'determine them), {r["wall_s"]:.0f} s wall on {args.workers} workers '
                   f'({r["simulated_kicks"]} kicks simulated, {r["evaluations"]} evaluations); '
                   f'per-kick residual RMS {r["residual_rms_start_rad"]:.3g} rad at the start, '
                   f'{r["residual_rms_fitted_rad"]:.3g} rad fitted (sum of squares '
