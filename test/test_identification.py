@@ -604,9 +604,10 @@ def test_a_device_of_the_papers_set_is_recorded_on_it_with_its_truth(tmp_path, c
 
 def test_a_kick_the_model_does_not_determine_is_left_out():
     """On the paper's device a kick of intensity 0.75 with the high pair at 4.2 ms (paper_a's
-    first) lands 3e-4 rad apart at a tenth of the fit's tolerance, more than its residual's
-    noise: it is left out. The full kick lands within 1e-6 rad and is kept. Leaving a kick
-    out keeps a shared stretch only between two kicks that both remain."""
+    first) lands 1.8e-3 rad apart at a tenth of the fit's tolerance, more than its residual's
+    standard deviation (1.4e-4 rad): it is left out. The full kick lands within 5e-6 rad and
+    is kept. Leaving a kick out keeps a shared stretch only between two kicks that both
+    remain."""
     from sphere_sim.kicks.engine import SerialEngine
     from sphere_sim.kicks.lookup_table import load_kick_model
     from sphere_twin.synthetic_device import PAPER_DEVICES, kick_programme, kick_sequence
