@@ -84,9 +84,9 @@ FIT_RTOL = 3e-5
 # (intensity 0.75, the high pair 4.2 ms) ends 3e-4 rad apart at rtol 1e-5, 1e-6 and 1e-7
 # without converging, its landing after the sliding impact turning on differences below any
 # tolerance (one of paper_b's 40 kicks from 0.5 to 1 was left out); most others, and the dry
-# contact's, agree within a few 1e-6. Each
-# kick is simulated at the start values at the fit's tolerance and at this fraction of it, and
-# one whose two ends differ by more than its residual's standard deviation is left out.
+# contact's, agree within a few 1e-6. Each kick is simulated at the start values at the fit's
+# tolerance and at this fraction of it, and one whose two ends differ by more than its
+# residual's standard deviation is left out.
 DETERMINACY_RTOL_FACTOR = 0.1
 # Finite-difference step in the scaled coordinate ([0, 1] over the range, logarithmic). The
 # integrator's error jumps as a parameter moves (a few 1e-6 rad); divided by the step, the jumps
