@@ -7,6 +7,7 @@ here; the kinds are one list, :class:`ControllerKind`.
 import enum
 import math
 from collections.abc import Iterable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -37,13 +38,37 @@ def full_kick_width_rad(kick_plant: KickPlant) -> float:
     return angle_between(up, kick_plant.kick(up, 0, 1.0).normal)
 
 
+@runtime_checkable
+class StrayKicksKnown(Protocol):
+    """A kick model that knows how far its programmes can slip the sphere off their actions
+    (the lookup tables)."""
+
+    def largest_stray_kick_rad(self) -> float: ...
+
+
+def direction_learning_floor_rad(kick_plant: KickPlant) -> float:
+    """The shortest kick that teaches sigma_a (rad), calibrated on the kick model.
+
+    The paper learns sigma_a from every kick (eq. 61, at alpha_sigma = 0.9). On a model whose
+    programmes can slip the sphere in a direction of their own (below the pull-in, or from far
+    out: the ratchet of docs/parameters.md), a kick no longer than the longest such slip tells
+    nothing of its action's direction, and eq. (61) would adopt that slip's. So the floor is the
+    longest kick of the model with no component along its action (more than 90 deg off), 0 on
+    a model that has none (learning from every kick, as the paper). A model wrapped in an
+    intensity calibration is read through it.
+    """
+    inner = getattr(kick_plant, 'kicks', kick_plant)
+    return inner.largest_stray_kick_rad() if isinstance(inner, StrayKicksKnown) else 0.0
+
+
 def make_controller(kind: ControllerKind | str, phi_min_rad: float, full_width_rad: float,
                     directions_rad: Iterable[float],
-                    direction_learning_min_rad: float | None = None,
+                    direction_learning_min_rad: float = 0.0,
                     ) -> BasicController | ExtendedController:
     """A fresh controller of ``kind`` (a :class:`ControllerKind` or its value).
 
     ``PRELEARNED`` gives an extended controller still to be taught by its caller.
+    ``direction_learning_min_rad`` is the extended controller's (:class:`ExtendedParams`).
 
     Raises
     ------
@@ -66,6 +91,7 @@ def make_controller(kind: ControllerKind | str, phi_min_rad: float, full_width_r
 def controller_for(kind: ControllerKind | str, kick_plant: KickPlant,
                    phi_min_rad: float = DEFAULT_PHI_MIN_RAD,
                    ) -> BasicController | ExtendedController:
-    """A controller whose model is ``kick_plant``'s directions and full-kick width."""
+    """A controller whose model is ``kick_plant``'s directions, full-kick width and
+    direction-learning floor (:func:`direction_learning_floor_rad`)."""
     return make_controller(kind, phi_min_rad, full_kick_width_rad(kick_plant),
-                           kick_plant.directions_rad)
+                           kick_plant.directions_rad, direction_learning_floor_rad(kick_plant))

@@ -12,7 +12,6 @@ from typing import TYPE_CHECKING, Any
 
 from sphere_control.closed_loop import LoopHistory
 from sphere_control.controllers import ControllerKind
-from sphere_control.extended import DIRECTION_LEARNING_MIN_FRACTION
 from sphere_control.intensity_calibration import calibrated
 from sphere_control.kick_plants import EightDirectionPlant
 from sphere_control.perturbations import Mismatch, PerturbedPlant
@@ -148,7 +147,8 @@ def _setup_title(setup: SetUp, put: PlantUnderTest, config: EvaluationConfig) ->
     f1 = setup.trajectory(put).frequency_hz
     bands = ', '.join(f'{math.degrees(b):.4g}' for b in setup.basic_bands_rad(config, put))
     learning = ('every kick' if setup.sigma_from_every_kick else
-                f'kicks of {DIRECTION_LEARNING_MIN_FRACTION:g} W and more')
+                f'kicks longer than the table\'s stray kicks, '
+                f'{setup.direction_learning_min_rad(put) / put.full_width_rad:.3g} W')
     return (f'Fig. 15 trajectory, 33 deg mismatch, set-up "{setup.name}" (f1 {f1:.4g} Hz, '
             f'basic best of Phi_min {bands} deg, sigma from {learning})')
 

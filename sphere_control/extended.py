@@ -30,9 +30,6 @@ from sphere_control.rotation_network import NetworkShape, RotationWidthNetwork
 from sphere_sim.kicks.discrete import DIAGONAL_DIRECTIONS_RAD, KickPlant
 from sphere_sim.model.rotations import angle_between
 
-# A kick shorter than this fraction of the model's full width says little about its direction
-# (its angle is dominated by measurement noise and interpolation), so sigma_a is not updated.
-DIRECTION_LEARNING_MIN_FRACTION = 0.2
 # The controller prelearn teaches and hands back.
 C = TypeVar('C', bound=Controller)
 
@@ -60,10 +57,11 @@ class ExtendedParams:
         The model's kick directions, the initial sigma_a (rad).
     shape : NetworkShape
     rates : LearningRates
-    direction_learning_min_rad : float or None
-        Kicks shorter than this (rad) do not update sigma_a; by default
-        DIRECTION_LEARNING_MIN_FRACTION of the full width; 0 learns from every kick that
-        moved the sphere (the paper).
+    direction_learning_min_rad : float
+        Kicks shorter than this (rad) do not update sigma_a. 0 (the default) learns from every
+        kick that moved the sphere, as the paper does; a kick model whose programmes can slip
+        the sphere in a direction of their own sets it to the longest such slip
+        (:func:`sphere_control.controllers.direction_learning_floor_rad`).
     """
 
     phi_min_rad: float
@@ -71,13 +69,7 @@ class ExtendedParams:
     directions_rad: tuple[float, ...] = DIAGONAL_DIRECTIONS_RAD
     shape: NetworkShape = dataclasses.field(default_factory=NetworkShape)
     rates: LearningRates = dataclasses.field(default_factory=LearningRates)
-    direction_learning_min_rad: float | None = None
-
-    @property
-    def direction_threshold_rad(self) -> float:
-        if self.direction_learning_min_rad is not None:
-            return self.direction_learning_min_rad
-        return DIRECTION_LEARNING_MIN_FRACTION * self.full_width_rad
+    direction_learning_min_rad: float = 0.0
 
 
 class ExtendedController:
@@ -116,8 +108,9 @@ class ExtendedController:
         d = displacement_xy(normal_before, normal_after)
         rates = self.params.rates
         rotation = angle_between(normal_before, normal_after)
-        # A kick that did not move the sphere has no direction, whatever the threshold.
-        if rotation > 0.0 and rotation >= self.params.direction_threshold_rad:
+        # Only a kick longer than the floor teaches a direction (one that did not move the
+        # sphere has none, whatever the floor).
+        if rotation > self.params.direction_learning_min_rad:
             achieved = math.atan2(d[1], d[0])
             gap = wrap_angle_rad(self.directions_rad[a] - achieved)
             self.directions_rad[a] = wrap_angle_rad(self.directions_rad[a] - rates.direction * gap)

@@ -42,12 +42,13 @@ from sphere_control.closed_loop import (
     Outcome,
     run_closed_loop,
 )
-from sphere_control.controllers import ControllerKind, make_controller
-from sphere_control.estimator import KalmanParams, NormalKalmanFilter
-from sphere_control.extended import (
-    DIRECTION_LEARNING_MIN_FRACTION,
-    prelearn,
+from sphere_control.controllers import (
+    ControllerKind,
+    direction_learning_floor_rad,
+    make_controller,
 )
+from sphere_control.estimator import KalmanParams, NormalKalmanFilter
+from sphere_control.extended import prelearn
 from sphere_control.intensity_calibration import IntensityCalibration, calibrated
 from sphere_control.perturbations import Mismatch, NoisySensor, PerturbedPlant
 from sphere_control.reachable import (
@@ -110,8 +111,8 @@ class SetUp:
         ``EvaluationConfig.basic_phi_min_widths``; otherwise the paper's f1 and Phi_min, and
         the basic controller's best of the paper's two bands.
     sigma_from_every_kick : bool
-        sigma_a learns from every kick that moved the sphere (the paper), or only from kicks of
-        at least DIRECTION_LEARNING_MIN_FRACTION of the full width.
+        sigma_a learns from every kick that moved the sphere (the paper), or only from kicks
+        longer than the nominal model's stray kicks (:func:`direction_learning_floor_rad`).
     """
 
     name: str
@@ -138,9 +139,7 @@ class SetUp:
 
     def direction_learning_min_rad(self, put: PlantUnderTest) -> float:
         """The shortest kick that teaches sigma_a (rad)."""
-        if self.sigma_from_every_kick:
-            return 0.0
-        return DIRECTION_LEARNING_MIN_FRACTION * put.full_width_rad
+        return 0.0 if self.sigma_from_every_kick else put.direction_floor_rad
 
 
 # The paper's §5 as given, but for sigma_a, which learns from kicks of a fifth of the full width
@@ -229,14 +228,17 @@ class PlantUnderTest:
     full_width_rad: float
     settle_time_s: float = 0.0
     calibration: IntensityCalibration | None = None
+    direction_floor_rad: float = 0.0
 
     @classmethod
     def measure(cls, label: str, plant: KickPlant) -> PlantUnderTest:
-        """``plant`` calibrated from its own level-state width curve, and measured."""
+        """``plant`` calibrated from its own level-state width curve, and measured (its full
+        kick, and its longest stray kick: :func:`direction_learning_floor_rad`)."""
         kicks = calibrated(plant)
         full = kicks.kick(LEVEL_NORMAL, 0, 1.0)
         return cls(label, kicks, angle_between(LEVEL_NORMAL, full.normal),
-                   float(full.settle_time_s), kicks.calibration)
+                   float(full.settle_time_s), kicks.calibration,
+                   direction_learning_floor_rad(plant))
 
     def calibrated(self, plant: KickPlant) -> KickPlant:
         """Another plant of the same actions, driven in this plant's calibrated intensities."""
@@ -257,7 +259,7 @@ class PlantUnderTest:
 
 def study_controller(kind: ControllerKind, phi_min: float, put: PlantUnderTest, plant: KickPlant,
                      config: EvaluationConfig, directions_rad: Sequence[float] | None = None,
-                     direction_learning_min_rad: float | None = None,
+                     direction_learning_min_rad: float = 0.0,
                      ) -> BasicController | ExtendedController:
     """A fresh controller of ``kind`` whose model is the nominal plant ``put``.
 

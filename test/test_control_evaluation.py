@@ -53,8 +53,9 @@ def test_the_paper_set_up_keeps_the_paper_numbers_whatever_the_kick():
     assert OUR_SETUP.basic_bands_rad(config, small) == pytest.approx(
         [f * small.full_width_rad for f in config.basic_phi_min_widths])
     assert EVERY_KICK_SETUP.direction_learning_min_rad(small) == 0.0
-    assert PAPER_SETUP.direction_learning_min_rad(small) == pytest.approx(
-        0.2 * small.full_width_rad)
+    # An analytic kick goes along its action at every intensity: nothing strays, so the
+    # paper's set-up learns from every kick there as the paper does.
+    assert PAPER_SETUP.direction_learning_min_rad(small) == small.direction_floor_rad == 0.0
 
 
 @pytest.mark.parametrize('mismatch_deg', [0.0, 12.0])
@@ -167,3 +168,35 @@ def test_speed_study_finds_where_a_slow_kick_rate_is_outrun(put):
     assert slow['plant']['fraction_outrun'] > 0.5
     low, high = slow['plant']['tilt_deg_outrun']
     assert 0.0 <= low < high <= 27.0  # eq. (64) stays within 26 deg of tilt
+
+
+def test_the_controllers_learn_directions_only_from_kicks_longer_than_the_models_stray_ones():
+    """sigma_a's floor is calibrated on the kick model, as the intensity is: the longest kick of
+    the shipped table with nothing along its action (a sub-pull-in slip); 0 on a model that
+    never strays, where sigma_a learns from every kick as in the paper. The controller node and
+    the studies take it from the same table."""
+    from sphere_control.command import Command
+    from sphere_control.controllers import controller_for
+    from sphere_control.intensity_calibration import calibrated
+    from sphere_sim.kicks.discrete import normal_from_xy
+    from sphere_sim.kicks.lookup_table import LookupTable
+
+    table = LookupTable.load_current()
+    floor = table.largest_stray_kick_rad()
+    controller = controller_for('extended', calibrated(table))
+    assert controller.params.direction_learning_min_rad == floor > 0.0
+    assert PlantUnderTest.measure('table', table).direction_floor_rad == floor
+    analytic = AnalyticKickPlant(PAPER_FULL_KICK_RAD)
+    assert controller_for('extended', calibrated(analytic)).params \
+        .direction_learning_min_rad == 0.0
+
+    # A slip just under the floor leaves sigma_0 alone; a kick just over it is adopted (eq. 61).
+    start = normal_from_xy(0.0, 0.0)
+    sideways = controller.directions_rad[0] + 0.5 * math.pi
+    for length, learns in ((0.9 * floor, False), (1.1 * floor, True)):
+        learner = controller.copy()
+        after = normal_from_xy(length * math.cos(sideways), length * math.sin(sideways))
+        learner.observe(start, Command(0, 0.0), after)
+        moved = abs(math.remainder(learner.directions_rad[0] - controller.directions_rad[0],
+                                   2 * math.pi))
+        assert (moved > math.radians(45.0)) is learns

@@ -237,3 +237,32 @@ def test_diagonal_and_axis_tables_combine_into_eight_directions(shipped):
                                       table.kick(start, local, 0.7).normal)
         assert decode_kick(eight, eight.programme(action, 0.7, start), start) == \
             (action, pytest.approx(0.7))
+
+
+def test_the_longest_stray_kick_is_the_longest_with_nothing_along_its_action(shipped):
+    """The shipped table has stray kicks (sub-pull-in slips, kicks from far out), all shorter
+    than half a full kick. Planting one backwards kick in a node inside the cone makes it the
+    longest; one 80 deg off (still along its action) or one outside the cone does not count."""
+    spec = shipped.spec
+    full = shipped.kick(np.array([0.0, 0.0, 1.0]), 0, 1.0)
+    full_width = math.hypot(*full.normal[:2])
+    floor = shipped.largest_stray_kick_rad()
+    assert 0.0 < floor < 0.5 * full_width
+    nodes = [(i, j, math.hypot(x, y)) for i, j, x, y in spec.nodes() if spec.side(x, y) >= 0.0]
+    inside = next((i, j) for i, j, r in nodes if r <= 0.5 * math.sin(spec.cone_half_angle_rad))
+    outside = next((i, j) for i, j, r in nodes if r > math.sin(spec.cone_half_angle_rad)
+                   and not np.isnan(shipped.displacement[i, j, 0, 0]))
+    d = spec.design.direction_rad
+    longer = 2.0 * floor
+
+    def planted(node, angle_off_rad):
+        displacement = shipped.displacement.copy()
+        displacement[node[0], node[1], 1] = longer * np.array([math.cos(d + angle_off_rad),
+                                                               math.sin(d + angle_off_rad)])
+        return dataclasses.replace(shipped, displacement=displacement)
+
+    assert planted(inside, math.pi).largest_stray_kick_rad() == pytest.approx(longer)
+    assert planted(inside, -math.radians(100.0)).largest_stray_kick_rad() == \
+        pytest.approx(longer)
+    assert planted(inside, math.radians(80.0)).largest_stray_kick_rad() == floor
+    assert planted(outside, math.pi).largest_stray_kick_rad() == floor

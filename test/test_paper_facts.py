@@ -21,6 +21,10 @@ from sphere_sim.studies.runs import literal_kick
 RESULTS = Path(__file__).parents[1] / 'bench' / 'results'
 PAPER_KICK_DEG = 0.54  # §4.1, Fig. 5 and 6a
 CREEP_LIMIT_DEG_PER_S = 1e-3
+RATCHET_LIMIT_DEG = 1e-4  # Fig. 1d read for pulses: 100 sub-pull-in pulses at 35 deg
+# A tangential contact stiffness whose elastic zone spans the tips' sweep under the pulses
+# (docs/parameters.md: the only band that meets the ratchet's bound lies around it).
+SPANNING_BRISTLE_N_PER_M = 1e3
 
 
 @pytest.fixture(scope='module')
@@ -122,3 +126,29 @@ def test_sub_pull_in_pulses_walk_the_sphere_by_gross_slip_not_by_bristle_creep(o
     assert soft < 0.2 * stiff
     model, x = holding.landed_state(35.0, cal, design)
     assert np.all(model.bristle_limits_m(x) < 1e-9)
+
+
+# Missed (0.025 deg; docs/parameters.md, "The ratchet and the kick's size cannot both hold"):
+# kept as a strict expected failure, like the width, so that a model that meets it turns this red.
+@pytest.mark.xfail(strict=True, reason='ratchet missed: 0.025 deg after 100 pulses (gross slip)')
+def test_a_hundred_sub_pull_in_pulses_leave_the_tilted_sphere_in_place(optimised):
+    """Fig. 1d read for pulses: 100 pulses of 10-30 V on all beams at 35 deg move the normal by
+    at most 1e-4 deg in all (`sphere-twin validate`'s ratchet line)."""
+    _, design = optimised
+    moved = holding.ratchet_rad(35.0, params=load_parameter_set('calibrated'), design=design)
+    assert math.degrees(moved) <= RATCHET_LIMIT_DEG
+
+
+def test_a_contact_soft_enough_to_hold_through_the_pulses_widens_the_kick_past_the_papers(
+        optimised):
+    """Why the ratchet stays missed: the one tangential stiffness that holds the sphere through
+    the pulses (the contact 70 times softer than Mindlin's) makes the full kick wider than §4.1's
+    0.54 deg + 20 %, a figure of the paper's own. A model that meets both turns this red."""
+    _, design = optimised
+    soft = load_parameter_set('calibrated').replace(
+        **{'friction.bristle_stiffness_n_per_m': SPANNING_BRISTLE_N_PER_M})
+    assert math.degrees(holding.ratchet_rad(35.0, params=soft, design=design)) \
+        <= RATCHET_LIMIT_DEG
+    kick = KickBench(soft).effect(normal_from_xy(0.0, 0.0), design, 1.0)
+    assert math.degrees(kick.width_rad) > 1.2 * PAPER_KICK_DEG
+    assert math.degrees(direction_error(kick, design)) == pytest.approx(0.0, abs=1.0)

@@ -253,6 +253,25 @@ class LookupTable:
                                                        self.displacement[i, j, k, 0]) - d,
                                             2.0 * math.pi)) for i, j in inside])
 
+    def largest_stray_kick_rad(self) -> float:
+        """The largest displacement (rad) among the simulated kicks from nodes inside the cone
+        that have no component along their nominal direction (more than 90 deg off it).
+
+        Below the pull-in, or from far out in the cone, a programme can slip the sphere this
+        far in a direction of its own (docs/parameters.md, the ratchet): a kick no longer than
+        this says nothing of its action's direction.
+        """
+        spec, d = self._spec, self._spec.design.direction_rad
+        inside = [(i, j) for i, j, x, y in spec.nodes() if spec.side(x, y) >= 0.0
+                  and math.hypot(x, y) <= math.sin(spec.cone_half_angle_rad)]
+        largest = 0.0
+        for i, j in inside:
+            for dx, dy in self.displacement[i, j]:
+                off = abs(math.remainder(math.atan2(dy, dx) - d, 2.0 * math.pi))
+                if off > 0.5 * math.pi:
+                    largest = max(largest, math.hypot(dx, dy))
+        return largest
+
     # --- files -----------------------------------------------------------------------------
     def save(self, path: str | Path) -> Path:
         path = Path(path)
@@ -341,6 +360,10 @@ class CombinedKickPlant:
 
     def design(self, action: int) -> KickDesign:
         return self._entries[action][0].spec.design
+
+    def largest_stray_kick_rad(self) -> float:
+        """The largest of the tables' (:meth:`LookupTable.largest_stray_kick_rad`)."""
+        return max(table.largest_stray_kick_rad() for table in self.tables)
 
     def programme(self, action: int, intensity: float,
                   normal: NDArray[np.float64] = LEVEL_NORMAL) -> PulseProgramme:
