@@ -130,19 +130,26 @@ def test_final_normal_is_the_kicks_normal_to_the_bit(model, x_rest):
         final_normal(model, normal, programme, window_s=0.02, x_rest=x_rest), result.normal)
 
 
-def test_an_objective_builds_its_model_and_rest_state_once_per_process(monkeypatch):
+def test_an_objective_carries_its_rest_state_and_its_copies_never_relax_it(monkeypatch):
+    """The rest state is relaxed once, where the search starts; the copies a pool's workers
+    unpickle carry it, and each process assembles the model once."""
     import pickle
 
-    optimization._setup.cache_clear()
-    built = []
-    real = optimization.rest_state
+    optimization._model.cache_clear()
+    relaxed, assembled = [], []
+    real_rest, real_assemble = optimization.rest_state, optimization.assemble
     monkeypatch.setattr(optimization, 'rest_state',
-                        lambda model, **kw: built.append(1) or real(model, **kw))
+                        lambda model, **kw: relaxed.append(1) or real_rest(model, **kw))
+    monkeypatch.setattr(optimization, 'assemble',
+                        lambda *a, **kw: assembled.append(1) or real_assemble(*a, **kw))
     objective = optimization._Objective('rest', None, KickDesign())
-    copies = [pickle.loads(pickle.dumps(objective)) for _ in range(3)]  # as a pool's chunks
+    assert len(relaxed) == 1
+    copies = [pickle.loads(pickle.dumps(objective)) for _ in range(3)]  # as a pool's tasks
+    optimization._model.cache_clear()  # as in a fresh worker
     values = {copy(np.array([1e-3, 1e-3, 0.0])) for copy in copies}
-    assert len(built) == 1 and len(values) == 1
-    optimization._setup.cache_clear()
+    assert len(relaxed) == 1 and len(assembled) == 2 and len(values) == 1
+    np.testing.assert_array_equal(copies[0].x_rest, objective.x_rest)
+    optimization._model.cache_clear()
 
 
 def _square(x):

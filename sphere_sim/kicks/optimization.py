@@ -13,7 +13,6 @@ from functools import lru_cache
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 from scipy.optimize import differential_evolution
 
 from sphere_sim.kicks.design import KICK_RELAXATION, KickDesign, final_normal, simulate_kick
@@ -48,24 +47,23 @@ class OptimisedKick:
         return out
 
 
-# Models and rest states of the scenes and parameter sets this process has optimised for; a
-# calibration moves between a few parameter sets, each with its own.
+# Models of the scenes and parameter sets this process has optimised for; a calibration moves
+# between a few parameter sets, each with its own.
 SETUP_CACHE_SIZE = 8
 
 
 @lru_cache(maxsize=SETUP_CACHE_SIZE)
-def _setup(scene_name: str,
-           params: ParameterSet | None) -> tuple[Model, NDArray[np.float64]]:
-    """Model and rest state, built once per process (not once per unpickled objective)."""
-    model = assemble(load_scene(scene_name), params)
-    return model, rest_state(model, relaxation=KICK_RELAXATION)
+def _model(scene_name: str, params: ParameterSet | None) -> Model:
+    """The model, assembled once per process (not once per unpickled objective)."""
+    return assemble(load_scene(scene_name), params)
 
 
 class _Objective:
     """Picklable objective for parallel workers: -(displacement along the nominal direction).
 
-    It carries only its inputs; each process builds the model and rest state once
-    (:func:`_setup`), however many times the objective is unpickled there.
+    It carries its inputs and the rest state every kick starts from, relaxed once by the
+    process that starts the search: no worker relaxes it again. Each process assembles the
+    model once (:func:`_model`), however many times the objective is unpickled there.
     """
 
     def __init__(self, scene_name: str, params: ParameterSet | None,
@@ -73,22 +71,23 @@ class _Objective:
         self.scene_name = scene_name
         self.params = params
         self.template = template
+        self.x_rest = rest_state(_model(scene_name, params), relaxation=KICK_RELAXATION)
 
     def design(self, v: Sequence[float]) -> KickDesign:
         return dataclasses.replace(self.template, width_low_s=float(v[0]),
                                    width_high_s=float(v[1]), delay_s=float(v[2]))
 
     def outcome(self, v: Sequence[float]) -> KickResult:
-        model, x_rest = _setup(self.scene_name, self.params)
-        result, _ = simulate_kick(model, NORMAL_AT_REST, self.design(v).programme(),
-                                  rtol=OPTIMISATION_RTOL, x_rest=x_rest)
+        result, _ = simulate_kick(_model(self.scene_name, self.params), NORMAL_AT_REST,
+                                  self.design(v).programme(), rtol=OPTIMISATION_RTOL,
+                                  x_rest=self.x_rest)
         return result
 
     def __call__(self, v: Sequence[float]) -> float:
         # The final normal alone: the transient's peak and settling time are not searched on.
-        model, x_rest = _setup(self.scene_name, self.params)
-        normal = final_normal(model, NORMAL_AT_REST, self.design(v).programme(),
-                              rtol=OPTIMISATION_RTOL, x_rest=x_rest)
+        normal = final_normal(_model(self.scene_name, self.params), NORMAL_AT_REST,
+                              self.design(v).programme(), rtol=OPTIMISATION_RTOL,
+                              x_rest=self.x_rest)
         d = self.template.direction_rad
         return -float(normal[0] * math.cos(d) + normal[1] * math.sin(d))
 
@@ -125,7 +124,7 @@ def optimise_kick(template: KickDesign | None = None, params: ParameterSet | Non
                                         maxiter=maxiter, tol=1e-3, polish=False,
                                         workers=engine, updating='deferred',
                                         callback=callback)
-        # On a worker, which has the model and rest state already.
+        # On a worker, which has the model already.
         best = engine(objective.outcome, [result.x])[0]
     normal0 = NORMAL_AT_REST
     d = best.normal[:2]

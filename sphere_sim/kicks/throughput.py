@@ -188,7 +188,7 @@ def clear_caches() -> None:
     run pays for its own, and a pool forked afterwards starts without them."""
     table_build._model.cache_clear()
     table_build._rest.cache_clear()
-    optimization._setup.cache_clear()
+    optimization._model.cache_clear()
 
 
 # --- workloads -----------------------------------------------------------------------------
