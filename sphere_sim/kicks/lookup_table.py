@@ -246,12 +246,10 @@ class LookupTable:
         of the simulated half inside the cone: how far the table's kicks stray from their
         nominal direction, the offsets' measure (§4.1)."""
         k = int(np.argmin(np.abs(self.intensities - intensity)))
-        spec, d = self._spec, self._spec.design.direction_rad
-        inside = [(i, j) for i, j, x, y in spec.nodes() if spec.side(x, y) >= 0.0
-                  and math.hypot(x, y) <= math.sin(spec.cone_half_angle_rad)]
+        d = self._spec.design.direction_rad
         return np.array([abs(math.remainder(math.atan2(self.displacement[i, j, k, 1],
                                                        self.displacement[i, j, k, 0]) - d,
-                                            2.0 * math.pi)) for i, j in inside])
+                                            2.0 * math.pi)) for i, j in self._simulated_inside()])
 
     def largest_stray_kick_rad(self) -> float:
         """The largest displacement (rad) among the simulated kicks from nodes inside the cone
@@ -261,16 +259,21 @@ class LookupTable:
         far in a direction of its own (docs/parameters.md, the ratchet): a kick no longer than
         this says nothing of its action's direction.
         """
-        spec, d = self._spec, self._spec.design.direction_rad
-        inside = [(i, j) for i, j, x, y in spec.nodes() if spec.side(x, y) >= 0.0
-                  and math.hypot(x, y) <= math.sin(spec.cone_half_angle_rad)]
+        d = self._spec.design.direction_rad
         largest = 0.0
-        for i, j in inside:
+        for i, j in self._simulated_inside():
             for dx, dy in self.displacement[i, j]:
                 off = abs(math.remainder(math.atan2(dy, dx) - d, 2.0 * math.pi))
                 if off > 0.5 * math.pi:
                     largest = max(largest, math.hypot(dx, dy))
         return largest
+
+    def _simulated_inside(self) -> list[tuple[int, int]]:
+        """Grid indices of the simulated half's nodes inside the cone (the other half is its
+        mirror image)."""
+        spec = self._spec
+        return [(i, j) for i, j, x, y in spec.nodes() if spec.side(x, y) >= 0.0
+                and math.hypot(x, y) <= math.sin(spec.cone_half_angle_rad)]
 
     # --- files -----------------------------------------------------------------------------
     def save(self, path: str | Path) -> Path:
