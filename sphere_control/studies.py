@@ -12,13 +12,14 @@ Set-ups, side by side (:class:`SetUp`, :data:`SET_UPS`). The paper's full kick t
 by 0.54 deg; a plant may kick more or less (the calibrated table: 0.508 deg, nothing fitted to
 it). The paper's set-up runs §5 as given: f1 = 0.02 Hz, Phi_min of 0.05 and 0.25 deg (the basic
 controller's best of the two in Fig. 15), the kick period the full kick's settle time; sigma_a
-learns from kicks of at least a fifth of the full width, and a second set-up learning it from
-every kick, as the paper does, stands beside it (:data:`PAPER_SETUP` says why). Ours scales f1
-and Phi_min by the kick-size ratio (what decides whether the basic controller oscillates is
-Phi_min against the kick width, and the reference then advances the same fraction of a kick per
-kick) and searches the basic band over a few kick widths. Distances in the setpoint scenario are
-the paper's in all (the reference is 1.28 deg away). All aim with reference preview unless told
-not to.
+learns from kicks longer than the nominal model's stray kicks (a calibration of the table,
+:func:`~sphere_control.controllers.direction_learning_floor_rad`), and a second set-up learning
+it from every kick, as the paper does, stands beside it (:data:`PAPER_SETUP` says why). Ours
+scales f1 and Phi_min by the kick-size ratio (what decides whether the basic controller
+oscillates is Phi_min against the kick width, and the reference then advances the same fraction
+of a kick per kick) and searches the basic band over a few kick widths. Distances in the
+setpoint scenario are the paper's in all (the reference is 1.28 deg away). All aim with
+reference preview unless told not to.
 """
 
 from __future__ import annotations
@@ -142,8 +143,8 @@ class SetUp:
         return 0.0 if self.sigma_from_every_kick else put.direction_floor_rad
 
 
-# The paper's §5 as given, but for sigma_a, which learns from kicks of a fifth of the full width
-# and more: below the pull-in a programme slips a tilted sphere in a direction of its own (by
+# The paper's §5 as given, but for sigma_a, which learns only from kicks longer than the table's
+# stray kicks: below the pull-in a programme slips a tilted sphere in a direction of its own (by
 # 0.002 deg at u_K = 0, up to 0.1 deg just below the pull-in: the ratchet, docs/parameters.md),
 # and eq. (61) at alpha_sigma = 0.9 would adopt that direction. The set-up that learns from
 # every kick stands beside it (docs/control.md).

@@ -5,7 +5,7 @@ table, or ``--plant analytic``: kicks of the paper's 0.54 deg), prints the compa
 writes ``evaluation.json`` and the figures like the paper's Figs. 13-15 to ``--out`` (the
 working directory by default; the committed ones are in ``bench/results``), and ends with
 Fig. 15 in the paper's set-up (f1 = 0.02 Hz, the basic controller's best of the paper's two
-bands, sigma learned from kicks of at least a fifth of the full width, the kick period the
+bands, sigma learned from kicks longer than the table's stray kicks, the kick period the
 full kick's settle time): ``trajectory MSE extended/basic without preview: <ratio>``, then
 ``trajectory MSE extended/basic: <ratio>`` with preview, the default.
 """
