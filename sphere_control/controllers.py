@@ -13,6 +13,7 @@ import numpy as np
 
 from sphere_control.basic import BasicController, BasicParams
 from sphere_control.extended import ExtendedController, ExtendedParams
+from sphere_control.intensity_calibration import CalibratedKicks
 from sphere_sim.kicks.discrete import KickPlant
 from sphere_sim.model.rotations import angle_between
 
@@ -57,7 +58,7 @@ def direction_learning_floor_rad(kick_plant: KickPlant) -> float:
     a model that has none (learning from every kick, as the paper). A model wrapped in an
     intensity calibration is read through it.
     """
-    inner = getattr(kick_plant, 'kicks', kick_plant)
+    inner = kick_plant.kicks if isinstance(kick_plant, CalibratedKicks) else kick_plant
     return inner.largest_stray_kick_rad() if isinstance(inner, StrayKicksKnown) else 0.0
 
 
