@@ -25,6 +25,11 @@ Additions (docs/numerics.md measures each):
   solve contracted fast enough (Hairer's FACCON); scipy always takes two.
 * **The model's domain**: a step after which an electrode has reached the ground electrode
   ends the run (``STATUS_LEFT_DOMAIN``) instead of letting the step collapse there.
+* **RADAU5's rule after a retry**: a step that was accepted only after a retry (an error
+  rejection, an onset rejection or a Newton failure) does not let the next one grow (Hairer's
+  ``IF (REJECT) HNEW = MIN(HNEW, H)``); scipy lets it grow at once. On this model's kicks most
+  retries are Newton failures where a bristle goes from sticking to slipping, and a step grown
+  straight back into the next transition fails again (docs/numerics.md measures the rule).
 
 The integrator returns to Python every ``CHUNK_STEPS`` accepted steps so that the caller can
 enforce a wall-clock budget (numba has no clock).
@@ -414,6 +419,7 @@ def integrate(t_start, t_end, x_start, u, arrays, rtol, atol, jac_scale, t_eval,
         if check_onset:
             contact_gaps(y, p, flags, directions, gaps0)
         rejected = False
+        retried = False  # any retry of this step, Newton failures included (RADAU5's REJECT)
         accepted = False
         n_iter = 0
         rate = 0.0
@@ -529,6 +535,7 @@ def integrate(t_start, t_end, x_start, u, arrays, rtol, atol, jac_scale, t_eval,
                     have_lu = False
             if not converged:
                 h_abs *= 0.5
+                retried = True
                 have_lu = False
                 counters[C_REJECTED] += 1
                 counters[C_NEWTON_FAILED] += 1
@@ -563,6 +570,8 @@ def integrate(t_start, t_end, x_start, u, arrays, rtol, atol, jac_scale, t_eval,
         recompute_jac = n_iter > 2 and rate > jac_rate
         factor = _predict_factor(h_abs, h_abs_old, error_norm, error_norm_old)
         factor = min(MAX_FACTOR, safety * factor)
+        if retried or rejected:
+            factor = min(1.0, factor)
         if not recompute_jac and factor < 1.2:
             factor = 1.0
         else:

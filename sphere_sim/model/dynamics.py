@@ -121,9 +121,11 @@ D_MIN_SPHERE_GAP = 5
 N_DIAG = 6
 
 # The ``part`` of the model a kernel call evaluates: every term, one beam alone (its index,
-# >= 0), or only the terms that depend on the sphere's state (see rhs_kernel).
+# >= 0), only the terms that depend on the sphere's state, or those of one beam's tip alone
+# (``TIP_OF_BEAM - k`` for beam k; see rhs_kernel).
 WHOLE_MODEL = -1
 SPHERE_DEPENDENT = -2
+TIP_OF_BEAM = -3
 
 QUATERNION_GAIN_PER_S = 1.0e3  # pulls |q| back to 1 without touching the rotation itself
 FAR_GAP_M = 1.0  # reported gap when a contact does not exist
@@ -259,7 +261,8 @@ def rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, dxdt, dia
         of ``dxdt`` are left as they were and the sphere's rates feel only this beam's tip;
         or ``SPHERE_DEPENDENT``: the beams' own forces (gravity, springs, damping,
         electrostatics, ground contact), which do not depend on the sphere's state, are left
-        out, so that each beam's rates hold only its tip's contact with the sphere. The
+        out, so that each beam's rates hold only its tip's contact with the sphere; or
+        ``TIP_OF_BEAM - k``: that, for beam k alone (its tip's bristle enters nothing else). The
         difference of two calls with the same ``part`` is a beam's, or the sphere's, columns
         of the Jacobian (:func:`jacobian_kernel`), since the left-out forces enter the rates
         linearly.
@@ -302,9 +305,10 @@ def rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, dxdt, dia
         centre = add(pos, r_sc)
         centre_vel = add(vel, cross(omega_i, r_sc))
 
-    own_forces = part != SPHERE_DEPENDENT
+    own_forces = part >= WHOLE_MODEL
+    only_beam = part if part >= 0 else (TIP_OF_BEAM - part if part <= TIP_OF_BEAM else -1)
     for k in range(n):
-        if part >= 0 and k != part:
+        if only_beam >= 0 and k != only_beam:
             continue
         z = x[2 * k]
         phi = x[2 * k + 1]
@@ -458,10 +462,11 @@ def jacobian_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, scal
     :func:`rhs_kernel`). A beam's state enters only its own rows and, through its tip's force,
     the sphere's, so its columns difference the kernel of that beam alone; the sphere's state
     enters the sphere's rows and the beams' through their tips, so its columns difference the
-    kernel without the beams' own forces (and their capacitances). For four beams: 14 calls
-    of ``SPHERE_DEPENDENT`` and 20 of one beam, and 12 more of ``SPHERE_DEPENDENT`` for the
-    bristles of the ``paper`` and ``stiction`` readings (a bristle enters its beam's rates, the
-    sphere's and its own, all of which that part evaluates).
+    kernel without the beams' own forces (and their capacitances). A bristle enters only its
+    beam's rates, the sphere's and its own, all through its tip's contact, so its columns
+    difference that tip alone (``TIP_OF_BEAM - k``). For four beams: 14 calls of
+    ``SPHERE_DEPENDENT``, 20 of one beam and, with the bristles of the ``paper`` and
+    ``stiction`` readings, 16 of one tip (a quarter of the contact terms each).
     """
     n = x.size
     nb = flags[F_N_BEAMS]
@@ -470,9 +475,10 @@ def jacobian_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, scal
     f1 = np.empty(n)
     diag = np.empty(N_DIAG)
     xp = x.copy()
+    sphere_rows = SPHERE_STATES if flags[F_SPHERE] else 0
     rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, f0, diag,
                SPHERE_DEPENDENT)
-    for j in range(o, n):
+    for j in range(o, o + sphere_rows):
         h = _difference_step(x[j], scale[j], JACOBIAN_STEP)
         xp[j] = x[j] + h
         rhs_kernel(t, xp, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, f1, diag,
@@ -483,7 +489,25 @@ def jacobian_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, scal
     for i in range(n):
         for j in range(o):
             jac[i, j] = 0.0
-    sphere_rows = SPHERE_STATES if flags[F_SPHERE] else 0
+        for j in range(o + sphere_rows, n):
+            jac[i, j] = 0.0
+    if flags[F_STICTION]:
+        for k in range(nb):
+            rows = (2 * k, 2 * k + 1, 2 * nb + 2 * k, 2 * nb + 2 * k + 1)
+            ob = o + SPHERE_STATES + BRISTLE_STATES * k
+            tip = TIP_OF_BEAM - k
+            rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, f0, diag, tip)
+            for j in range(ob, ob + BRISTLE_STATES):
+                h = _difference_step(x[j], scale[j], JACOBIAN_STEP)
+                xp[j] = x[j] + h
+                rhs_kernel(t, xp, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, f1, diag,
+                           tip)
+                xp[j] = x[j]
+                for i in rows:
+                    jac[i, j] = (f1[i] - f0[i]) / h
+                for i in range(o, ob + BRISTLE_STATES):  # the sphere's rows and this bristle's
+                    if i < o + SPHERE_STATES or i >= ob:
+                        jac[i, j] = (f1[i] - f0[i]) / h
     for k in range(nb):
         rows = (2 * k, 2 * k + 1, 2 * nb + 2 * k, 2 * nb + 2 * k + 1)
         rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, f0, diag, k)
