@@ -246,6 +246,37 @@ def test_a_resting_controller_sends_0_v_once_per_rest_and_batches_its_status(con
     assert last.message == 'resting' and last.level == DiagnosticStatus.OK
 
 
+def test_a_hold_a_lockstep_simulator_never_took_is_sent_again_after_the_stale_timeout(
+        context, monkeypatch):
+    """With hold_each_sample, repeats of the sample already held send nothing while the hold
+    may still be on its way; a repeat more than stale_timeout_s of wall time after it sends it
+    again (the simulator is still waiting: it never took it), and then waits as long again."""
+    from sphere_twin.nodes import controller_node
+    from sphere_twin.nodes.controller_node import ControllerNode
+
+    wall_s = [100.0]
+    monkeypatch.setattr(controller_node.time, 'monotonic', lambda: wall_s[0])
+    node = ControllerNode(context=context, parameter_overrides=[
+        Parameter('hold_each_sample', value=True), Parameter('stale_timeout_s', value=1.0)])
+    holds = []
+    node._voltage_pub.publish = holds.append
+    try:
+        level = np.array([0.0, 0.0, 1.0])
+        node.on_reference(surface_normal_to_msg(level))
+        sent = []
+        for wall in (100.0, 100.2, 100.4, 100.9, 101.1, 101.3, 102.0):
+            wall_s[0] = wall
+            node.on_normal(surface_normal_to_msg(level, _stamp(0.29)))  # the idle repeats
+            sent.append(len(holds))
+        wall_s[0] = 102.4
+        node.on_normal(surface_normal_to_msg(level, _stamp(0.30)))  # the simulator moved on
+    finally:
+        node.destroy_node()
+    assert sent == [1, 1, 1, 1, 2, 2, 2]
+    assert len(holds) == 3
+    assert [msg.header.stamp.nanosec for msg in holds] == [290_000_000] * 2 + [300_000_000]
+
+
 def _stamp(t_s):
     from msg_defs.conversions import time_from_ns
 

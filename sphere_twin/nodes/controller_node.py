@@ -112,6 +112,7 @@ class ControllerNode(Node):
         self._kicked_s: list[float] = []  # those of them that kicked
         self.hold_each_sample = p['hold_each_sample']
         self._hold_sent_at_s = -1.0
+        self._hold_sent_wall_s = 0.0  # time.monotonic() when it went out
         self._resting = False  # a rest's 0 V command has gone out
         self.pace = PaceMeter()
         self.get_logger().info(f'{self.controller_kind} controller, Phi_min '
@@ -172,6 +173,7 @@ class ControllerNode(Node):
             self._programme_pub.publish(programme_to_msg(*programme.segments(), stamp=start))
         elif decision.phase is Phase.RESTING and self._hold_due(sample_s):
             self._hold_sent_at_s = sample_s
+            self._hold_sent_wall_s = time.monotonic()
             self._voltage_pub.publish(voltages_to_msg([0.0] * BEAM_COUNT, stamp))
         self._note(decision, sample_s, stamp)
 
@@ -179,9 +181,14 @@ class ControllerNode(Node):
         """Whether a resting decision on the sample at ``sample_s`` sends 0 V: once per rest,
         or (hold_each_sample) once per sample, one in flight at a time, since a lockstep
         simulator advances one sample per command and holds queued behind a later kick
-        would delay it."""
+        would delay it. A lockstep simulator that still repeats the sample held
+        ``stale_timeout_s`` of wall time after the hold went out never took it (lost, or
+        consumed without advancing): it is sent again, as an unanswered kick is given up
+        and decided anew, or the run would wait forever."""
         if self.hold_each_sample:
-            return sample_s > self._hold_sent_at_s
+            unanswered = (sample_s == self._hold_sent_at_s and time.monotonic()
+                          - self._hold_sent_wall_s > self.cycle.stale_timeout_s)
+            return sample_s > self._hold_sent_at_s or unanswered
         due, self._resting = not self._resting, True
         return due
 
