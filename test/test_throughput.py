@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from sphere_sim.kicks import optimization
+from sphere_sim.kicks import optimization, process_models
 from sphere_sim.kicks import throughput as tp
 from sphere_sim.kicks.design import KickDesign, cardan_of_normal, final_normal, simulate_kick
 from sphere_sim.kicks.discrete import normal_from_xy
@@ -135,21 +135,21 @@ def test_an_objective_carries_its_rest_state_and_its_copies_never_relax_it(monke
     unpickle carry it, and each process assembles the model once."""
     import pickle
 
-    optimization._model.cache_clear()
+    process_models.process_model.cache_clear()
     relaxed, assembled = [], []
-    real_rest, real_assemble = optimization.rest_state, optimization.assemble
+    real_rest, real_assemble = optimization.rest_state, process_models.assemble
     monkeypatch.setattr(optimization, 'rest_state',
                         lambda model, **kw: relaxed.append(1) or real_rest(model, **kw))
-    monkeypatch.setattr(optimization, 'assemble',
+    monkeypatch.setattr(process_models, 'assemble',
                         lambda *a, **kw: assembled.append(1) or real_assemble(*a, **kw))
     objective = optimization._Objective('rest', None, KickDesign())
     assert len(relaxed) == 1
     copies = [pickle.loads(pickle.dumps(objective)) for _ in range(3)]  # as a pool's tasks
-    optimization._model.cache_clear()  # as in a fresh worker
+    process_models.process_model.cache_clear()  # as in a fresh worker
     values = {copy(np.array([1e-3, 1e-3, 0.0])) for copy in copies}
     assert len(relaxed) == 1 and len(assembled) == 2 and len(values) == 1
     np.testing.assert_array_equal(copies[0].x_rest, objective.x_rest)
-    optimization._model.cache_clear()
+    process_models.process_model.cache_clear()
 
 
 def _square(x):

@@ -36,7 +36,6 @@ import json
 import math
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from functools import lru_cache
 from pathlib import Path
 from typing import Any, cast
 
@@ -58,11 +57,10 @@ from sphere_sim.kicks.observations import (
     KickObservation,
     Observations,
 )
+from sphere_sim.kicks.process_models import process_model
 from sphere_sim.kicks.table_build import BLAS_THREADS_PER_KICK
-from sphere_sim.model.assembly import Model, assemble
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.parameters import ParameterSet
-from sphere_sim.model.scene import load_scene
 
 # Why a parameter was set aside (:func:`select_identifiable`): its status, its partner (an
 # entangled one's) and the cosine of their effects.
@@ -232,16 +230,11 @@ def params_at(params: ParameterSet, fits: Sequence[FitParameter],
 
 # --- one kick, one task ---------------------------------------------------------------------------
 
-@lru_cache(maxsize=8)
-def _model(params: ParameterSet) -> Model:
-    return assemble(load_scene('rest'), params)
-
-
 def kick_end_normal(params: ParameterSet, kick: KickObservation,
                     rtol: float = FIT_RTOL) -> NDArray[np.float64]:
     """The model's resting normal after ``kick``'s programme, from rest at its recorded start."""
     with threadpool_limits(limits=BLAS_THREADS_PER_KICK):
-        model = _model(params)
+        model = process_model(params)
         x_rest = rest_state(model, cardan_of_normal(kick.normal_before),
                             relaxation=KICK_RELAXATION)
         window = max(SETTLE_S, float(kick.times_s[-1]))

@@ -9,7 +9,6 @@ from rest at zero tilt, over the kick window.
 import dataclasses
 import math
 from collections.abc import Callable, Sequence
-from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -18,11 +17,10 @@ from scipy.optimize import differential_evolution
 from sphere_sim.kicks.design import KICK_RELAXATION, KickDesign, final_normal, simulate_kick
 from sphere_sim.kicks.discrete import KickResult
 from sphere_sim.kicks.engine import SerialEngine, engine_for
-from sphere_sim.model.assembly import Model, assemble
+from sphere_sim.kicks.process_models import process_model
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.parameters import ParameterSet
 from sphere_sim.model.rotations import angle_between
-from sphere_sim.model.scene import load_scene
 
 WIDTH_BOUNDS_S = (0.2e-3, 8e-3)
 DELAY_BOUNDS_S = (-6e-3, 6e-3)
@@ -47,23 +45,13 @@ class OptimisedKick:
         return out
 
 
-# Models of the scenes and parameter sets this process has optimised for; a calibration moves
-# between a few parameter sets, each with its own.
-SETUP_CACHE_SIZE = 8
-
-
-@lru_cache(maxsize=SETUP_CACHE_SIZE)
-def _model(scene_name: str, params: ParameterSet | None) -> Model:
-    """The model, assembled once per process (not once per unpickled objective)."""
-    return assemble(load_scene(scene_name), params)
-
-
 class _Objective:
     """Picklable objective for parallel workers: -(displacement along the nominal direction).
 
     It carries its inputs and the rest state every kick starts from, relaxed once by the
     process that starts the search: no worker relaxes it again. Each process assembles the
-    model once (:func:`_model`), however many times the objective is unpickled there.
+    model once (:func:`~sphere_sim.kicks.process_models.process_model`), however many times
+    the objective is unpickled there.
     """
 
     def __init__(self, scene_name: str, params: ParameterSet | None,
@@ -71,21 +59,21 @@ class _Objective:
         self.scene_name = scene_name
         self.params = params
         self.template = template
-        self.x_rest = rest_state(_model(scene_name, params), relaxation=KICK_RELAXATION)
+        self.x_rest = rest_state(process_model(params, scene_name), relaxation=KICK_RELAXATION)
 
     def design(self, v: Sequence[float]) -> KickDesign:
         return dataclasses.replace(self.template, width_low_s=float(v[0]),
                                    width_high_s=float(v[1]), delay_s=float(v[2]))
 
     def outcome(self, v: Sequence[float]) -> KickResult:
-        result, _ = simulate_kick(_model(self.scene_name, self.params), NORMAL_AT_REST,
+        result, _ = simulate_kick(process_model(self.params, self.scene_name), NORMAL_AT_REST,
                                   self.design(v).programme(), rtol=OPTIMISATION_RTOL,
                                   x_rest=self.x_rest)
         return result
 
     def __call__(self, v: Sequence[float]) -> float:
         # The final normal alone: the transient's peak and settling time are not searched on.
-        normal = final_normal(_model(self.scene_name, self.params), NORMAL_AT_REST,
+        normal = final_normal(process_model(self.params, self.scene_name), NORMAL_AT_REST,
                               self.design(v).programme(), rtol=OPTIMISATION_RTOL,
                               x_rest=self.x_rest)
         d = self.template.direction_rad

@@ -25,11 +25,10 @@ from sphere_sim.kicks.design import KICK_RELAXATION, cardan_of_normal, simulate_
 from sphere_sim.kicks.discrete import KickResult, normal_from_xy
 from sphere_sim.kicks.engine import DaskEngine, PoolEngine, SerialEngine, engine_for
 from sphere_sim.kicks.lookup_table import TABLE_FORMAT_VERSION, LookupTable, TableError, TableSpec
-from sphere_sim.model.assembly import Model, assemble
+from sphere_sim.kicks.process_models import process_model
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.parameters import ParameterSet, load_parameter_set
 from sphere_sim.model.rotations import angle_between
-from sphere_sim.model.scene import load_scene
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -69,14 +68,9 @@ def spec_from_dict(data: Mapping[str, Any]) -> TableSpec:
     return TableSpec.from_dict(data)
 
 
-@lru_cache(maxsize=4)
-def _model(params: ParameterSet) -> Model:
-    return assemble(load_scene('rest'), params)
-
-
 @lru_cache(maxsize=256)
 def _rest(params: ParameterSet, x_sn: float, y_sn: float) -> NDArray[np.float64]:
-    model = _model(params)
+    model = process_model(params)
     return rest_state(model, cardan_of_normal(normal_from_xy(x_sn, y_sn)),
                       relaxation=KICK_RELAXATION)
 
@@ -107,7 +101,7 @@ def node_rest(params: ParameterSet, x_sn: float, y_sn: float) -> NDArray[np.floa
 def _run_kick_job(spec_data: Mapping[str, Any], params: ParameterSet, job: KickJob,
                   x_rest: NDArray[np.float64] | None) -> Entry:
     spec = spec_from_dict(spec_data)
-    model = _model(params)
+    model = process_model(params)
     normal = normal_from_xy(job.x_sn, job.y_sn)
     x_rest = _rest(params, job.x_sn, job.y_sn) if x_rest is None else x_rest
     result, _ = simulate_kick(model, normal, spec.node_programme(job.x_sn, job.y_sn, job.intensity),
@@ -325,7 +319,7 @@ def random_check_points(n_points: int, seed: int, cone_half_angle_rad: float,
 def direct_kick(spec: TableSpec, params: ParameterSet, normal: NDArray[np.float64], action: int,
                 intensity: float) -> KickResult:
     """The continuous model's outcome for the same kick the table interpolates."""
-    model = _model(params)
+    model = process_model(params)
     programme = spec.programme(action, intensity, normal)
     with threadpool_limits(limits=BLAS_THREADS_PER_KICK):
         x_rest = rest_state(model, cardan_of_normal(normal), relaxation=KICK_RELAXATION)

@@ -27,12 +27,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from sphere_sim.kicks import design as design_module
-from sphere_sim.kicks import optimization, table_build
+from sphere_sim.kicks import table_build
 from sphere_sim.kicks.calibration import with_value
 from sphere_sim.kicks.design import KickDesign, simulate_kick
 from sphere_sim.kicks.engine import DaskEngine, PoolEngine, SerialEngine
 from sphere_sim.kicks.lookup_table import TableSpec
 from sphere_sim.kicks.optimization import optimise_kick
+from sphere_sim.kicks.process_models import process_model
 from sphere_sim.kicks.table_build import build_table, jobs_of
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import explicit_state
@@ -186,9 +187,8 @@ def warm_up() -> None:
 def clear_caches() -> None:
     """Forget the set-ups a previous run left in this process (models, rest states): each
     run pays for its own, and a pool forked afterwards starts without them."""
-    table_build._model.cache_clear()
+    process_model.cache_clear()
     table_build._rest.cache_clear()
-    optimization._model.cache_clear()
 
 
 # --- workloads -----------------------------------------------------------------------------

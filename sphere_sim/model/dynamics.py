@@ -505,9 +505,10 @@ def jacobian_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, scal
                 xp[j] = x[j]
                 for i in rows:
                     jac[i, j] = (f1[i] - f0[i]) / h
-                for i in range(o, ob + BRISTLE_STATES):  # the sphere's rows and this bristle's
-                    if i < o + SPHERE_STATES or i >= ob:
-                        jac[i, j] = (f1[i] - f0[i]) / h
+                for i in range(o, o + SPHERE_STATES):
+                    jac[i, j] = (f1[i] - f0[i]) / h
+                for i in range(ob, ob + BRISTLE_STATES):
+                    jac[i, j] = (f1[i] - f0[i]) / h
     for k in range(nb):
         rows = (2 * k, 2 * k + 1, 2 * nb + 2 * k, 2 * nb + 2 * k + 1)
         rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, f0, diag, k)
