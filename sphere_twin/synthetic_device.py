@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from msg_defs.device import SENSOR_RATE_HZ
-from sphere_sim.kicks.discrete import PAPER_FULL_KICK_RAD
+from sphere_sim.kicks.discrete import NOISE_STUDY_STD_RAD
 
 if TYPE_CHECKING:
     from sphere_sim.kicks.lookup_table import CombinedKickPlant, LookupTable
@@ -34,8 +34,6 @@ if TYPE_CHECKING:
     from sphere_sim.model.parameters import ParameterSet
     from sphere_sim.model.programme import PulseProgramme
 
-# The noise study's sensor noise: a tenth of the paper's full kick, per axis.
-NOISE_STUDY_STD_RAD = 0.1 * PAPER_FULL_KICK_RAD
 INTENSITY_RANGE = (0.5, 1.0)
 # On the paper's device a kick below about 0.8 is no smooth function of the beams' parameters:
 # the pull-in step (0.009 to 0.238 deg within 0.002 of intensity) and the dip above it lie there,

@@ -1,5 +1,7 @@
 """The model is assembled from what the scene declares, and nothing else runs."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from physics_helpers import scene_with
@@ -34,7 +36,31 @@ def test_full_scene_has_sphere_states_and_all_parts():
     assert model.n_states == 4 * 4 + 13 + 4 * 3  # beams, sphere, a friction bristle per tip
     assert model.parts == ('beams', 'electrostatics:closed_form', 'ground_contact', 'sphere',
                            'sphere_contact', 'friction:viscous', 'friction:coulomb',
-                           'friction:stribeck')
+                           'friction:stribeck', 'friction:stiction')
+
+
+def test_a_scene_without_stiction_has_no_bristles_and_slides_by_the_papers_law():
+    """``effects.friction.stiction: false`` (the ``sliding`` rung) drops the bristles' states
+    and their part; the tips then feel eq. (46)-(48) regularised by eq. (51), the ``paper``
+    reading's sliding force at sqrt(eps + v^2)."""
+    from sphere_sim.model import dynamics as dyn
+    from sphere_sim.model.friction import paper_sliding_force
+
+    scene = scene_with()
+    model = assemble(scene.replace(effects=dataclasses.replace(scene.effects, stiction=False)))
+    assert model.n_states == 4 * 4 + 13 and not model.has_bristles
+    assert 'friction:stiction' not in model.parts and 'friction:coulomb' in model.parts
+    f = model.params.friction
+    for speed in (0.0, 1e-5, 3e-3, 0.1, 0.3):
+        regularised = np.sqrt(f.epsilon_m2_per_s2 + speed**2)
+        got = dyn.friction_magnitude(regularised, 2e-3, 1.0, f.viscous_ns_per_m, f.coulomb,
+                                     f.coulomb_velocity_m_per_s, f.stribeck,
+                                     f.stribeck_velocity_m_per_s, True, True, True,
+                                     model.flags[dyn.F_FRICTION_READING])
+        assert got == pytest.approx(paper_sliding_force(
+            regularised, 2e-3, 1.0, f.viscous_ns_per_m, f.coulomb, f.coulomb_velocity_m_per_s,
+            f.stribeck, f.stribeck_velocity_m_per_s), rel=1e-12)
+        assert got > 0.0
 
 
 @pytest.mark.parametrize('patched', ['quat_rows', 'friction_magnitude', 'onset_gate'])

@@ -24,6 +24,8 @@ EIGHT_DIRECTIONS_RAD = tuple(math.radians(a) for a in (-45.0, 0.0, 45.0, 90.0, 1
 CONE_HALF_ANGLE_RAD = math.radians(40.0)  # the state space investigated in the paper
 # The paper's optimised hind-left kick, sqrt(alpha^2 + beta^2) (§4.1, Fig. 5 and Fig. 6a).
 PAPER_FULL_KICK_RAD = math.radians(0.54)
+# The noise study's sensor noise: a tenth of the paper's full kick, per axis (9.4e-4 rad).
+NOISE_STUDY_STD_RAD = 0.1 * PAPER_FULL_KICK_RAD
 # A kick period is a kick's settle time rounded up to this: the offline loop's decision grid,
 # and a whole number of samples of a 100 Hz sensor.
 KICK_PERIOD_STEP_S = 0.01

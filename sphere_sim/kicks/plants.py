@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from msg_defs.device import BEAM_COUNT, KICK_WINDOW_S
 from sphere_sim.integrate.solve import simulate
-from sphere_sim.kicks.discrete import PAPER_FULL_KICK_RAD
+from sphere_sim.kicks.discrete import NOISE_STUDY_STD_RAD
 from sphere_sim.model.assembly import Model
 from sphere_sim.model.initial_state import initial_state
 from sphere_sim.model.programme import PulseProgramme, VoltageSchedule
@@ -33,7 +33,7 @@ if TYPE_CHECKING:
 LIVE_RTOL = 3e-4
 # What LIVE_RTOL is held to: a hundredth of the sensor noise of the noise study (0.1 widths of
 # the paper's 0.54 deg kick, per axis).
-LIVE_ERROR_BOUND_RAD = 0.01 * 0.1 * PAPER_FULL_KICK_RAD
+LIVE_ERROR_BOUND_RAD = 0.01 * NOISE_STUDY_STD_RAD
 # A decoded programme matches a kick of the design if its edges agree to this (a message
 # carries times in whole nanoseconds) and its voltages to this. A sender's voltage offset
 # (§4.1) follows the normal it measured, the plant's the normal it holds: where the shipped

@@ -411,7 +411,7 @@ def assemble(scene: Scene, params: ParameterSet | None = None, jit: bool = True)
     flags[dyn.F_COULOMB] = sphere_contact and fx.coulomb
     flags[dyn.F_STRIBECK] = sphere_contact and fx.stribeck
     flags[dyn.F_FRICTION_READING] = READINGS.index(params.friction.reading)
-    flags[dyn.F_STICTION] = (sphere_contact and fx.coulomb
+    flags[dyn.F_STICTION] = (sphere_contact and fx.coulomb and fx.stiction
                              and flags[dyn.F_FRICTION_READING] in BRISTLE_READINGS)
 
     p = pack_parameters(params)
@@ -440,6 +440,8 @@ def assemble(scene: Scene, params: ParameterSet | None = None, jit: bool = True)
     if sphere_contact:
         parts.append('sphere_contact')
         parts += [f'friction:{t}' for t in ('viscous', 'coulomb', 'stribeck') if getattr(fx, t)]
+        if flags[dyn.F_STICTION]:
+            parts.append('friction:stiction')
     angles = np.array([beam_angle_rad(b) for b in scene.beams], dtype=float).reshape(-1)
     return Model(scene=scene, params=params, beams=tuple(scene.beams), has_sphere=has_sphere,
                  parts=tuple(parts), p=p, flags=flags,

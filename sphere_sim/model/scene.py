@@ -29,7 +29,10 @@ CAPACITANCE_MODELS = ('closed_form', 'rbf')
 INITIAL_MODES = ('rest', 'explicit')
 EFFECTS = ('gravity', 'electrostatics', 'ground_contact', 'sphere_contact', 'contact_losses',
            'damping')
-FRICTION_TERMS = ('viscous', 'coulomb', 'stribeck')
+# ``stiction``: the bristle below the sliding law (its static limit and presliding), where the
+# parameter set's friction reading has one; without it the sliding law is regularised at rest
+# as eq. (51) does.
+FRICTION_TERMS = ('viscous', 'coulomb', 'stribeck', 'stiction')
 
 # The scene's numbers, checked by the parameters' checker: wide physical bounds (a
 # millimetre-sized device), refusing what would divide by zero or leave the model.
@@ -63,6 +66,7 @@ class Effects:
     viscous: bool = True
     coulomb: bool = True
     stribeck: bool = True
+    stiction: bool = True
 
     @property
     def any_friction(self) -> bool:

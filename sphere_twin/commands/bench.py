@@ -54,7 +54,7 @@ from sphere_sim.studies.work_precision import (
     Plan,
     work_precision,
 )
-from sphere_twin.commands import bench_levers, bench_startup, bench_twin
+from sphere_twin.commands import bench_fidelity, bench_levers, bench_startup, bench_twin
 from sphere_twin.commands.bench_scenes import optimised_design, scenes_of_this_tree
 from sphere_twin.commands.options import DEFAULT_OUT_DIR, output_directory, worker_counts
 
@@ -265,6 +265,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                      help='output directory')
     thr.set_defaults(func=run_throughput)
     bench_twin.register(sub)
+    bench_fidelity.register(sub)
     bench_levers.register(sub)
     bench_startup.register(sub)
 

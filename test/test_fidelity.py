@@ -1,0 +1,120 @@
+"""The ladder of models: a rung leaves out one named mechanism, starts from the full model's
+state, and is judged by its landing error against the full model (sphere_sim.twin.ladder)."""
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from sphere_sim.kicks.plants import LIVE_ERROR_BOUND_RAD
+from sphere_sim.model.assembly import assemble
+from sphere_sim.model.fidelity import (
+    FULL,
+    LADDER,
+    SLIDING,
+    TABLE_RUNG,
+    FidelityError,
+    carried_state,
+    rung_named,
+)
+from sphere_sim.model.parameters import load_parameter_set
+from sphere_sim.model.rotations import angle_between
+from sphere_sim.model.scene import load_scene
+from sphere_sim.twin import ladder
+
+
+def test_an_unknown_rung_is_refused_naming_the_rungs():
+    with pytest.raises(FidelityError) as info:
+        rung_named('fastest')
+    assert "'fastest'" in str(info.value)
+    assert all(name in str(info.value) for name in LADDER)
+
+
+def test_a_rung_refuses_a_scene_that_already_lacks_its_mechanism():
+    scene = load_scene('rest')
+    bare = scene.replace(effects=dataclasses.replace(scene.effects, stiction=False))
+    with pytest.raises(FidelityError, match='stiction'):
+        SLIDING.scene(bare)
+    assert FULL.scene(bare) is bare
+
+
+def test_the_sliding_rung_leaves_out_the_bristles_and_nothing_else():
+    """The same scene and parameters less the bristles: the states of beams and sphere are
+    carried over unchanged, and the two models agree wherever no tip touches the sphere."""
+    scene = load_scene('rest')
+    full = assemble(scene)
+    sliding = assemble(SLIDING.scene(scene))
+    assert full.parts == (*sliding.parts, 'friction:stiction')
+    assert sliding.params == full.params and not sliding.has_bristles
+    rng = np.random.default_rng(3)
+    x = np.concatenate([rng.normal(0.0, 1e-7, full.sphere_offset),
+                        [0.0, 0.0, 1e-3, 1.0, 0.0, 0.0, 0.0],
+                        rng.normal(0.0, 1e-3, 6), rng.normal(0.0, 1e-9, 12)])
+    carried = carried_state(full, sliding, x)
+    assert carried.shape == (sliding.n_states,)
+    np.testing.assert_array_equal(carried, x[:sliding.n_states])
+    # The sphere lifted 1 mm clear of the tips: no contact, so no friction of either kind.
+    u = np.array([20.0, 0.0, 35.0, 80.0])
+    np.testing.assert_allclose(sliding.rhs(0.0, carried, u),
+                               full.rhs(0.0, x, u)[:sliding.n_states], rtol=1e-12, atol=0.0)
+    with pytest.raises(FidelityError):
+        carried_state(sliding, full, carried)
+
+
+def _result(name, errors, ms):
+    return ladder.RungResult(name, '', tuple(errors), tuple([ms * 1e-3] * len(errors)))
+
+
+def test_the_live_rung_is_the_fastest_model_rung_within_both_bounds():
+    p95, most = ladder.LIVE_P95_BUDGET_RAD, ladder.LIVE_MAX_BUDGET_RAD
+    within = [0.0] * 19 + [0.9 * most]  # the 95th percentile interpolates below the top
+    assert _result('x', within, 1.0).meets_live_budget
+    assert not _result('x', [0.0] * 18 + [2 * p95, 2 * p95], 1.0).meets_live_budget
+    assert not _result('x', [0.0] * 19 + [1.1 * most], 1.0).meets_live_budget
+    full, sliding = _result('full', within, 100.0), _result('sliding', within, 30.0)
+    table = _result(TABLE_RUNG, [0.0] * 20, 0.1)
+    assert ladder.live_rung_of([full, sliding, table]) is sliding  # the table is no model
+    off_budget = _result('sliding', [1.0] * 20, 30.0)
+    assert ladder.live_rung_of([full, off_budget, table]) is full
+    assert ladder.live_rung_of([_result('full', [1.0] * 20, 100.0), table]) is None
+
+
+def test_the_kick_set_spans_both_designs_three_intensities_and_three_tilts():
+    kicks = ladder.kick_set()
+    assert len(kicks) >= 30
+    assert {k.design for k in kicks} == {'diagonal', 'axis'}
+    assert {k.intensity for k in kicks} == {0.6, 0.8, 1.0}
+    assert {k.tilt_deg for k in kicks} == {0.0, 20.0, 35.0}
+    for k in kicks:
+        assert math.degrees(math.acos(k.normal[2])) == pytest.approx(k.tilt_deg, abs=1e-9)
+
+
+def test_the_table_rung_is_the_full_model_where_the_table_was_simulated():
+    """At a node of the table's grid and one of its intensities, the table's landing is the full
+    model's at the table's tolerance: the rungs start from the same rest, with the same
+    programme (the table's own, offsets included), so any difference is the table's."""
+    params = load_parameter_set('calibrated')
+    table = ladder._table('diagonal', params)
+    _, _, x_sn, y_sn = table.spec.nodes()[len(table.spec.nodes()) // 3]
+    tilt_deg = math.degrees(math.asin(math.hypot(x_sn, y_sn)))
+    azimuth_deg = math.degrees(math.atan2(y_sn, x_sn))
+    intensity = float(table.intensities[-1])
+    kick = ladder.LadderKick('diagonal', intensity, tilt_deg, azimuth_deg)
+    looked_up, _ = ladder.landing(TABLE_RUNG, kick, params)
+    simulated, _ = ladder.landing('full', kick, params, rtol=table.spec.rtol)
+    assert angle_between(kick.normal, simulated) > 1e-3  # a kick, not a rest
+    assert angle_between(looked_up, simulated) < 1e-8
+
+
+def test_the_full_rung_at_the_live_tolerance_lands_where_the_reference_does_off_the_edges():
+    """Off the mirror lines and above the pull-in step (a full kick from 20 deg), the live
+    tolerance lands within a few of its bound of a tight reference; the sliding rung kicks too,
+    from the same rest and with the same programme."""
+    params = load_parameter_set('calibrated')
+    kick = ladder.LadderKick('diagonal', 1.0, 20.0, 20.0)
+    reference = ladder.reference_landing((kick, params, 1e-8))
+    live, _ = ladder.landing('full', kick, params)
+    assert angle_between(reference, live) < 3.0 * LIVE_ERROR_BOUND_RAD
+    sliding, _ = ladder.landing('sliding', kick, params)
+    assert angle_between(kick.normal, sliding) > 1e-3
