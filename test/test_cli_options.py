@@ -61,3 +61,23 @@ def test_a_bad_parameter_set_is_a_one_line_usage_error(argv, capsys):
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert err.startswith(f'sphere-twin {argv[0]}') and 'error: argument --params:' in err
     assert 'nosuch' in err and 'Traceback' not in err
+
+
+def test_validate_prints_the_widths_with_the_shipped_offsets_only_for_the_set_they_belong_to(
+        monkeypatch):
+    """The shipped voltage offsets were searched for the shipped design on `calibrated`: a file
+    that keeps the name but changes a value is another device and gets none, nor does another
+    set."""
+    from pathlib import Path
+
+    from sphere_sim.kicks.offset_lookup import OffsetLookup
+    from sphere_twin.commands import validate
+
+    monkeypatch.chdir(Path(__file__).parents[1])
+    design = validate._design(None)
+    calibrated = load_parameter_set('calibrated')
+    lookup = validate._offsets(design, calibrated)
+    assert isinstance(lookup, OffsetLookup) and lookup
+    softer = calibrated.replace(**{'friction.bristle_stiffness_n_per_m': 1e3})
+    assert softer.name == 'calibrated' and validate._offsets(design, softer) is None
+    assert validate._offsets(design, load_parameter_set('dry_contact')) is None

@@ -6,8 +6,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sphere_sim.integrate.solve import simulate
-from sphere_sim.kicks.characteristics import rotation_width_curves
+from sphere_sim.kicks.characteristics import KickBench, KickEffect
 from sphere_sim.kicks.design import KickDesign
+from sphere_sim.kicks.discrete import normal_from_cardan
+from sphere_sim.kicks.offset_lookup import OffsetLookup
 from sphere_sim.model.assembly import Model
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.parameters import ParameterSet
@@ -74,9 +76,16 @@ def ratchet_rad(tilt_deg: float = 35.0, pulses: int = RATCHET_PULSES,
 
 
 def width_ratio(tilt_deg: float = 35.0, params: ParameterSet | None = None,
-                design: KickDesign | None = None) -> float:
+                design: KickDesign | None = None, offsets: OffsetLookup | None = None) -> float:
     """The full kick's rotation width from a tilt of ``tilt_deg`` (about x) over the level one
-    (Fig. 10: it "slightly decreases")."""
-    curves = rotation_width_curves(design, alphas_deg=(0.0, tilt_deg), intensities=[1.0],
-                                   params=params)
-    return float(curves[1].width_rad[0] / curves[0].width_rad[0])
+    (Fig. 10: it "slightly decreases"). With ``offsets`` both kicks carry §4.1's voltage offset
+    for their resting normal, as the table's kicks do; without, only the design's voltages."""
+    design = KickDesign() if design is None else design
+    bench = KickBench(params)
+    widths = []
+    for alpha_deg in (0.0, tilt_deg):
+        normal = normal_from_cardan(alpha_deg)
+        programme = (design.programme(1.0) if offsets is None
+                     else offsets.programme(design, normal[0], normal[1], 1.0))
+        widths.append(KickEffect(bench.final_normal(normal, programme)[:2] - normal[:2]).width_rad)
+    return widths[1] / widths[0]
