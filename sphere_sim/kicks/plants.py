@@ -93,6 +93,9 @@ class TwinPlant(Protocol):
     def snapshot(self) -> PlantSnapshot:
         """The :class:`PlantSnapshot` now."""
 
+    def model_state(self) -> NDArray[np.float64] | None:
+        """The continuous model's state now (a copy), or None where the plant has none."""
+
 
 class ContinuousPlant:
     """The physics model of §3, integrated between commands and sample times.
@@ -140,6 +143,9 @@ class ContinuousPlant:
             self.stats_nfev += traj.stats.nfev
         self.time_s = max(self.time_s, t_end_s)
         self.schedule.forget_before(self.time_s)
+
+    def model_state(self) -> NDArray[np.float64]:
+        return self.x.copy()
 
     def snapshot(self) -> PlantSnapshot:
         m, x = self.model, self.x
@@ -287,6 +293,9 @@ class DiscretePlant:
             self._pending = None
         self.time_s = max(self.time_s, t_end_s)
         self.schedule.forget_before(self.time_s)
+
+    def model_state(self) -> None:
+        return None  # a table knows only where the normal lands
 
     def snapshot(self) -> PlantSnapshot:
         rest = self.rest

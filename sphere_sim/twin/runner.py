@@ -23,6 +23,7 @@ from msg_defs.programme_events import ProgrammeEvent, ProgrammeState
 from msg_defs.voltage_rules import VoltageRuleError, check_voltages
 from sphere_sim.kicks.plants import TIME_TOL_S, PlantError, PlantSnapshot, TwinPlant
 from sphere_sim.model.programme import ProgrammeError, PulseProgramme
+from sphere_sim.twin.fidelity_check import FidelityCheck
 
 # A programme may start at most this far after the simulated now. Stamps are simulated time;
 # one far ahead is a wall-clock stamp (`stamp: now` in `ros2 topic pub`), which would wait
@@ -151,12 +152,17 @@ class TwinRunner:
         ``busy_until_s``): each command is answered by the samples of its effect and the
         settled sample, and the run is the same whatever the wall-clock timing.
     voltage_limit_v : float
+    check : FidelityCheck, optional
+        Runs the full model beside the plant on every programme the plant starts, and compares
+        the landings (``check_fidelity``).
     """
 
     def __init__(self, plant: TwinPlant, period_s: float, noise_std_rad: float = 0.0,
                  seed: int = 0, lockstep: bool = False,
-                 voltage_limit_v: float = VOLTAGE_LIMIT_V) -> None:
+                 voltage_limit_v: float = VOLTAGE_LIMIT_V,
+                 check: FidelityCheck | None = None) -> None:
         self.plant = plant
+        self.check = check
         # Sample times are counted from the last change of period, not summed: no drift.
         self._grid_origin_s = 0.0
         self._step = 0
@@ -314,8 +320,12 @@ class TwinRunner:
                 if item.kind == 'hold':
                     self.plant.hold(typing.cast(NDArray[np.float64], item.payload))
                 else:
-                    self.plant.run_programme(typing.cast(PulseProgramme, item.payload))
+                    programme = typing.cast(PulseProgramme, item.payload)
+                    before = self._check_start()
+                    self.plant.run_programme(programme)
                     self._started(item)
+                    if self.check is not None and before is not None:
+                        self.check.started(self.time_s, *before, programme)
                 self.counters.accepted += 1
             except (PlantError, ProgrammeError) as error:
                 self.counters.rejected += 1
@@ -323,6 +333,12 @@ class TwinRunner:
                 if item.kind == 'programme':
                     self._event(ProgrammeState.REFUSED, item.asked_s, item.number, str(error))
         return refused
+
+    def _check_start(self) -> tuple[NDArray[np.float64] | None, NDArray[np.float64]] | None:
+        """The plant's state and normal before a programme starts, for the check (if on)."""
+        if self.check is None:
+            return None
+        return self.plant.model_state(), self.plant.snapshot().normal
 
     def _started(self, item: _Queued) -> None:
         """Book a programme the plant took: the one it replaced is cut; its start is reported
@@ -372,6 +388,8 @@ class TwinRunner:
             refused += self._apply_due()
         self._report_end()
         snapshot = self.plant.snapshot()
+        if self.check is not None:
+            self.check.observe(snapshot.time_s, snapshot.normal)
         self.counters.samples += 1
         if (self.lockstep and self.plant.time_s >= self.plant.busy_until_s - TIME_TOL_S
                 and not self._queued):
