@@ -11,8 +11,8 @@ from scipy.integrate import solve_ivp
 from sphere_sim.integrate import block_lu, newton_system
 from sphere_sim.integrate import radau_compiled as rc
 from sphere_sim.integrate.solve import simulate
+from sphere_sim.integrate.tolerances import LIVE_RTOL
 from sphere_sim.kicks.design import KickDesign
-from sphere_sim.kicks.plants import LIVE_RTOL
 from sphere_sim.model import dynamics as dyn
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.contact_law import contact_force

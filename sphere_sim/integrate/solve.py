@@ -38,15 +38,15 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sphere_sim.integrate import library_segments
+from sphere_sim.integrate import fast_segment, library_segments
 from sphere_sim.integrate.segment import (
     Budget,
     Segment,
     SolverError,
     SolverStats,
     SolverStatus,
-    check_domain,
 )
+from sphere_sim.integrate.tolerances import DEFAULT_RTOL
 from sphere_sim.model.assembly import Model
 from sphere_sim.model.initial_state import initial_state
 from sphere_sim.model.programme import PulseProgramme, VoltageSchedule
@@ -54,9 +54,6 @@ from sphere_sim.model.scaling import state_scale
 
 SCIPY_METHODS = ('Radau', 'BDF', 'LSODA', 'odeint', 'DOP853')
 DEFAULT_METHOD = 'fast'
-# rtol of simulate(): the final surface normal of the optimised kick is then within about 1e-8 rad
-# of the converged value (bench/results/work_precision.md), far below what a kick resolves.
-DEFAULT_RTOL = 1e-6
 # A run of the ~100 ms scenes takes well under a second; ten minutes means it is stuck.
 DEFAULT_MAX_WALL_S = 600.0
 # Accepted steps per run: the stiffest shipped scenes take ~1e4 steps per simulated 100 ms at
@@ -70,13 +67,6 @@ MAX_SAMPLE_BYTES = 2**30
 # transition depth 2 C / k_c (100 nm with Table A1): 2 nm, where the contact force is still
 # 4e-4 C and starting the contact that late adds ~1e-15 J of elastic energy.
 ONSET_DEPTH_FRACTION = 0.02
-# Newton contraction rate above which the compiled Radau refreshes its Jacobian: Hairer's
-# recommendation (THET = 0.1) when a Jacobian costs many right-hand sides; ours costs n + 1.
-FAST_JACOBIAN_RATE = 0.1
-# Forward differences of the compiled kernel for the compiled Radau's Jacobian: central ones
-# are ~1e4 times more accurate but change neither the steps nor the result, and cost twice as
-# much (docs/numerics.md, "Jacobian").
-FAST_JACOBIAN_CENTRAL = False
 
 
 @dataclasses.dataclass
@@ -122,55 +112,12 @@ def default_onset_depth_m(model: Model) -> float:
     return ONSET_DEPTH_FRACTION * 2.0 * c.transition_force_n / c.stiffness_n_per_m
 
 
-def _segment_fast(seg: Segment) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Integrate one constant-voltage segment with the compiled Radau IIA."""
-    from sphere_sim.integrate import radau_compiled as rc
-    model, x, t0, t1, u = seg.model, seg.x, seg.t0, seg.t1, seg.u
-    rtol, atol, t_eval, onset_depth_m = seg.rtol, seg.atol, seg.t_eval, seg.onset_depth_m
-    budget, stats = seg.budget, seg.stats
-    counters = np.zeros(rc.N_COUNTERS, dtype=np.int64)
-    x_eval = np.empty((model.n_states, t_eval.size))
-    jac_scale = state_scale(model)
-    t, h, i_eval = t0, -1.0, 0
-    x = np.ascontiguousarray(x, dtype=float)
-    status = rc.STATUS_CHUNK
-    while status == rc.STATUS_CHUNK:
-        budget.check(t, x)
-        steps_before = int(counters[rc.C_STEPS])
-        x_chunk = x
-        status, t, x, h, i_eval = rc.integrate(
-            t, t1, x, u, model.kernel_arrays, float(rtol), atol, jac_scale, t_eval, x_eval,
-            i_eval, h, np.inf, max(1, budget.max_steps - budget.steps), onset_depth_m,
-            FAST_JACOBIAN_RATE, FAST_JACOBIAN_CENTRAL, counters)
-        budget.steps += int(counters[rc.C_STEPS]) - steps_before
-        if status == rc.STATUS_STEP_BUDGET:
-            budget.steps = max(budget.steps, budget.max_steps + 1)
-    stats.nfev += int(counters[rc.C_NFEV])
-    stats.njev += int(counters[rc.C_NJEV])
-    stats.nlu += int(counters[rc.C_NLU])
-    # The compiled method counts all of these (SolverStats).
-    assert stats.n_steps is not None and stats.n_rejected is not None
-    assert stats.n_newton_failed is not None and stats.n_onset_bounded is not None
-    stats.n_steps += int(counters[rc.C_STEPS])
-    stats.n_rejected += int(counters[rc.C_REJECTED])
-    stats.n_onset_restarts += int(counters[rc.C_ONSET_REJECTED])
-    stats.n_newton_failed += int(counters[rc.C_NEWTON_FAILED])
-    stats.n_onset_bounded += int(counters[rc.C_ONSET_PREDICTED])
-    budget.check(t, x)
-    if status == rc.STATUS_LEFT_DOMAIN:
-        check_domain(model, t, x, u, model.electrode_gaps(x_chunk))
-    if status == rc.STATUS_STEP_TOO_SMALL or not np.all(np.isfinite(x)):
-        raise SolverError(f'fast: step size fell below 10 ulp of t at t = {t} s (h = {h:.3g} s)',
-                          t, x, SolverStatus.STEP_TOO_SMALL)
-    return x, x_eval[:, :i_eval]
-
-
 # A segment method integrates one Segment: its end state and its states at seg.t_eval.
 SegmentMethod = Callable[[Segment], tuple[NDArray[np.float64], NDArray[np.float64]]]
 # The method of each name (docs/numerics.md compares them), the way scipy's solve_ivp keeps
 # its METHODS.
 SEGMENT_METHODS: dict[str, SegmentMethod] = {
-    'fast': _segment_fast,
+    'fast': fast_segment.segment_fast,
     'Radau': functools.partial(library_segments.segment_scipy, 'Radau'),
     'BDF': functools.partial(library_segments.segment_scipy, 'BDF'),
     'LSODA': functools.partial(library_segments.segment_scipy, 'LSODA'),

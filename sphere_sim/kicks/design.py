@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from msg_defs.device import KICK_WINDOW_S, VOLTAGE_LIMIT_V
 from sphere_sim.integrate.solve import Trajectory, simulate
+from sphere_sim.integrate.tolerances import DEFAULT_RTOL
 from sphere_sim.kicks.discrete import KickResult
 from sphere_sim.model.assembly import Model
 from sphere_sim.model.initial_state import rest_state
@@ -123,7 +124,7 @@ def cardan_of_normal(normal: NDArray[np.float64]) -> tuple[float, float, float]:
 
 
 def simulate_kick(model: Model, normal: NDArray[np.float64], programme: PulseProgramme,
-                  window_s: float = KICK_WINDOW_S, rtol: float = 1e-6,
+                  window_s: float = KICK_WINDOW_S, rtol: float = DEFAULT_RTOL,
                   x_rest: NDArray[np.float64] | None = None,
                   method: str = 'fast') -> tuple[KickResult, Trajectory]:
     """One kick from rest at ``normal``; returns the KickResult and the trajectory.
@@ -163,7 +164,7 @@ def deviations_rad(normals: NDArray[np.float64],
 
 
 def final_normal(model: Model, normal: NDArray[np.float64], programme: PulseProgramme,
-                 window_s: float = KICK_WINDOW_S, rtol: float = 1e-6,
+                 window_s: float = KICK_WINDOW_S, rtol: float = DEFAULT_RTOL,
                  x_rest: NDArray[np.float64] | None = None, method: str = 'fast',
                  sample_period_s: float = KICK_SAMPLE_PERIOD_S) -> NDArray[np.float64]:
     """The resting normal after a kick: :func:`simulate_kick`'s ``normal``, the same number,

@@ -43,6 +43,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from threadpoolctl import threadpool_limits
 
+from sphere_sim.integrate.tolerances import FIT_RTOL
 from sphere_sim.kicks import misfit_scan as scan
 from sphere_sim.kicks.design import (
     KICK_RELAXATION,
@@ -76,7 +77,6 @@ SetAside = tuple[str, int | None, float]
 # (docs/parameters.md), the physical reading a hardware device is identified towards. The
 # paper's device (`calibrated`) keeps Table A1's friction, which the paper gives as fixed.
 START_PARAMETER_SET = 'dry_contact'
-FIT_RTOL = 3e-5
 # A kick whose end the model does not determine tells nothing of the parameters, and its jumps
 # as they move make the misfit rough. On the paper's device some kicks land so: paper_a's first
 # (intensity 0.75, the high pair 4.2 ms) ends 3e-4 rad apart at rtol 1e-5, 1e-6 and 1e-7

@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 from scipy.interpolate import RegularGridInterpolator
 
 from msg_defs.device import DEFAULT_PARAMETER_SET, KICK_WINDOW_S
+from sphere_sim.integrate.tolerances import DEFAULT_RTOL
 from sphere_sim.kicks.design import KickDesign
 from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD, LEVEL_NORMAL, KickPlant, KickResult
 from sphere_sim.kicks.offset_lookup import OffsetLookup, side_of_axis
@@ -82,7 +83,7 @@ class TableSpec:
                                       0.6, 0.65, 0.7, 0.75, 0.8, 0.84, 0.87, 0.9, 0.92, 0.94,
                                       0.95, 0.96, 0.97, 0.98, 0.99, 1.0)
     window_s: float = KICK_WINDOW_S
-    rtol: float = 1e-6
+    rtol: float = DEFAULT_RTOL
     parameter_set: str = DEFAULT_PARAMETER_SET
     design: KickDesign = dataclasses.field(default_factory=KickDesign)
     cone_half_angle_rad: float = CONE_HALF_ANGLE_RAD

@@ -16,6 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from msg_defs.device import BEAM_COUNT, KICK_WINDOW_S
 from sphere_sim.integrate.solve import simulate
+from sphere_sim.integrate.tolerances import LIVE_RTOL
 from sphere_sim.kicks.discrete import NOISE_STUDY_STD_RAD
 from sphere_sim.model.assembly import Model
 from sphere_sim.model.initial_state import initial_state
@@ -25,12 +26,6 @@ from sphere_sim.model.rotations import matrix_to_quat, quat_to_matrix
 if TYPE_CHECKING:
     from sphere_sim.kicks.lookup_table import ProgrammedKickPlant
 
-# The live twin's tolerance: a whole kick window (the optimised kick from rest and from a
-# 35 deg tilt) then ends within 3.5e-6 and 5.9e-6 rad of the rtol 1e-9 run, below 1 % of the
-# sensor noise of the noise study (0.1 kick widths, 9.4e-4 rad), at a third of the cost of
-# rtol 1e-6 (a kick from rest: about 55 ms of compute against 175 ms). rtol 1e-3 is 1.6e-5 rad
-# off, beyond that 1 % (docs/twin.md).
-LIVE_RTOL = 3e-4
 # What LIVE_RTOL is held to: a hundredth of the sensor noise of the noise study (0.1 widths of
 # the paper's 0.54 deg kick, per axis).
 LIVE_ERROR_BOUND_RAD = 0.01 * NOISE_STUDY_STD_RAD

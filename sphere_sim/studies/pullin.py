@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 
 from msg_defs.device import VOLTAGE_LIMIT_V
 from sphere_sim.integrate.solve import Trajectory, simulate
+from sphere_sim.integrate.tolerances import DEFAULT_RTOL
 from sphere_sim.model.assembly import Model, assemble
 from sphere_sim.model.initial_state import RestError, polish_equilibrium, rest_state
 from sphere_sim.model.parameters import ParameterSet
@@ -39,7 +40,7 @@ def all_beams_pulse(model: Model, amplitude_v: float,
 
 
 def pulls_in(model: Model, x_rest: NDArray[np.float64], amplitude_v: float,
-             width_s: float = PULSE_WIDTH_S, rtol: float = 1e-6) -> bool:
+             width_s: float = PULSE_WIDTH_S, rtol: float = DEFAULT_RTOL) -> bool:
     """Whether a pulse of ``amplitude_v`` on all beams brings a rear end onto the ground."""
     traj = simulate(model, x_rest, width_s, all_beams_pulse(model, amplitude_v, width_s),
                     rtol=rtol, sample_period_s=width_s / 200)
@@ -114,7 +115,7 @@ def pull_in(scene: Scene, params: ParameterSet | None = None,
 
 
 def pulse_sweep(model: Model, x_rest: NDArray[np.float64], voltages_v: Iterable[float],
-                width_s: float = PULSE_WIDTH_S, after_s: float = 10e-3, rtol: float = 1e-6,
+                width_s: float = PULSE_WIDTH_S, after_s: float = 10e-3, rtol: float = DEFAULT_RTOL,
                 progress: Callable[[float], object] | None = None) -> list[Trajectory]:
     """Fig. 4: trajectories of a pulse on all beams for each amplitude, list of Trajectory."""
     out = []

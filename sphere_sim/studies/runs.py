@@ -6,13 +6,12 @@ from typing import Any
 import numpy as np
 
 from sphere_sim.integrate.solve import Trajectory, check_sample_grid, simulate
+from sphere_sim.integrate.tolerances import DEFAULT_RTOL
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import initial_state
 from sphere_sim.model.parameters import ParameterSet
 from sphere_sim.model.rotations import quat_to_cardan
 from sphere_sim.model.scene import Scene, load_scene
-
-DEFAULT_RTOL = 1e-6
 
 
 @dataclasses.dataclass(frozen=True)

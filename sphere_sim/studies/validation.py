@@ -9,6 +9,7 @@ from numpy.typing import NDArray
 
 from msg_defs.device import BEAM_COUNT
 from sphere_sim.integrate.solve import simulate
+from sphere_sim.integrate.tolerances import DEFAULT_RTOL
 from sphere_sim.model.assembly import Model, assemble
 from sphere_sim.model.energy import energy_balance
 from sphere_sim.model.initial_state import rest_state
@@ -167,7 +168,7 @@ def tilted_creep_rate(tilt_deg: float = 20.0, duration_s: float = 1.0,
     """
     model = rest_model(params)
     x0 = rest_state(model, (tilt_deg, 0.0, 0.0))
-    traj = simulate(model, x0, duration_s, PulseProgramme(), rtol=1e-6,
+    traj = simulate(model, x0, duration_s, PulseProgramme(), rtol=DEFAULT_RTOL,
                     sample_period_s=duration_s / 4)
     tilt = tilt_rad(traj.surface_normal())
     return float((tilt[0] - tilt[-1]) / duration_s)

@@ -23,11 +23,11 @@ from sphere_sim.integrate.kernel_replay import RecordingModel, replay_wall_s
 from sphere_sim.integrate.segment import SolverError
 from sphere_sim.integrate.solve import (
     DEFAULT_METHOD,
-    DEFAULT_RTOL,
     SCIPY_METHODS,
     Trajectory,
     simulate,
 )
+from sphere_sim.integrate.tolerances import DEFAULT_RTOL
 from sphere_sim.model.assembly import Model
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.programme import Pulse, PulseProgramme

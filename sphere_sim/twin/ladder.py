@@ -26,11 +26,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sphere_sim.integrate.solve import simulate
+from sphere_sim.integrate.tolerances import LIVE_RTOL
 from sphere_sim.kicks.design import KICK_RELAXATION, cardan_of_normal
 from sphere_sim.kicks.discrete import NOISE_STUDY_STD_RAD
 from sphere_sim.kicks.engine import SerialEngine
 from sphere_sim.kicks.lookup_table import AXIS_TABLE_PATH, DEFAULT_TABLE_PATH, LookupTable
-from sphere_sim.kicks.plants import LIVE_ERROR_BOUND_RAD, LIVE_RTOL
+from sphere_sim.kicks.plants import LIVE_ERROR_BOUND_RAD
 from sphere_sim.kicks.process_models import process_model
 from sphere_sim.model.assembly import Model, assemble
 from sphere_sim.model.fidelity import RUNGS, TABLE_RUNG, carried_state, rung_named

@@ -9,9 +9,9 @@ import os
 import sys
 from collections.abc import Sequence
 
+from sphere_sim.integrate.tolerances import LIVE_RTOL
 from sphere_sim.kicks.engine import engine_of
 from sphere_sim.kicks.lookup_table import TableError
-from sphere_sim.kicks.plants import LIVE_RTOL
 from sphere_sim.twin.ladder import (
     LIVE_MAX_BUDGET_RAD,
     LIVE_P95_BUDGET_RAD,

@@ -7,9 +7,9 @@ import json
 
 from sphere_sim.integrate.segment import SolverError, SolverStatus
 from sphere_sim.integrate.solve import Trajectory
+from sphere_sim.integrate.tolerances import DEFAULT_RTOL
 from sphere_sim.model.scene import Scene, load_scene
 from sphere_sim.studies.runs import (
-    DEFAULT_RTOL,
     BeamsOutcome,
     KickOutcome,
     run_scene,
