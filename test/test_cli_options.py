@@ -1,12 +1,16 @@
 """The options the subcommands share: one --params, resolved once, errors as usage errors."""
 
 import argparse
+import itertools
+from pathlib import Path
 
 import pytest
 
 from sphere_sim.model.parameters import ParameterSet, load_parameter_set
 from sphere_twin.cli import build_parser
 from sphere_twin.commands.options import parameter_set
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 def subcommand_parsers(parser):
@@ -61,3 +65,22 @@ def test_a_bad_parameter_set_is_a_one_line_usage_error(argv, capsys):
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert err.startswith(f'sphere-twin {argv[0]}') and 'error: argument --params:' in err
     assert 'nosuch' in err and 'Traceback' not in err
+
+
+def test_kick_help_lists_every_shipped_scene(capsys):
+    shipped = sorted(p.stem for p in (REPO / 'sphere_sim' / 'scenes').glob('*.yaml'))
+    assert {'rest', 'asymmetric_kick'} <= set(shipped)
+    with pytest.raises(SystemExit) as exit_:
+        build_parser().parse_args(['kick', '--help'])
+    assert exit_.value.code == 0
+    help_text = ' '.join(capsys.readouterr().out.split())  # argparse wraps at the terminal
+    assert f'a shipped scene ({", ".join(shipped)}) or the path of a scene YAML file' in help_text
+
+
+def test_the_readme_command_table_names_every_subcommand():
+    readme = (REPO / 'README.md').read_text()
+    lines = readme[readme.index('| command | what it does |'):].splitlines()[2:]
+    rows = itertools.takewhile(lambda line: line.startswith('| `'), lines)
+    named = {row[3:].split('`')[0].split()[0] for row in rows}
+    commands = {name for name, _ in subcommand_parsers(build_parser()) if ' ' not in name}
+    assert commands == named
