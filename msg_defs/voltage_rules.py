@@ -5,8 +5,8 @@ increase, and its last segment switches every beam off (it holds for ever). Whoe
 command in applies these: a sender before it goes on the wire (:mod:`msg_defs.conversions`),
 the twin where a command enters it (:class:`~sphere_sim.twin.runner.TwinRunner`, through
 :meth:`~sphere_sim.model.programme.PulseProgramme.from_segments`), and every pulse programme
-the model is given (:class:`~sphere_sim.model.programme.PulseProgramme` checks what each beam
-holds between its edges). No ROS here.
+the model is given (:class:`~sphere_sim.model.programme.PulseProgramme` checks each pulse's
+amplitude and what each beam holds between its edges). No ROS here.
 """
 
 import math

@@ -10,6 +10,7 @@ shows it for anything).
 
 import argparse
 import importlib
+import signal
 import sys
 import typing
 from collections.abc import Sequence
@@ -42,6 +43,8 @@ COMMAND_MODULES = (
 
 
 USAGE_STATUS = 2  # argparse's status for a usage error; the same for every user mistake
+# Ctrl-C ends a command as a shell reports a command SIGINT ended: 128 + the signal's number.
+INTERRUPTED_STATUS = 128 + signal.SIGINT
 
 
 def user_errors() -> tuple[type[Exception], ...]:
@@ -95,18 +98,52 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def interrupted(error: BaseException) -> bool:
+    """Whether ``error`` is Ctrl-C: a KeyboardInterrupt, or what a compiled (numba) function
+    makes of one that arrived while it ran (a SystemError "returned a result with an exception
+    set", whose cause or context is the KeyboardInterrupt)."""
+    seen: set[int] = set()
+    current: BaseException | None = error
+    while current is not None and id(current) not in seen:
+        if isinstance(current, KeyboardInterrupt):
+            return True
+        seen.add(id(current))
+        current = current.__cause__ or current.__context__
+    return False
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    ensure_localhost_discovery()
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    args: argparse.Namespace | None = None
+    try:
+        ensure_localhost_discovery()
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        return _run(args)
+    except (KeyboardInterrupt, SystemError) as error:
+        # Ctrl-C is no error of anyone's: one line and 130, whatever was running (the
+        # imports, a command, a compiled integration); --debug shows where it was.
+        if not interrupted(error) or (args is not None and args.debug):
+            raise
+        print(f'{_command_name(args)}: interrupted', file=sys.stderr)
+        return INTERRUPTED_STATUS
+
+
+def _run(args: argparse.Namespace) -> int:
+    """The command ``args`` names; a user's mistake is one line and USAGE_STATUS."""
     try:
         return args.func(args)
     except user_errors() as error:
         if args.debug:
             raise
-        command = ' '.join(filter(None, (args.command, *_subcommands(args))))
-        print(f'sphere-twin {command}: error: {one_line(error)}', file=sys.stderr)
+        print(f'{_command_name(args)}: error: {one_line(error)}', file=sys.stderr)
         return USAGE_STATUS
+
+
+def _command_name(args: argparse.Namespace | None) -> str:
+    """``sphere-twin <cmd>`` as its lines start (``sphere-twin`` before the command is known)."""
+    if args is None:
+        return 'sphere-twin'
+    return ' '.join(filter(None, ('sphere-twin', args.command, *_subcommands(args))))
 
 
 def _subcommands(args: argparse.Namespace) -> list[str]:

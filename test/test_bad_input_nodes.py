@@ -52,6 +52,8 @@ BAD_INPUTS = [
      "parameter compression = 'gzip' is not one of: zstd, lz4, none"),
     ('output-dir-not-empty', 'recorder', _p(output_dir='{tmp}'),
      'parameter output_dir: bag directory {tmp} already exists and is not empty'),
+    ('output-dir-under-a-file', 'recorder', _p(output_dir='{tmp}/bad.yaml/bag'),
+     'cannot create output_dir {tmp}/bad.yaml/bag: Not a directory'),
     ('topic-outside-contract', 'recorder', _p(topics=['/nope'], output_dir='{tmp}/bag3'),
      "parameter topics: no topic '/nope' in the contract; known: /sphere/surface_normal"),
     ('offset-beyond-end', 'player', _p(bag='example', start_offset_s=1e9),

@@ -98,3 +98,23 @@ def test_what_is_no_bag_is_one_line(given, capsys):
     assert main(['report', given]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith('sphere-twin report: error: ')
+
+
+@pytest.mark.parametrize('command', [['report'], ['identify'], ['replay-check'], ['bag', 'info'],
+                                     ['bag', 'repair']])
+@pytest.mark.parametrize(('content', 'reason'), [
+    (b'', 'is empty: no MCAP header was ever written'),
+    (b'SQLite format 3\x00' + bytes(100),
+     'is not an MCAP file (it does not start with the MCAP magic)')])
+def test_a_bare_mcap_file_that_is_no_recording_is_named_as_given(command, content, reason,
+                                                                  tmp_path, monkeypatch, capsys):
+    """The error names the user's file, not the temporary bag directory it is read through,
+    and leaves nothing beside it (bag repair writes no metadata.yaml for it)."""
+    monkeypatch.chdir(tmp_path)
+    Path('zero.mcap').write_bytes(content)
+    assert main([*command, 'zero.mcap']) == 2
+    captured = capsys.readouterr()
+    assert captured.err.splitlines() == [
+        f'sphere-twin {" ".join(command)}: error: zero.mcap {reason}']
+    assert captured.out == ''
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['zero.mcap']

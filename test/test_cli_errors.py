@@ -31,6 +31,19 @@ INPUTS = {
     'negative_volts.yaml': SCENE + ('duration_s: 0.01\nvoltage_programme:\n  pulses:\n'
                                     '    - {beam: 1, amplitude_v: -50.0, start_s: 0.0, '
                                     'width_s: 0.001}\n'),
+    # +50 V and -50 V at once on beam 1: the sum (0 V) would hide a sign error
+    'opposite_pulses.yaml': SCENE + ('duration_s: 0.01\nvoltage_programme:\n  pulses:\n'
+                                     '    - {beam: 1, amplitude_v: 50.0, start_s: 0.0, '
+                                     'width_s: 0.001}\n'
+                                     '    - {beam: 1, amplitude_v: -50.0, start_s: 0.0, '
+                                     'width_s: 0.001}\n'),
+    'overlapping_pulses.yaml': SCENE + ('duration_s: 0.01\nvoltage_programme:\n  pulses:\n'
+                                        '    - {beam: 1, amplitude_v: 50.0, start_s: 0.0, '
+                                        'width_s: 0.004}\n'
+                                        '    - {beam: 2, amplitude_v: 50.0, start_s: 0.0, '
+                                        'width_s: 0.004}\n'
+                                        '    - {beam: 1, amplitude_v: 20.0, start_s: 0.002, '
+                                        'width_s: 0.004}\n'),
     'params_malformed.yaml': 'base: calibrated\noverrides: {beam.length_m: [\n',
     'params_unknown.yaml': 'base: calibrated\noverrides:\n  beam.wingspan_m: 1.0\n',
     'params_nobase.yaml': 'base: nosuch\n',
@@ -70,6 +83,14 @@ CASES = [
     _case(['kick', 'over_limit.yaml'], 'exceeds the limit'),
     # the drivers are unipolar: the programme keeps the wire's rule (-50 V is not +50 V)
     _case(['kick', 'negative_volts.yaml'], 'must be >= 0 V'),
+    # a pulse is checked alone, whatever it would sum to with the others on its beam
+    _case(['kick', 'opposite_pulses.yaml'],
+          "'voltage_programme': pulse 1 (beam 1): amplitude_v must be >= 0 V (the drivers are "
+          'unipolar), got -50 V'),
+    # pulses on one beam that share time are refused, both named, unless the scene says add
+    _case(['kick', 'overlapping_pulses.yaml'],
+          "'voltage_programme': pulse 0 (beam 1, 50 V from 0 to 0.004 s) and pulse 2 (beam 1, "
+          '20 V from 0.002 to 0.006 s) overlap: move one, or set overlap: add to sum them'),
     _case(['kick', 'rest', '--params', 'params_malformed.yaml'], 'params_malformed.yaml'),
     _case(['kick', 'rest', '--params', 'params_unknown.yaml'], 'beam.wingspan_m'),
     _case(['validate', '--params', 'params_nobase.yaml'], 'nosuch'),

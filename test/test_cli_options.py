@@ -1,12 +1,16 @@
 """The options the subcommands share: one --params, resolved once, errors as usage errors."""
 
 import argparse
+import itertools
+from pathlib import Path
 
 import pytest
 
 from sphere_sim.model.parameters import ParameterSet, load_parameter_set
 from sphere_twin.cli import build_parser
 from sphere_twin.commands.options import parameter_set
+
+REPO = Path(__file__).resolve().parents[1]
 
 
 def subcommand_parsers(parser):
@@ -81,3 +85,22 @@ def test_validate_prints_the_widths_with_the_shipped_offsets_only_for_the_set_th
     softer = calibrated.replace(**{'friction.bristle_stiffness_n_per_m': 1e3})
     assert softer.name == 'calibrated' and validate._offsets(design, softer) is None
     assert validate._offsets(design, load_parameter_set('dry_contact')) is None
+
+
+def test_kick_help_lists_every_shipped_scene(capsys):
+    shipped = sorted(p.stem for p in (REPO / 'sphere_sim' / 'scenes').glob('*.yaml'))
+    assert {'rest', 'asymmetric_kick'} <= set(shipped)
+    with pytest.raises(SystemExit) as exit_:
+        build_parser().parse_args(['kick', '--help'])
+    assert exit_.value.code == 0
+    help_text = ' '.join(capsys.readouterr().out.split())  # argparse wraps at the terminal
+    assert f'a shipped scene ({", ".join(shipped)}) or the path of a scene YAML file' in help_text
+
+
+def test_the_readme_command_table_names_every_subcommand():
+    readme = (REPO / 'README.md').read_text()
+    lines = readme[readme.index('| command | what it does |'):].splitlines()[2:]
+    rows = itertools.takewhile(lambda line: line.startswith('| `'), lines)
+    named = {row[3:].split('`')[0].split()[0] for row in rows}
+    commands = {name for name, _ in subcommand_parsers(build_parser()) if ' ' not in name}
+    assert commands == named

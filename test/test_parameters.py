@@ -2,9 +2,11 @@ import dataclasses
 import math
 
 import pytest
+import yaml
 
 from sphere_sim.model.parameters import ParameterError, load_parameter_set
-from sphere_sim.model.scene import SceneError, load_scene, scene_from_dict
+from sphere_sim.model.programme import ProgrammeError, Pulse, PulseProgramme
+from sphere_sim.model.scene import SceneError, available_scenes, load_scene, scene_from_dict
 
 
 def test_table_a1_is_in_si_units():
@@ -107,6 +109,61 @@ def test_scene_errors_name_the_key_and_the_choices():
 
 
 def test_shipped_scenes_load():
-    for name in ('rest', 'four_beam_pulse', 'asymmetric_kick', 'beams_only'):
+    assert {'rest', 'four_beam_pulse', 'asymmetric_kick', 'beams_only'} <= set(
+        available_scenes())
+    for name in available_scenes():
         scene = load_scene(name)
         assert scene.duration_s > 0
+        assert scene.programme.overlap == 'refuse'  # no shipped scene needs pulses summed
+
+
+def _two_pulses_on_beam_1(**programme):
+    """A scene with 50 V on beam 1 from 0 to 4 ms and 20 V from 2 to 6 ms."""
+    return {'duration_s': 0.01, 'voltage_programme': {**programme, 'pulses': [
+        {'beam': 1, 'amplitude_v': 50.0, 'start_s': 0.0, 'width_s': 4e-3},
+        {'beam': 1, 'amplitude_v': 20.0, 'start_s': 2e-3, 'width_s': 4e-3}]}}
+
+
+def test_overlapping_pulses_are_refused_unless_the_scene_says_add(tmp_path):
+    with pytest.raises(SceneError, match=r'pulse 0 \(beam 1, 50 V from 0 to 0\.004 s\) and '
+                                         r'pulse 1 \(beam 1, 20 V from 0\.002 to 0\.006 s\) '
+                                         r'overlap'):
+        scene_from_dict(_two_pulses_on_beam_1())
+    path = tmp_path / 'summed.yaml'
+    path.write_text(yaml.safe_dump(_two_pulses_on_beam_1(overlap='add')))
+    times_s, volts = load_scene(str(path)).programme.segments()
+    assert times_s.tolist() == [0.0, 2e-3, 4e-3, 6e-3]
+    assert volts[:, 0].tolist() == [50.0, 70.0, 20.0, 0.0]  # the overlap holds the sum
+    assert not volts[:, 1:].any()
+    # Summing is no way past the limit, and the rule is one of two words.
+    over = _two_pulses_on_beam_1(overlap='add')
+    over['voltage_programme']['pulses'][1]['amplitude_v'] = 40.0
+    with pytest.raises(SceneError, match='exceeds the limit'):
+        scene_from_dict(over)
+    with pytest.raises(SceneError, match=r"'voltage_programme\.overlap' must be one of "
+                                         r"\['refuse', 'add'\], got 'sum'"):
+        scene_from_dict(_two_pulses_on_beam_1(overlap='sum'))
+
+
+def test_pulses_that_only_touch_do_not_overlap():
+    """One pulse ending where the next begins is no overlap, even where the end (start +
+    width) rounds a unit in the last place past the next start (0.1 + 0.2 > 0.3)."""
+    scene = scene_from_dict({'duration_s': 1.0, 'voltage_programme': {'pulses': [
+        {'beam': 1, 'amplitude_v': 50.0, 'start_s': 0.1, 'width_s': 0.2},
+        {'beam': 1, 'amplitude_v': 20.0, 'start_s': 0.3, 'width_s': 0.1},
+        {'beam': 1, 'amplitude_v': 30.0, 'start_s': 0.4, 'width_s': 0.0}]}})
+    assert scene.programme.voltages_at(0.2)[0] == 50.0
+    assert scene.programme.voltages_at(0.35)[0] == 20.0
+
+
+def test_a_negative_pulse_is_refused_even_where_the_sum_is_not():
+    """The drivers are unipolar: -20 V inside a 50 V pulse would hold 30 V, a sign error
+    the sum hides; opposite pulses would hold 0 V."""
+    inside = _two_pulses_on_beam_1(overlap='add')
+    inside['voltage_programme']['pulses'][1]['amplitude_v'] = -20.0
+    with pytest.raises(SceneError, match=r'pulse 1 \(beam 1\): amplitude_v must be >= 0 V '
+                                         r'\(the drivers are unipolar\), got -20 V'):
+        scene_from_dict(inside)
+    opposite = [Pulse(2, 50.0, 0.0, 1e-3), Pulse(2, -50.0, 0.0, 1e-3)]
+    with pytest.raises(ProgrammeError, match=r'pulse 1 .* must be >= 0 V'):
+        PulseProgramme(tuple(opposite), overlap='add')

@@ -48,11 +48,13 @@ from msg_defs.topics import (
 from sphere_twin.bag import format as bag_format
 from sphere_twin.bag.reader import deserialize, read_messages, read_metadata
 from sphere_twin.bag.writer import BagWriter
-from sphere_twin.node_runtime.ros_env import DISCOVERY_RANGE_VAR
+from sphere_twin.node_runtime.parameter_specs import StartupError
+from sphere_twin.node_runtime.ros_env import DISCOVERY_RANGE_VAR, startup_error_line
 from sphere_twin.nodes.recorder_node import (
     RecorderNode,
     StopRequest,
     default_output_dir,
+    open_bag,
     summary_line,
 )
 from sphere_twin.processes import parameter_args, stop
@@ -533,6 +535,35 @@ def test_recorder_node_rejects_a_topic_outside_the_contract(context, tmp_path):
             Parameter('output_dir', value=str(tmp_path / 'x')),
             Parameter('topics', value=['/nope'])])
     assert not (tmp_path / 'x').exists()
+
+
+def test_an_output_dir_that_cannot_be_made_is_named_with_the_reason_in_words(tmp_path):
+    """The recorder's one line says the path and why, not an OSError's number (it said
+    `recorder: error: 20`), and leaves nothing behind."""
+    (tmp_path / 'notes.txt').write_text('a file')
+    cases = {
+        tmp_path / 'notes.txt' / 'bag': f'cannot create output_dir {tmp_path}/notes.txt/bag: '
+                                        'Not a directory',
+        tmp_path / 'notes.txt': f'parameter output_dir: bag directory {tmp_path}/notes.txt is '
+                                'a file, not a directory: give a new or empty directory',
+    }
+    for output_dir, says in cases.items():
+        with pytest.raises(StartupError) as raised:
+            open_bag(str(output_dir), 'zstd', 1 << 20)
+        assert startup_error_line('recorder', raised.value).startswith(
+            f'recorder: error: {says}')
+    assert [p.name for p in tmp_path.iterdir()] == ['notes.txt']
+    assert (tmp_path / 'notes.txt').read_text() == 'a file'
+
+
+def test_an_os_error_at_start_up_is_said_in_words():
+    """Whatever OSError a node's start-up lets through, its line names the file and the
+    reason, not the error's number (its first argument)."""
+    error = NotADirectoryError(20, 'Not a directory', '/etc/hostname/bag')
+    assert startup_error_line('player', error) == (
+        'player: error: /etc/hostname/bag: Not a directory')
+    assert startup_error_line('player', PermissionError(13, 'Permission denied')) == (
+        'player: error: Permission denied')
 
 
 def test_default_bag_directory_is_named_by_utc_time():

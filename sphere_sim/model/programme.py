@@ -4,7 +4,7 @@ running device holds over time (:class:`VoltageSchedule`); both held constant be
 import dataclasses
 import math
 from collections.abc import Iterable, Mapping, Sequence
-from typing import Any, Self
+from typing import Any, Literal, Self, get_args
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -15,6 +15,15 @@ from msg_defs.voltage_rules import VoltageRuleError, check_segments, check_volta
 
 class ProgrammeError(ValueError):
     """A pulse programme that cannot be applied to the device."""
+
+
+# What two pulses on one beam that share time mean: 'refuse' (the default) refuses the
+# programme, 'add' sums their amplitudes.
+OverlapRule = Literal['refuse', 'add']
+OVERLAP_RULES: tuple[OverlapRule, ...] = get_args(OverlapRule)
+# A pulse's end is its start plus its width, rounded: one that ends where the next begins may
+# end a few units in the last place after it, which is no overlap.
+_EDGE_ROUNDING_ULPS = 4
 
 
 @dataclasses.dataclass(frozen=True)
@@ -35,21 +44,30 @@ class Pulse:
 class PulseProgramme:
     """A set of pulses, validated on construction.
 
-    Overlapping pulses on the same beam add their amplitudes. What a beam holds between any two
-    edges obeys the one rule for held voltages (:func:`msg_defs.voltage_rules.check_voltages`:
-    unipolar drivers, at most the limit), as a command from the wire does.
+    Every pulse's amplitude is >= 0 V (the drivers are unipolar: a negative pulse is refused
+    even where a larger one on its beam would hide it in the sum). Two pulses on one beam that
+    share time are refused, naming both, unless ``overlap`` is ``'add'``: then the beam holds
+    their sum. What a beam holds between any two edges obeys the one rule for held voltages
+    (:func:`msg_defs.voltage_rules.check_voltages`: unipolar drivers, at most the limit), as a
+    command from the wire does.
     """
 
     pulses: tuple[Pulse, ...] = ()
     voltage_limit_v: float = VOLTAGE_LIMIT_V
+    overlap: OverlapRule = 'refuse'
 
     def __post_init__(self) -> None:
         object.__setattr__(self, 'pulses', tuple(self.pulses))
         if not (math.isfinite(self.voltage_limit_v) and self.voltage_limit_v > 0):
             raise ProgrammeError(
                 f'voltage limit must be a positive number, got {self.voltage_limit_v}')
+        if self.overlap not in OVERLAP_RULES:
+            raise ProgrammeError(f'overlap must be one of {list(OVERLAP_RULES)}, '
+                                 f'got {self.overlap!r}')
         for i, pulse in enumerate(self.pulses):
             self._check_pulse(f'pulse {i} (beam {pulse.beam})', pulse)
+        if self.overlap == 'refuse':
+            self._refuse_overlaps()
         for t in self.edges():
             try:
                 # the sum of overlapping pulses may round a hair above the limit
@@ -68,9 +86,38 @@ class PulseProgramme:
             raise ProgrammeError(f'{where}: width_s must be >= 0, got {pulse.width_s}')
         if pulse.start_s < 0:
             raise ProgrammeError(f'{where}: start_s must be >= 0, got {pulse.start_s}')
+        if pulse.amplitude_v < 0:
+            # Checked pulse by pulse, not only in the sums a beam holds: under 'add' a negative
+            # pulse inside a larger one would pass there and cut it silently.
+            raise ProgrammeError(f'{where}: amplitude_v must be >= 0 V (the drivers are '
+                                 f'unipolar), got {pulse.amplitude_v:g} V')
+
+    def _refuse_overlaps(self) -> None:
+        """Refuse two pulses on one beam that share time, naming both: a pulse written over
+        another is more often a slip in a start time than a wish for the sum, and the sum would
+        hide it. Pulses of zero width hold nothing and overlap nothing."""
+        order = sorted((i for i, p in enumerate(self.pulses) if p.width_s > 0),
+                       key=lambda i: (self.pulses[i].beam, self.pulses[i].start_s))
+        latest: int | None = None  # the pulse on this beam so far that ends last
+        for i in order:
+            pulse = self.pulses[i]
+            if latest is None or self.pulses[latest].beam != pulse.beam:
+                latest = i
+                continue
+            before = self.pulses[latest]
+            rounding = _EDGE_ROUNDING_ULPS * math.ulp(before.end_s)
+            if pulse.start_s < before.end_s - rounding:
+                first, second = sorted((latest, i))
+                raise ProgrammeError(
+                    f'{_describe(first, self.pulses[first])} and '
+                    f'{_describe(second, self.pulses[second])} overlap: move one, or set '
+                    'overlap: add to sum them')
+            if pulse.end_s > before.end_s:
+                latest = i
 
     @classmethod
-    def from_dicts(cls, items: Iterable[Any], voltage_limit_v: float = VOLTAGE_LIMIT_V) -> Self:
+    def from_dicts(cls, items: Iterable[Any], voltage_limit_v: float = VOLTAGE_LIMIT_V,
+                   overlap: OverlapRule = 'refuse') -> Self:
         pulses = []
         for i, item in enumerate(items):
             allowed = {f.name for f in dataclasses.fields(Pulse)}
@@ -82,7 +129,7 @@ class PulseProgramme:
                                     start_s=float(item['start_s']), width_s=float(item['width_s'])))
             except (TypeError, ValueError) as exc:
                 raise ProgrammeError(f'pulse {i}: {exc}') from exc
-        return cls(tuple(pulses), voltage_limit_v)
+        return cls(tuple(pulses), voltage_limit_v, overlap)
 
     def edges(self) -> list[float]:
         """Sorted times (s) at which any voltage changes."""
@@ -141,7 +188,13 @@ class PulseProgramme:
     def mirrored(self, beam_map: Mapping[int, int]) -> 'PulseProgramme':
         """The same programme with beams renamed by ``beam_map`` (dict old -> new)."""
         return PulseProgramme(tuple(dataclasses.replace(p, beam=beam_map[p.beam])
-                                    for p in self.pulses), self.voltage_limit_v)
+                                    for p in self.pulses), self.voltage_limit_v, self.overlap)
+
+
+def _describe(index: int, pulse: Pulse) -> str:
+    """A pulse as an error names it: its place in the programme, its beam and its time."""
+    return (f'pulse {index} (beam {pulse.beam}, {pulse.amplitude_v:g} V from '
+            f'{pulse.start_s:g} to {pulse.end_s:g} s)')
 
 
 class VoltageSchedule:

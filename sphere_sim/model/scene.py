@@ -22,7 +22,12 @@ from sphere_sim.model.parameters import (
     load_parameter_set,
     read_yaml_file,
 )
-from sphere_sim.model.programme import ProgrammeError, PulseProgramme
+from sphere_sim.model.programme import (
+    OVERLAP_RULES,
+    OverlapRule,
+    ProgrammeError,
+    PulseProgramme,
+)
 
 SCENES_DIR = Path(__file__).parents[1] / 'scenes'
 CAPACITANCE_MODELS = ('closed_form', 'rbf')
@@ -225,12 +230,13 @@ def scene_from_dict(data: Any, name: str = 'scene') -> Scene:
 
     prog_in = data.get('voltage_programme', {}) or {}
     prog_in = _require_mapping(prog_in, 'voltage_programme')
-    _check_keys(prog_in, ('pulses', 'voltage_limit_v'), "'voltage_programme'")
+    _check_keys(prog_in, ('pulses', 'voltage_limit_v', 'overlap'), "'voltage_programme'")
     try:
         programme = PulseProgramme.from_dicts(
             prog_in.get('pulses', []) or [],
             _number(prog_in.get('voltage_limit_v', VOLTAGE_LIMIT_V),
-                    'voltage_programme.voltage_limit_v'))
+                    'voltage_programme.voltage_limit_v'),
+            _overlap_rule(prog_in.get('overlap', 'refuse')))
     except ProgrammeError as exc:
         raise SceneError(f"'voltage_programme': {exc}") from exc
     absent = sorted({p.beam for p in programme.pulses} - set(beams))
@@ -258,6 +264,16 @@ def scene_from_dict(data: Any, name: str = 'scene') -> Scene:
     except ParameterError as exc:
         raise SceneError(f"'parameters'/'perturbation': {exc}") from exc
     return scene
+
+
+def _overlap_rule(value: Any) -> OverlapRule:
+    """The scene's ``voltage_programme.overlap``: pulses on one beam that share time are
+    refused unless the scene says ``add`` (PulseProgramme)."""
+    for rule in OVERLAP_RULES:
+        if value == rule:
+            return rule
+    raise SceneError(f"'voltage_programme.overlap' must be one of {list(OVERLAP_RULES)}, "
+                     f'got {value!r}')
 
 
 def _check_pulses_within(programme: PulseProgramme, duration_s: float) -> None:

@@ -83,7 +83,12 @@ def _read_bare_mcap(path: Path) -> tuple[Path, str]:
     atexit.register(shutil.rmtree, view, True)
     (view / path.name).symlink_to(path.resolve())
     write_placeholder_metadata(view, path.name)
-    result = repair_bag(view, backup=False)
+    try:
+        result = repair_bag(view, backup=False)
+    except BagError as error:
+        # The view is a detail of reading: the user gave the file, so the error names it.
+        shutil.rmtree(view, True)
+        raise BagError(str(error).replace(str(view / path.name), str(path))) from None
     state = ('closed cleanly' if result.was_complete
              else f'not closed ({result.stop_reason})')
     return view, (f'{path} has no metadata.yaml: read from its own records '

@@ -97,7 +97,9 @@ class BagWriter:
         if chunk_size_bytes <= 0:
             raise ValueError(f'chunk size must be positive, got {chunk_size_bytes}')
         self.path = Path(path)
-        if self.path.exists() and (not self.path.is_dir() or any(self.path.iterdir())):
+        if self.path.exists() and not self.path.is_dir():
+            raise FileExistsError(f'bag directory {self.path} is a file, not a directory')
+        if self.path.exists() and any(self.path.iterdir()):
             raise FileExistsError(f'bag directory {self.path} already exists and is not empty')
         self.path.mkdir(parents=True, exist_ok=True)
         self.file_name = file_name or mcap_file_name(self.path)

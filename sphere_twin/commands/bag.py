@@ -72,18 +72,27 @@ def run_info(args: argparse.Namespace) -> int:
 
 
 def run_repair(args: argparse.Namespace) -> int:
+    from sphere_twin.bag.reader import BagError
     from sphere_twin.bag.repair import repair_bag
 
-    bag_dir = args.bag
+    bag_dir, written = args.bag, None
     if args.bag.is_file():
-        bag_dir = _bag_dir_of_file(args.bag)
-    print(repair_bag(bag_dir, backup=not args.no_backup).summary())
+        bag_dir, written = _bag_dir_of_file(args.bag)
+    try:
+        result = repair_bag(bag_dir, backup=not args.no_backup)
+    except BagError:
+        if written is not None:  # a file that is no bag leaves no metadata.yaml behind
+            written.unlink(missing_ok=True)
+        raise
+    if written is not None:
+        print(f'{args.bag} had no metadata.yaml: wrote {written} from its records')
+    print(result.summary())
     return 0
 
 
-def _bag_dir_of_file(path: Path) -> Path:
-    """The directory of an MCAP file to repair, with a metadata.yaml that lists it (written,
-    and said, when there was none)."""
+def _bag_dir_of_file(path: Path) -> tuple[Path, Path | None]:
+    """The directory of an MCAP file to repair, with a metadata.yaml that lists it, and that
+    metadata.yaml's path when it was written here (there was none), else None."""
     from sphere_twin.bag import format as bag_format
     from sphere_twin.bag.locate import MCAP_SUFFIX, lists_file, write_placeholder_metadata
     from sphere_twin.bag.reader import BagError, read_metadata
@@ -93,10 +102,9 @@ def _bag_dir_of_file(path: Path) -> Path:
     metadata_path = path.parent / bag_format.METADATA_FILENAME
     if not metadata_path.exists():
         write_placeholder_metadata(path.parent, path.name)
-        print(f'{path} had no metadata.yaml: wrote {metadata_path} from its records')
-        return path.parent
+        return path.parent, metadata_path
     if not lists_file(path.parent, path.name):
         read_metadata(path.parent)  # a metadata.yaml that is no bag's says so first
         raise BagError(f'{path} is not listed in {metadata_path}: repair that bag, or move the '
                        'file to a directory of its own')
-    return path.parent
+    return path.parent, None

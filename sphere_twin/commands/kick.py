@@ -8,7 +8,7 @@ import json
 from sphere_sim.integrate.segment import SolverError, SolverStatus
 from sphere_sim.integrate.solve import Trajectory
 from sphere_sim.integrate.tolerances import DEFAULT_RTOL
-from sphere_sim.model.scene import Scene, load_scene
+from sphere_sim.model.scene import Scene, available_scenes, load_scene
 from sphere_sim.studies.runs import (
     BeamsOutcome,
     KickOutcome,
@@ -28,7 +28,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         description='Simulate a scene (a shipped name or a YAML path) from its initial state '
                     'for its duration and print the final Cardan angles (deg), surface normal '
                     'and rotation.')
-    parser.add_argument('scene', help='scene name (see sphere_sim/scenes) or path to a YAML file')
+    parser.add_argument('scene', help='a shipped scene (' + ', '.join(available_scenes())
+                        + ') or the path of a scene YAML file')
     add_params_option(parser, default=None,
                       help="parameter set (name or YAML file) instead of the scene's own")
     parser.add_argument('--rtol', type=tolerance, default=DEFAULT_RTOL,

@@ -109,6 +109,10 @@ def startup_error_line(node_name: str, error: BaseException) -> str:
         remedy = MODULE_TO_ROSDEP.get(module, f'pip install {module}')
         return (f'{node_name}: error: the Python module {module!r} is missing: install '
                 f'{remedy} (on a ROS install: rosdep install --from-paths src -y)')
+    if isinstance(error, OSError) and error.strerror:
+        # An OSError's args[0] is its number: the line says the file and the reason instead.
+        where = f'{error.filename}: ' if error.filename is not None else ''
+        return f'{node_name}: error: {where}{error.strerror}'
     # args[0], not str(error): str() of a KeyError (or an exception of several args) is a repr.
     text = str(error.args[0]) if error.args else ''
     return f'{node_name}: error: {text.splitlines()[0] if text.strip() else repr(error)}'

@@ -58,6 +58,26 @@ def summary_line(message_count: int, topic_count: int, path: str | Path) -> str:
     return f'recorded {message_count} messages on {topic_count} topics to {path}'
 
 
+def open_bag(output_dir: str, compression: str, chunk_size_bytes: int) -> BagWriter:
+    """A new bag in ``output_dir``.
+
+    Raises
+    ------
+    StartupError
+        For a directory that is not empty, or one that cannot be made or written: the path
+        and the reason in words (an OSError's first argument is its number, which the one line
+        of a start-up error would otherwise print alone).
+    """
+    try:
+        return BagWriter(output_dir, compression=compression, chunk_size_bytes=chunk_size_bytes)
+    except FileExistsError as error:
+        raise StartupError(f'parameter output_dir: {error}: give a new or empty '
+                           'directory (a bag is never overwritten)') from None
+    except OSError as error:
+        reason = error.strerror or str(error)
+        culprit = '' if error.filename in (None, output_dir) else f'{error.filename}: '
+        raise StartupError(f'cannot create output_dir {output_dir}: {culprit}{reason}') from None
+
 
 class RecorderNode(Node):
     """Records contract topics to a bag.
@@ -88,13 +108,8 @@ class RecorderNode(Node):
             self.topics = tuple(topic_by_name(name) for name in p['topics'] if name)
         except KeyError as error:
             raise ValueError(f'parameter topics: {error.args[0]}') from None
-        output_dir = p['output_dir'] or default_output_dir()
-        try:
-            self.writer = BagWriter(output_dir, compression=p['compression'],
-                                    chunk_size_bytes=p['chunk_size_bytes'])
-        except FileExistsError as error:
-            raise StartupError(f'parameter output_dir: {error}: give a new or empty '
-                               'directory (a bag is never overwritten)') from None
+        self.writer = open_bag(p['output_dir'] or default_output_dir(), p['compression'],
+                               p['chunk_size_bytes'])
         for topic in self.topics:
             self.create_subscription(topic.msg_type, topic.name,
                                      functools.partial(self.on_message, topic),
