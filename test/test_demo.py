@@ -186,8 +186,10 @@ def test_the_summary_says_when_the_pace_slipped(held, slipped):
     from sphere_twin.commands.demo import _report_pace
 
     lines = []
-    simulator = _Farewell('simulator', f'simulator: simulated 33.020 s, 481 programmes (137 '
-                                       f'late), 0 rejected; real-time factor {held}; of wall')
+    simulator = _Farewell('simulator', f'simulator: simulated 33.020 s, 3302 samples, 481 '
+                                       f'programmes started (137 late), commands: 0 rejected, '
+                                       f'0 dropped, 0 waiting for their sample; real-time '
+                                       f'factor {held}; of wall')
     _report_pace([simulator, _Farewell('reference', 'real-time factor 0.17')], lines.append,
                  asked_factor=0.25)
     assert lines[0] == (f'demo: real-time factor: simulator {held:.2f}, reference 0.17; late '

@@ -400,13 +400,15 @@ class SimulatorNode(Node):
                                                    beams[1]))
 
     def summary(self) -> str:
-        """The final line: simulated time, samples, programmes, rejections, real-time factor,
-        and where each thread's wall time went."""
+        """The final line: simulated time, samples, programmes started, commands rejected,
+        dropped and still waiting for their start, real-time factor, and where each thread's
+        wall time went."""
         self._outbox.flush()  # what was handed over counts as published
         v = dict(self.status_values())
         return (f'simulator: simulated {self.runner.time_s:.3f} s, {v["samples"]} samples, '
-                f'{v["programmes"]} programmes ({v["late"]} late), {v["rejected"]} rejected, '
-                f'{v["dropped"]} dropped; '
+                f'{v["programmes"]} programmes started ({v["late"]} late), commands: '
+                f'{v["rejected"]} rejected, {v["dropped"]} dropped, {v["waiting"]} waiting for '
+                'their sample; '
                 f'real-time factor {float(v["real_time_factor"]):.3f}; of wall time: '
                 f'integrating {float(v["integrating_fraction"]):.0%} and waiting for '
                 f'publishing {float(v["waiting_for_publishing_fraction"]):.0%} (simulation '
