@@ -14,7 +14,8 @@ the launch file passes them after the params file, true unless ``use_sim_time:=f
 params file without their sections (or one that sets it false) cannot put them on the wall
 clock. With ``play:=true`` the player replays ``bag``
 instead of running the simulator and controller. If a node the run needs exits, the launch
-ends. Nothing at module level imports anything, and :func:`node_parameters` and
+ends, with status 1 if the node failed (:func:`required_exit`). Nothing at module level
+imports anything, and :func:`node_parameters` and
 :func:`launch_problem` import no ``launch``, so the file can be read and its rules checked
 where the launch packages are not installed (test/test_launch.py).
 """
@@ -141,6 +142,15 @@ def node_parameter_layers(configurations: dict[str, str]) -> dict[str, list[str 
             for executable, given in node_parameters(configurations).items()}
 
 
+def required_exit(executable: str, returncode: int | None) -> tuple[str, bool]:
+    """What the exit of a node the run needs does to the launch: the reason it ends, and
+    whether that is a failure (a code other than 0, or a signal's negative one), which ends
+    it with status 1. A clean exit (the player at the end of its bag) ends it with 0."""
+    failed = returncode != 0
+    return (f'{executable} exited with code {returncode}; the twin cannot go on without it',
+            failed)
+
+
 def launch_problem(configurations: dict[str, str], nodes: dict[str, dict]) -> str | None:
     """Why these nodes cannot start, in one line, or None: checked before any starts."""
     import os
@@ -199,8 +209,14 @@ def _node_actions(context):
         def on_exit(event, exit_context):
             if exit_context.is_shutdown:  # stopped by the launch (Ctrl-C): nothing to add
                 return None
-            return Shutdown(reason=f'{executable} exited with code {event.returncode}; the '
-                                   'twin cannot go on without it')
+            reason, failed = required_exit(executable, event.returncode)
+            if failed:
+                # Jazzy's LaunchService returns 0 after a Shutdown, whatever its reason: only an
+                # exception raised in the launch makes it return 1 (`ros2 launch`'s status). It
+                # then shuts the launched system down as Shutdown does, saying so in one line:
+                # `Caught exception in launch (see debug for traceback): <reason>`.
+                raise RuntimeError(reason)
+            return Shutdown(reason=reason)
         return on_exit
 
     def for_launch_ros(layer):

@@ -347,17 +347,34 @@ def _run_launch(arguments):
     return service.run(), reasons
 
 
-def test_a_required_node_that_exits_ends_the_launch(tmp_path, monkeypatch):
+@pytest.mark.parametrize('executable, code, status', [
+    ('simulator', 3, 1), ('controller', 2, 1),  # a failure: `ros2 launch` says so
+    ('reference', 0, 0)])  # a clean exit (as the player's at the end of its bag)
+def test_a_required_node_that_exits_ends_the_launch(executable, code, status, tmp_path,
+                                                     monkeypatch):
     _import_launch()
     prefix = _prefix(tmp_path / 'prefix', 'sphere_twin')
-    _stand_in(prefix, 'simulator', 'sleep 1; exit 3')
-    for executable in ('reference', 'controller'):
-        _stand_in(prefix, executable, 'exec sleep 60')
+    for name in TWIN:
+        _stand_in(prefix, name, f'sleep 1; exit {code}' if name == executable
+                  else 'exec sleep 60')
     monkeypatch.setenv('AMENT_PREFIX_PATH', str(prefix))
     started = time.monotonic()
-    _, reasons = _run_launch({'params_file': str(CONFIG_FILE)})
+    returned, reasons = _run_launch({'params_file': str(CONFIG_FILE)})
     assert time.monotonic() - started < 30  # not the 60 s of the other two
-    assert reasons[0] == 'simulator exited with code 3; the twin cannot go on without it'
+    assert returned == status
+    # A failure's reason comes through launch's own line for an exception in the launch.
+    assert reasons[0].endswith(f'{executable} exited with code {code}; the twin cannot go on '
+                               'without it')
+
+
+@pytest.mark.parametrize('code, failed', [(0, False), (2, True), (1, True), (-2, True),
+                                          (-9, True)])
+def test_a_required_node_ends_the_launch_with_status_1_if_it_failed(code, failed):
+    """Without `launch`: the rule the launch file applies when a node the run needs exits
+    (a failure raises in the launch, which `ros2 launch` then ends with status 1)."""
+    reason, is_failure = _launch_file()['required_exit']('controller', code)
+    assert reason == f'controller exited with code {code}; the twin cannot go on without it'
+    assert is_failure is failed
 
 
 def test_rviz_without_rviz2_ends_the_launch_before_any_node_starts(tmp_path, monkeypatch):
