@@ -220,10 +220,10 @@ class KickCycle:
         return None
 
     def in_flight(self) -> tuple[int, int]:
-        """The kick sent and not yet counted as landed, cut, refused or unanswered, as (not yet
-        started, started and not yet landed): (0, 0), (1, 0) or (0, 1). With it the counts
-        add up to the kicks sent; a plant counts a programme when it starts, so at a stop its
-        count is the kicks sent less the one not yet started."""
+        """The kick sent and not yet counted as landed, cut, refused or unanswered, as (its
+        start not yet reported, started and not yet landed): (0, 0), (1, 0) or (0, 1). With it
+        the counts add up to the kicks sent. A plant counts a programme when it starts it, so
+        at a stop its count may include the one whose start report had not yet arrived."""
         p = self.pending
         if p is None or not p.learn:  # a cut one is counted as cut
             return 0, 0

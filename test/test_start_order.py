@@ -28,8 +28,9 @@ SIMULATOR_FAREWELL = re.compile(r'(?P<programmes>\d+) programmes started \(\d+ l
                                 r'commands: (?P<rejected>\d+) rejected')
 CONTROLLER_FAREWELL = re.compile(r'(?P<kicks>\d+) kicks sent over .*\((?P<landed>\d+) landed, '
                                  r'(?P<cut>\d+) cut, (?P<refused>\d+) refused, '
-                                 r'(?P<unanswered>\d+) unanswered, (?P<not_started>\d+) not yet '
-                                 r'started, (?P<not_landed>\d+) started and not yet landed\)')
+                                 r'(?P<unanswered>\d+) unanswered, (?P<not_started>\d+) '
+                                 r'awaiting its start report, (?P<not_landed>\d+) started and '
+                                 r'not yet landed\)')
 
 
 @pytest.mark.parametrize('k', range(len(ORDERS)),
@@ -82,7 +83,8 @@ def test_no_programme_overlaps_and_only_landed_kicks_are_learned_in_any_start_or
     # The books of both ends, from their farewell lines: nothing rejected; every kick the
     # controller sent is in exactly one of its counts, the one in flight at the stop included;
     # the simulator counts the programmes it started: the landed ones and the one the
-    # controller heard start, and perhaps the one it had not yet heard start (or gave up on).
+    # controller heard start, and perhaps the one whose start report the controller had not
+    # yet had (or gave up on).
     sim = SIMULATOR_FAREWELL.search(processes['simulator'].stdout_text())
     ctl = CONTROLLER_FAREWELL.search(processes['controller'].stdout_text())
     assert sim and ctl, (processes['simulator'].stdout_text()

@@ -274,8 +274,8 @@ class ControllerNode(Node):
         not_started, not_landed = self.cycle.in_flight()
         return (f'controller: {c.kicks} kicks sent over {self.pace.simulated_span_s():.3f} s of '
                 f'samples ({c.landed} landed, {c.cut} cut, {c.refused} refused, '
-                f'{c.unanswered} unanswered, {not_started} not yet started, {not_landed} '
-                f'started and not yet landed); real-time factor '
+                f'{c.unanswered} unanswered, {not_started} awaiting its start report, '
+                f'{not_landed} started and not yet landed); real-time factor '
                 f'{self.pace.real_time_factor():.3f}')
 
 
