@@ -6,13 +6,16 @@
     ros2 launch sphere_twin twin.launch.py rviz:=true
 
 Every node reads its parameters from ``params_file`` (default: the installed
-``config/twin.yaml``). An argument that sets a node parameter (plant, scene, ..., use_sim_time)
-is passed to the node only when it is given, so an edited params file is not overridden by
-defaults of the launch file. Every stamp of the twin is simulated time (docs/twin.md): the
-simulator publishes /clock and never follows it; reference and controller follow it with
-``use_sim_time`` (true in config/twin.yaml). With ``play:=true`` the player replays ``bag``
+``config/twin.yaml``). An argument that sets a node parameter (plant, scene, ...) is passed to
+the node only when it is given, so an edited params file is not overridden by defaults of the
+launch file. Every stamp of the twin is simulated time (docs/twin.md): the simulator publishes
+/clock and never follows it; reference and controller follow it with ``use_sim_time``, which
+the launch file passes them after the params file, true unless ``use_sim_time:=false``, so a
+params file without their sections (or one that sets it false) cannot put them on the wall
+clock. With ``play:=true`` the player replays ``bag``
 instead of running the simulator and controller. If a node the run needs exits, the launch
-ends. Nothing at module level imports anything, and :func:`node_parameters` and
+ends, with status 1 if the node failed (:func:`required_exit`). Nothing at module level
+imports anything, and :func:`node_parameters` and
 :func:`launch_problem` import no ``launch``, so the file can be read and its rules checked
 where the launch packages are not installed (test/test_launch.py).
 """
@@ -39,9 +42,9 @@ ARGUMENTS = {
                                  'axis (rad).' + _FROM_FILE),
     'real_time_factor': (NOT_GIVEN, 'Simulated seconds per wall second; 0 runs as fast as '
                                     'possible.' + _FROM_FILE),
-    'use_sim_time': (NOT_GIVEN, 'Reference and controller follow the simulator\'s /clock (the '
-                                'simulator and the player publish it).' + _FROM_FILE
-                     + ' RViz, which reads no params file: true.'),
+    'use_sim_time': ('true', 'Reference, controller and RViz follow the simulator\'s /clock (the '
+                             'simulator and the player publish it): true whatever the params '
+                             'file says; false puts them on the wall clock.'),
     'record': ('false', 'Also start the recorder (a bag under bags/).'),
     'output_dir': (NOT_GIVEN, 'Bag directory to create (must not exist or be empty); "" for '
                               'bags/run_<UTC time>.' + _FROM_FILE),
@@ -55,8 +58,9 @@ ARGUMENTS = {
                           'config/twin.yaml).'),
 }
 
-# Arguments passed as the node parameter of the same name, only when given:
-# name -> (type of the parameter, the nodes that take it).
+# Arguments passed as the node parameter of the same name, only when given (use_sim_time
+# always: its default is true, not NOT_GIVEN): name -> (type of the parameter, the nodes that
+# take it).
 PARAMETER_ARGUMENTS = {
     'plant': ('str', ('simulator',)),
     'scene': ('str', ('simulator',)),
@@ -64,7 +68,8 @@ PARAMETER_ARGUMENTS = {
     'seed': ('int', ('simulator',)),
     'noise_std_rad': ('float', ('simulator',)),
     'real_time_factor': ('float', ('simulator',)),
-    # Never the simulator's: it is the clock and refuses use_sim_time:=true.
+    # Never the simulator's (it is the clock and refuses use_sim_time:=true) nor the player's
+    # (it publishes /clock); the nodes that follow the clock get it after the params file.
     'use_sim_time': ('bool', ('reference', 'controller', 'rviz2')),
     'controller': ('str', ('controller',)),
     'output_dir': ('str', ('recorder',)),
@@ -103,8 +108,10 @@ def _value(name: str, text: str, kind: str) -> Value:
 def node_parameters(configurations: dict[str, str]) -> dict[str, dict[str, Value]]:
     """The nodes to start for these launch configurations (argument name -> text, as
     ``ros2 launch ... name:=text`` gives them; an absent one takes its default), each with the
-    parameters the launch file passes it on top of the params file: only the arguments given,
-    so the params file's value stands for the others. A malformed argument is a ValueError."""
+    parameters the launch file passes it on top of the params file: the arguments given, so
+    the params file's value stands for the others, and use_sim_time (true by default) to the
+    nodes that follow /clock, whatever the params file says. A malformed argument is a
+    ValueError."""
     def flag(name: str) -> bool:
         return bool(_value(name, configurations.get(name, ARGUMENTS[name][0]), 'bool'))
 
@@ -114,11 +121,8 @@ def node_parameters(configurations: dict[str, str]) -> dict[str, dict[str, Value
     if flag('rviz'):
         started.append('rviz2')
     nodes: dict[str, dict[str, Value]] = {name: {} for name in started}
-    if 'rviz2' in nodes:
-        # RViz gets no params file, so nothing but the launch file can put it on /clock.
-        nodes['rviz2']['use_sim_time'] = True
     for name, (kind, takers) in PARAMETER_ARGUMENTS.items():
-        text = configurations.get(name, NOT_GIVEN)
+        text = configurations.get(name, ARGUMENTS[name][0])
         if text == NOT_GIVEN:
             continue
         value = _value(name, text, kind)  # checked even for a node not started: a typo
@@ -126,6 +130,25 @@ def node_parameters(configurations: dict[str, str]) -> dict[str, dict[str, Value
             if node in nodes:
                 nodes[node][name] = value
     return nodes
+
+
+def node_parameter_layers(configurations: dict[str, str]) -> dict[str, list[str | dict]]:
+    """What each node of :func:`node_parameters` is given, in the order launch_ros passes it
+    (a later layer wins a parameter both set): the params file (``configurations
+    ['params_file']``; RViz reads none), then the parameters the launch file sets."""
+    params_file = configurations.get('params_file')
+    return {executable: ([params_file] if params_file is not None and executable != 'rviz2'
+                         else []) + ([given] if given else [])
+            for executable, given in node_parameters(configurations).items()}
+
+
+def required_exit(executable: str, returncode: int | None) -> tuple[str, bool]:
+    """What the exit of a node the run needs does to the launch: the reason it ends, and
+    whether that is a failure (a code other than 0, or a signal's negative one), which ends
+    it with status 1. A clean exit (the player at the end of its bag) ends it with 0."""
+    failed = returncode != 0
+    return (f'{executable} exited with code {returncode}; the twin cannot go on without it',
+            failed)
 
 
 def launch_problem(configurations: dict[str, str], nodes: dict[str, dict]) -> str | None:
@@ -186,25 +209,35 @@ def _node_actions(context):
         def on_exit(event, exit_context):
             if exit_context.is_shutdown:  # stopped by the launch (Ctrl-C): nothing to add
                 return None
-            return Shutdown(reason=f'{executable} exited with code {event.returncode}; the '
-                                   'twin cannot go on without it')
+            reason, failed = required_exit(executable, event.returncode)
+            if failed:
+                # Jazzy's LaunchService returns 0 after a Shutdown, whatever its reason: only an
+                # exception raised in the launch makes it return 1 (`ros2 launch`'s status). It
+                # then shuts the launched system down as Shutdown does, saying so in one line:
+                # `Caught exception in launch (see debug for traceback): <reason>`.
+                raise RuntimeError(reason)
+            return Shutdown(reason=reason)
         return on_exit
 
-    actions = []
-    for executable, given in nodes.items():
+    def for_launch_ros(layer):
         # launch_ros reads a plain string as YAML (scene:=2 would reach the node as an
         # integer); ParameterValue keeps it the string parameter it is.
-        values = {name: ParameterValue(value, value_type=str) if isinstance(value, str)
-                  else value for name, value in given.items()}
+        if not isinstance(layer, dict):
+            return layer  # the params file
+        return {name: ParameterValue(value, value_type=str) if isinstance(value, str)
+                else value for name, value in layer.items()}
+
+    actions = []
+    for executable, layers in node_parameter_layers(configurations).items():
+        parameters = [for_launch_ros(layer) for layer in layers]
         if executable == 'rviz2':
             actions.append(Node(
                 package=NODES[executable], executable=executable, name=executable,
-                output='screen', parameters=[values],
+                output='screen', parameters=parameters,
                 arguments=['-d', PathJoinSubstitution([FindPackageShare('sphere_twin'), 'rviz',
                                                        'twin.rviz'])]))
             continue
         actions.append(Node(
             package=NODES[executable], executable=executable, name=executable, output='screen',
-            parameters=[configurations['params_file']] + ([values] if values else []),
-            on_exit=ends_the_launch(executable)))
+            parameters=parameters, on_exit=ends_the_launch(executable)))
     return actions

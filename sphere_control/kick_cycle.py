@@ -92,6 +92,9 @@ class PendingKick:
 
 @dataclasses.dataclass
 class CycleCounts:
+    """The kicks of a cycle by what became of them. Every kick sent is landed, cut, refused,
+    unanswered or, at most one at a time, still in flight (:meth:`KickCycle.in_flight`)."""
+
     kicks: int = 0  # sent
     landed: int = 0  # ran to their end and were learned from
     cut: int = 0  # cut by a later command: waited for, not learned from
@@ -215,6 +218,16 @@ class KickCycle:
             self._give_up_unanswered(wall_s)
             return Decision(Phase.STALE)
         return None
+
+    def in_flight(self) -> tuple[int, int]:
+        """The kick sent and not yet counted as landed, cut, refused or unanswered, as (its
+        start not yet reported, started and not yet landed): (0, 0), (1, 0) or (0, 1). With it
+        the counts add up to the kicks sent. A plant counts a programme when it starts it, so
+        at a stop its count may include the one whose start report had not yet arrived."""
+        p = self.pending
+        if p is None or not p.learn:  # a cut one is counted as cut
+            return 0, 0
+        return (1, 0) if math.isnan(p.start_s) else (0, 1)
 
     # --- the cycle ---------------------------------------------------------------------
     def over(self) -> bool:

@@ -11,8 +11,15 @@ import time
 import pytest
 
 from msg_defs.topics import ALL_TOPICS, CLOCK
+from sphere_sim.kicks.plants import LIVE_RTOL
+from sphere_sim.model.fidelity import FULL, TABLE_RUNG
 from sphere_twin.cli import build_parser
-from sphere_twin.commands.demo import DEFAULT_REAL_TIME_FACTOR, demo_nodes, run_demo
+from sphere_twin.commands.demo import (
+    DEFAULT_REAL_TIME_FACTOR,
+    demo_nodes,
+    demo_start_lines,
+    run_demo,
+)
 from sphere_twin.nodes.simulator_node import CATCH_UP_SPEEDUP
 from sphere_twin.processes import fresh_domain_id, resolve_executable
 
@@ -34,7 +41,11 @@ def test_short_demo_runs_the_loop_records_a_bag_and_reports(tmp_path, plant):
     assert all(line.endswith('exit code 0') for line in lines if line.startswith('demo: stopped'))
     kicks = re.search(r'demo: (\d+) kicks in ([\d.]+) s simulated', text)
     assert kicks and int(kicks.group(1)) > 0 and float(kicks.group(2)) >= 5.0
-    assert f'{plant} plant, paced at {DEFAULT_REAL_TIME_FACTOR[plant]:g}x' in text
+    # What to expect comes first, right after the domain; the summary names the rung again.
+    assert lines[1:4] == demo_start_lines(plant, DEFAULT_REAL_TIME_FACTOR[plant], 3.0, 2.0)
+    rung = FULL.name if plant == 'continuous' else TABLE_RUNG
+    assert re.search(rf'demo: \d+ kicks in [\d.]+ s simulated \([\d.]+ per second\) on the '
+                     rf'{plant} plant, model {rung}, from the bag', text), text
     pace = re.search(r'demo: real-time factor: controller ([\d.]+), reference ([\d.]+), '
                      r'simulator ([\d.]+); late programmes: (\d+)', text)
     assert pace, text
@@ -58,6 +69,22 @@ def test_short_demo_runs_the_loop_records_a_bag_and_reports(tmp_path, plant):
     assert (tmp_path / bag.split('/')[-1] / 'metadata.yaml').is_file()
     assert list(tmp_path.glob('*_error.png'))
     assert lines[-1].startswith('demo: OK')
+
+
+@pytest.mark.parametrize(('plant', 'rung', 'model'), [
+    ('continuous', FULL.name, f'the full model of the paper at the live tolerance (rtol '
+                              f'{LIVE_RTOL:g})'),
+    ('discrete', TABLE_RUNG, "each kick's landing looked up in the kick tables")])
+def test_the_demo_says_first_the_plant_its_rung_the_pace_and_the_wall_time(plant, rung, model):
+    plant_line, pace_line, scenario_line = demo_start_lines(plant, 0.25, 8.0, 25.0)
+    assert plant_line.startswith(f'demo: {plant} plant, model {rung}: {model}')
+    # 33 s of simulated time at a quarter of real time: 132 s of wall time.
+    assert pace_line == ('demo: 33 s of simulated time at 0.25 of real time: about 2.2 min of '
+                         'wall time, plus the offline loop')
+    assert scenario_line.startswith('demo: scenario: setpoint (0.01, 0.02) for 8 s, then eq. '
+                                    '(64)')
+    assert 'about 20 s of wall time' in demo_start_lines(plant, 0.25, 3.0, 2.0)[1]
+    assert 'about 1.5 h of wall time' in demo_start_lines(plant, 0.5, 2700.0, 0.0)[1]
 
 
 def test_the_demo_simulator_waits_for_every_listener_of_the_clock(tmp_path):
@@ -139,7 +166,9 @@ def test_sigterm_stops_the_demo_as_sigint_does_on_the_domain_the_environment_nam
     stopped = [line for line in lines if line.startswith('demo: stopped ')]
     assert len(stopped) == 4 and all(line.endswith('exit code 0') for line in stopped), text
     assert re.search(r'demo: \d+ kicks in [\d.]+ s simulated .*, from the bag', text), text
-    assert 'offline loop' not in text  # no comparison: the run was cut short
+    # No comparison: the run was cut short (the start lines only announced it).
+    assert not [line for line in lines if line.startswith('demo: the offline loop')
+                or 'offline loop:' in line], text
     assert lines[-1] == 'demo: STOPPED by SIGTERM, exit status 143'
     assert len(list(tmp_path.glob('demo_*/metadata.yaml'))) == 1  # the bag, closed
 
@@ -159,8 +188,10 @@ def test_the_summary_says_when_the_pace_slipped(held, slipped):
     from sphere_twin.commands.demo import _report_pace
 
     lines = []
-    simulator = _Farewell('simulator', f'simulator: simulated 33.020 s, 481 programmes (137 '
-                                       f'late), 0 rejected; real-time factor {held}; of wall')
+    simulator = _Farewell('simulator', f'simulator: simulated 33.020 s, 3302 samples, 481 '
+                                       f'programmes started (137 late), commands: 0 rejected, '
+                                       f'0 dropped, 0 waiting for their sample; real-time '
+                                       f'factor {held}; of wall')
     _report_pace([simulator, _Farewell('reference', 'real-time factor 0.17')], lines.append,
                  asked_factor=0.25)
     assert lines[0] == (f'demo: real-time factor: simulator {held:.2f}, reference 0.17; late '

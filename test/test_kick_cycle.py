@@ -72,6 +72,35 @@ def test_the_kick_is_timed_from_its_reported_start_not_the_asked_one(cycle):
     assert command == Command(1, 0.5) and cycle.counts.landed == 1 and cycle.kicks == 2
 
 
+def _accounted(cycle):
+    """The kicks sent, from the other counts and the one in flight."""
+    c = cycle.counts
+    return c.landed + c.cut + c.refused + c.unanswered + sum(cycle.in_flight())
+
+
+def test_every_kick_sent_is_counted_once_the_one_in_flight_included(cycle):
+    asked = cycle.on_sample(0.0, LEVEL, wall_s=0.0).start_s
+    assert cycle.in_flight() == (1, 0) and _accounted(cycle) == cycle.kicks == 1
+    cycle.on_programme_event(report(ProgrammeState.STARTED, asked, asked))
+    assert cycle.in_flight() == (0, 1) and _accounted(cycle) == 1
+    cycle.on_programme_event(report(ProgrammeState.ENDED, asked, asked + 0.004))
+    assert cycle.in_flight() == (0, 1)  # over, but not yet landed: no sample since
+    second = cycle.on_sample(asked + KICK_PERIOD_S, MOVED, wall_s=0.0)
+    assert cycle.counts.landed == 1 and cycle.in_flight() == (1, 0)
+    assert _accounted(cycle) == cycle.kicks == 2
+    cycle.on_programme_event(report(ProgrammeState.STARTED, second.start_s, second.start_s, 2))
+    cycle.on_programme_event(report(ProgrammeState.CUT, second.start_s, second.start_s, 2))
+    assert cycle.counts.cut == 1 and cycle.in_flight() == (0, 0)  # counted as cut
+    assert _accounted(cycle) == 2
+    third = cycle.on_sample(second.start_s + KICK_PERIOD_S, MOVED, wall_s=0.0)
+    cycle.on_programme_event(report(ProgrammeState.REFUSED, third.start_s, third.start_s, 3))
+    assert cycle.counts.refused == 1 and _accounted(cycle) == cycle.kicks == 3
+    cycle.on_sample(third.start_s + PERIOD_S, MOVED, wall_s=0.0)
+    cycle.check_stale(wall_s=2.0)  # no report for the fourth: given up
+    assert cycle.counts.unanswered == 1 and cycle.in_flight() == (0, 0)
+    assert _accounted(cycle) == cycle.kicks == 4
+
+
 def test_before_the_sample_period_is_known_the_lead_is_a_100_hz_period(cycle):
     assert cycle.on_sample(0.0, LEVEL, wall_s=0.0).start_s == pytest.approx(0.01)
 

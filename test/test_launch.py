@@ -129,11 +129,14 @@ def test_which_nodes_start_for_which_arguments():
         'use_sim_time': False}
 
 
-def test_nothing_but_given_arguments_reaches_the_nodes():
+def test_nothing_but_given_arguments_and_sim_time_reaches_the_nodes():
     """An edited params file rules: with no argument given each node gets only the params
-    file, and a given argument reaches exactly the nodes that have the parameter, typed."""
+    file, and use_sim_time for the nodes on the clock; a given argument reaches exactly the
+    nodes that have the parameter, typed."""
     node_parameters = _launch_file()['node_parameters']
-    assert node_parameters({'params_file': 'my.yaml'}) == {node: {} for node in TWIN}
+    assert node_parameters({'params_file': 'my.yaml'}) == {
+        'simulator': {}, 'reference': {'use_sim_time': True},
+        'controller': {'use_sim_time': True}}
     given = node_parameters({'real_time_factor': '0.5', 'controller': 'basic', 'seed': '3',
                              'scene': '2', 'use_sim_time': 'false'})
     assert given == {'simulator': {'real_time_factor': 0.5, 'seed': 3, 'scene': '2'},
@@ -143,6 +146,74 @@ def test_nothing_but_given_arguments_reaches_the_nodes():
     assert node_parameters({'real_time_factor': '1'})['simulator'] == {'real_time_factor': 1.0}
     played = node_parameters({'play': 'true', 'bag': 'run1', 'plant': 'discrete'})
     assert played == {'player': {'bag': 'run1'}}
+
+
+def _write_yaml(path, sections):
+    path.write_text(yaml.safe_dump(sections))
+    return path
+
+
+def _node_args(layers, tmp_path):
+    """The --ros-args launch_ros gives a node for its parameter layers: each file as a
+    --params-file, each dict written to a file of its own for every node, in order."""
+    args = ['--ros-args']
+    for k, layer in enumerate(layers):
+        if isinstance(layer, dict):
+            layer = _write_yaml(tmp_path / f'layer_{k}.yaml', {'/**': {'ros__parameters': layer}})
+        args += ['--params-file', str(layer)]
+    return args
+
+
+def _built_use_sim_time(executable, args):
+    """use_sim_time of the node, built in this process with ``args`` as its command line."""
+    import rclpy
+
+    from sphere_twin.nodes.controller_node import ControllerNode
+    from sphere_twin.nodes.reference_node import ReferenceNode
+    from sphere_twin.processes import fresh_domain_id
+
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=fresh_domain_id(), args=args)
+    try:
+        node = {'reference': ReferenceNode, 'controller': ControllerNode}[executable](
+            context=context)
+        try:
+            return node.get_parameter('use_sim_time').value
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
+@pytest.mark.parametrize('params, use_sim_time', [
+    ('partial', 'true'),  # only a simulator section, as docs/twin.md shows one
+    ('wall clock', 'true'),  # a file that sets it false for both
+    ('shipped', 'true'),
+    ('shipped', 'false'),  # the argument still rules
+])
+@pytest.mark.parametrize('executable', ['reference', 'controller'])
+def test_the_nodes_on_the_clock_keep_sim_time_however_partial_the_params_file(
+        params, use_sim_time, executable, tmp_path, monkeypatch):
+    """Each node built on the layers the launch file gives it, as rclpy reads them
+    (without `launch`): use_sim_time is what the argument says, whatever the file says."""
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    files = {
+        'partial': _write_yaml(tmp_path / 'partial.yaml', {'simulator': {'ros__parameters': {
+            'real_time_factor': 0.5}}}),
+        'wall clock': _write_yaml(tmp_path / 'wall.yaml', {
+            name: {'ros__parameters': {'use_sim_time': False}}
+            for name in ('reference', 'controller')}),
+        'shipped': CONFIG_FILE}
+    launch = _launch_file(monkeypatch)  # the rules run without `launch`
+    configurations = {'params_file': str(files[params]), 'use_sim_time': use_sim_time}
+    layers = launch['node_parameter_layers'](configurations)
+    assert layers['simulator'] == [str(files[params])]  # the clock: never on sim time
+    assert layers[executable][0] == str(files[params])
+    assert _built_use_sim_time(executable, _node_args(layers[executable], tmp_path)) is (
+        use_sim_time == 'true')
+    if params == 'partial':  # the file alone would have put it on the wall clock
+        assert _built_use_sim_time(executable, _node_args(layers[executable][:1], tmp_path)) \
+            is False
 
 
 @pytest.mark.parametrize('name, text, message', [
@@ -238,7 +309,8 @@ def test_the_launch_description_passes_only_given_arguments(tmp_path, monkeypatc
     nodes = _launched_nodes(config)
     assert [node.node_executable for node in nodes] == TWIN
     assert {node.node_executable: _node_gets(node) for node in nodes} == {
-        name: ['twin.yaml'] for name in TWIN}
+        'simulator': ['twin.yaml'], 'reference': ['twin.yaml', {'use_sim_time': True}],
+        'controller': ['twin.yaml', {'use_sim_time': True}]}
     nodes = _launched_nodes(config | {'real_time_factor': '0.5', 'seed': '4', 'scene': '2',
                                       'controller': 'basic', 'use_sim_time': 'false',
                                       'rviz': 'true'})
@@ -275,17 +347,34 @@ def _run_launch(arguments):
     return service.run(), reasons
 
 
-def test_a_required_node_that_exits_ends_the_launch(tmp_path, monkeypatch):
+@pytest.mark.parametrize('executable, code, status', [
+    ('simulator', 3, 1), ('controller', 2, 1),  # a failure: `ros2 launch` says so
+    ('reference', 0, 0)])  # a clean exit (as the player's at the end of its bag)
+def test_a_required_node_that_exits_ends_the_launch(executable, code, status, tmp_path,
+                                                     monkeypatch):
     _import_launch()
     prefix = _prefix(tmp_path / 'prefix', 'sphere_twin')
-    _stand_in(prefix, 'simulator', 'sleep 1; exit 3')
-    for executable in ('reference', 'controller'):
-        _stand_in(prefix, executable, 'exec sleep 60')
+    for name in TWIN:
+        _stand_in(prefix, name, f'sleep 1; exit {code}' if name == executable
+                  else 'exec sleep 60')
     monkeypatch.setenv('AMENT_PREFIX_PATH', str(prefix))
     started = time.monotonic()
-    _, reasons = _run_launch({'params_file': str(CONFIG_FILE)})
+    returned, reasons = _run_launch({'params_file': str(CONFIG_FILE)})
     assert time.monotonic() - started < 30  # not the 60 s of the other two
-    assert reasons[0] == 'simulator exited with code 3; the twin cannot go on without it'
+    assert returned == status
+    # A failure's reason comes through launch's own line for an exception in the launch.
+    assert reasons[0].endswith(f'{executable} exited with code {code}; the twin cannot go on '
+                               'without it')
+
+
+@pytest.mark.parametrize('code, failed', [(0, False), (2, True), (1, True), (-2, True),
+                                          (-9, True)])
+def test_a_required_node_ends_the_launch_with_status_1_if_it_failed(code, failed):
+    """Without `launch`: the rule the launch file applies when a node the run needs exits
+    (a failure raises in the launch, which `ros2 launch` then ends with status 1)."""
+    reason, is_failure = _launch_file()['required_exit']('controller', code)
+    assert reason == f'controller exited with code {code}; the twin cannot go on without it'
+    assert is_failure is failed
 
 
 def test_rviz_without_rviz2_ends_the_launch_before_any_node_starts(tmp_path, monkeypatch):

@@ -18,7 +18,8 @@ LAUNCH_FILE = ROOT / 'launch' / 'twin.launch.py'
 CONFIG_FILE = ROOT / 'config' / 'twin.yaml'
 
 # Where config/twin.yaml sets a value other than the node's default, on purpose:
-# (node, parameter) -> value. The launch file passes no value unless its argument is given.
+# (node, parameter) -> value. The launch file passes no value unless its argument is given
+# (but use_sim_time, below).
 INTENDED_DIFFERENCES = {
     # The example bag; started alone, the player requires a bag.
     ('player', 'bag'): 'example',
@@ -171,12 +172,14 @@ def test_launch_arguments_passed_to_nodes_agree_with_their_declarations():
     assert takers >= {'simulator', 'controller', 'reference', 'recorder', 'player'}
     for name, (value_type, nodes) in passed.items():
         default, description = arguments[name]
+        if name in ROS_PARAMETERS:
+            # use_sim_time: true for the nodes on the clock, whatever the params file says.
+            assert value_type == 'bool' and default == 'true', f'launch argument {name}'
+            assert set(nodes) == {*ROS_PARAMETERS[name], 'rviz2'}
+            continue
         # "Not given": the node keeps the params file's value, and the argument says so.
         assert default == launch['NOT_GIVEN'] == '', f'launch argument {name}'
         assert launch['_FROM_FILE'] in description, f'launch argument {name}'
-        if name in ROS_PARAMETERS:
-            assert value_type == 'bool'
-            continue
         for node in nodes:
             specs = _specs(node)
             assert name in specs, f'the launch file passes {name} to {node}, which lacks it'
@@ -185,14 +188,18 @@ def test_launch_arguments_passed_to_nodes_agree_with_their_declarations():
             assert description == spec.description + launch['_FROM_FILE'], name
 
 
-def test_no_launch_argument_default_overrides_the_params_file():
+def test_no_launch_argument_default_overrides_the_params_file_but_sim_time():
+    """With every argument at its default a node gets only the params file, but for the
+    nodes on the clock use_sim_time: true (a params file without their sections would
+    otherwise put them on the wall clock)."""
     launch = _launch_file()
     defaults = {name: default for name, (default, _) in launch['ARGUMENTS'].items()
                 if default is not None}
     for play in ('false', 'true'):
         for node, given in launch['node_parameters'](
                 defaults | {'play': play, 'record': 'true'}).items():
-            assert given == {}, f'{node} gets {given} with every argument at its default'
+            expected = {'use_sim_time': True} if node in ROS_PARAMETERS['use_sim_time'] else {}
+            assert given == expected, f'{node} gets {given} with every argument at its default'
 
 
 def test_a_given_launch_argument_reaches_the_node_as_its_parameter_type():
@@ -210,7 +217,8 @@ def test_a_given_launch_argument_reaches_the_node_as_its_parameter_type():
             play = 'true' if node == 'player' else 'false'
             given = launch['node_parameters']({name: text, 'play': play, 'record': 'true'})
             assert _same(given[node][name], value), f'{name}:={text} to {node}'
-            assert set(given[node]) == {name}
+            on_clock = {'use_sim_time'} if node in ROS_PARAMETERS['use_sim_time'] else set()
+            assert set(given[node]) == {name} | on_clock
 
 
 # --- the nodes declare exactly the specs --------------------------------------------------

@@ -1,5 +1,7 @@
 """``sphere-twin demo``: the closed loop as separate processes, recorded to a bag.
 
+Says first what to expect: the plant, the rung of the ladder of models it runs (the full model
+at the live tolerance, or the kick table), the pace and the wall time the run should take.
 Starts the recorder, the simulator (the continuous model of §3 by default, or the discrete
 kick table; paced), the reference node and the extended controller on the ROS domain of
 ``ROS_DOMAIN_ID`` (a fresh one if it is unset); runs the default scenario (the Fig. 13
@@ -91,6 +93,44 @@ SIGNAL_EXIT_BASE = 128
 MAX_ROS_DOMAIN_ID = 232
 # A bag that ends this many simulated seconds before the run the demo watched lost its end.
 BAG_LAG_S = 0.5
+
+
+def model_fidelity(plant: str) -> tuple[str, str]:
+    """The rung of the ladder of models (:mod:`sphere_sim.model.fidelity`) that ``plant``
+    runs, and what that rung is, in words."""
+    from sphere_sim.kicks.plants import LIVE_RTOL
+    from sphere_sim.model.fidelity import FULL, TABLE_RUNG
+
+    if plant == 'discrete':
+        return TABLE_RUNG, ("each kick's landing looked up in the kick tables, nothing "
+                            "integrated (the ladder's last rung)")
+    return FULL.name, (f'the full model of the paper at the live tolerance (rtol '
+                       f'{LIVE_RTOL:g})')
+
+
+def wall_time_text(seconds: float) -> str:
+    """A duration as a person reads it: seconds below 90 s, minutes below 90 min, hours."""
+    if seconds < 90.0:
+        return f'{seconds:.0f} s'
+    if seconds < 5400.0:
+        return f'{seconds / 60.0:.1f} min'
+    return f'{seconds / 3600.0:.1f} h'
+
+
+def demo_start_lines(plant: str, real_time_factor: float, setpoint_s: float,
+                     trajectory_s: float) -> list[str]:
+    """What the demo says before it starts a node: the plant and its model's rung, the pace
+    and the wall time it should take (the simulated duration over the pace), the scenario."""
+    rung, rung_text = model_fidelity(plant)
+    duration_s = setpoint_s + trajectory_s
+    return [
+        f'demo: {plant} plant, model {rung}: {rung_text}',
+        f'demo: {duration_s:g} s of simulated time at {real_time_factor:g} of real time: about '
+        f'{wall_time_text(duration_s / real_time_factor)} of wall time, plus the offline loop',
+        f'demo: scenario: setpoint {SETPOINT_XY} for {setpoint_s:g} s, then eq. (64) (A_max '
+        f'0.44, f1 0.02 Hz, from t = {TRAJECTORY_OFFSET_S:g} s, where it passes the centre) '
+        f'for {trajectory_s:g} s of simulated time',
+    ]
 
 
 def demo_nodes(bag_dir: str | os.PathLike[str], setpoint_s: float, real_time_factor: float,
@@ -219,10 +259,8 @@ def run_demo(setpoint_s: float = DEFAULT_SETPOINT_S, trajectory_s: float = DEFAU
     duration_s = setpoint_s + trajectory_s
     say(f'demo: ROS_DOMAIN_ID={domain_id} ({domain_origin}), '
         f'{DISCOVERY_RANGE_VAR}={os.environ.get(DISCOVERY_RANGE_VAR, "LOCALHOST (default)")}')
-    say(f'demo: scenario: setpoint {SETPOINT_XY} for {setpoint_s:g} s, then eq. (64) '
-        f'(A_max 0.44, f1 0.02 Hz, from t = {TRAJECTORY_OFFSET_S:g} s, where it passes the '
-        f'centre) for {trajectory_s:g} s of simulated time, {plant} plant, paced at '
-        f'{real_time_factor:g}x real time')
+    for line in demo_start_lines(plant, real_time_factor, setpoint_s, trajectory_s):
+        say(line)
     with StopSignals() as stop:
         live = _run_live(demo_nodes(bag_dir, setpoint_s, real_time_factor, seed, plant),
                          domain_id, duration_s, real_time_factor, bag_dir, stop, say)
@@ -232,7 +270,7 @@ def run_demo(setpoint_s: float = DEFAULT_SETPOINT_S, trajectory_s: float = DEFAU
                            else _offline_rms_rad(setpoint_s, duration_s, plant, stop, say))
         problems = live.problems + failures
         problems += _report_bag(bag_dir, setpoint_s, live.simulated_s, say, offline_rms_rad,
-                                failures)
+                                failures, plant)
     say(f'demo: bag {bag_dir}')
     if stop.requested:
         say(f'demo: STOPPED by {stop.name}, exit status {stop.exit_status}'
@@ -408,14 +446,15 @@ def _trajectory_rms_rad(times_s: ArrayLike, errors_rad: ArrayLike, setpoint_s: f
 
 def _report_bag(bag_dir: Path, setpoint_s: float, run_end_s: float,
                 say: Callable[[str], None], offline_rms_rad: float | None,
-                failures: Sequence[str] = ()) -> list[str]:
+                failures: Sequence[str] = (), plant: str = DEFAULT_PLANT) -> list[str]:
     """What the run did, every figure read back from its own bag as `sphere-twin report`
     reads it (never from a node's output: a recorder that died holds less than the run
     did, and figures from two sources would not agree), beside the offline loop's
     trajectory RMS error, and a plot; the problems (an unreadable bag, no normal recorded).
 
     ``run_end_s`` is the simulated time the demo saw the run reach; a bag that ends well
-    before it, or ``failures`` (a node's non-zero exit), is said before the figures.
+    before it, or ``failures`` (a node's non-zero exit), is said before the figures. The kicks
+    line names ``plant`` and the rung of its model.
     """
     from sphere_twin.bag.reader import BagError
     from sphere_twin.run_analysis import (
@@ -445,7 +484,8 @@ def _report_bag(bag_dir: Path, setpoint_s: float, run_end_s: float,
                        title=f'{bag_dir.name}: setpoint, then eq. (64) from {setpoint_s:g} s')
     kicks = len(recorded.kicks)
     say(f'demo: {kicks} kicks in {bag_end_s:.1f} s simulated '
-        f'({kicks / max(bag_end_s, 1e-9):.1f} per second), from the bag')
+        f'({kicks / max(bag_end_s, 1e-9):.1f} per second) on the {plant} plant, model '
+        f'{model_fidelity(plant)[0]}, from the bag')
     on_setpoint = (times > 0.5 * setpoint_s) & (times < setpoint_s)
     if on_setpoint.any():
         say(f'demo: setpoint: final error {math.degrees(errors[on_setpoint][-1]):.4f} deg')

@@ -268,10 +268,14 @@ class ControllerNode(Node):
         return ratio
 
     def summary(self) -> str:
+        """The final line: the kicks sent and what became of each, the one in flight at the
+        stop included (the simulator counts the programmes it started), and the pace."""
         c = self.cycle.counts
-        return (f'controller: {c.kicks} kicks over {self.pace.simulated_span_s():.3f} s of '
+        not_started, not_landed = self.cycle.in_flight()
+        return (f'controller: {c.kicks} kicks sent over {self.pace.simulated_span_s():.3f} s of '
                 f'samples ({c.landed} landed, {c.cut} cut, {c.refused} refused, '
-                f'{c.unanswered} unanswered); real-time factor '
+                f'{c.unanswered} unanswered, {not_started} awaiting its start report, '
+                f'{not_landed} started and not yet landed); real-time factor '
                 f'{self.pace.real_time_factor():.3f}')
 
 

@@ -53,7 +53,7 @@ from msg_defs.transforms import (
     sphere_transform_msg,
     tf_message_type,
 )
-from sphere_sim.twin.report_limit import ReportLimit
+from sphere_sim.twin.report_limit import CountedWarning, ReportLimit
 from sphere_twin.node_runtime.outbox import Outbox
 from sphere_twin.node_runtime.parameter_specs import (
     StartupError,
@@ -152,6 +152,8 @@ class SimulatorNode(Node):
         self.wait_for_clock_subscribers = p['wait_for_clock_subscribers']
         self._last_sample: Sample | None = None
         self._reports = ReportLimit()
+        # Late programmes: the first logged with its times, the others counted and summarised.
+        self._late = CountedWarning()
         self._last_repeat_wall_s = 0.0
         self._wall_start_s = time.perf_counter()
         # (wall, simulated) time from which the pace is kept: the first sample, or the last
@@ -223,10 +225,12 @@ class SimulatorNode(Node):
         try:
             late = self.runner.counters.late
             self.runner.command_programme(times, volts, start_s)
-            if self.runner.counters.late > late:
+            if self.runner.counters.late > late and self._late.note():
                 self.get_logger().warning(
                     f'{PULSE_PROGRAM.name} for t = {start_s:.4f} s arrived at t = '
-                    f'{self.runner.time_s:.4f} s: started late, at the next sample')
+                    f'{self.runner.time_s:.4f} s: started late, at the next sample '
+                    f'({self._late_cause()}); the next late ones are counted, in a line at '
+                    f'most every {self._late.period_s:g} s')
         except ValueError as error:
             self.runner.counters.rejected += 1
             self._report_rejection(PULSE_PROGRAM.name, str(error))
@@ -269,7 +273,29 @@ class SimulatorNode(Node):
             self.get_logger().warning(text)
         self._publish_diagnostics(level, text)
 
+    def _late_cause(self) -> str:
+        """Why a programme arrives after its start, in words."""
+        if self.lockstep:
+            return 'its stamp was in the simulated past'
+        if not self.paced:
+            return ('the simulator had passed its start: unpaced, it runs on while the sender '
+                    'answers')
+        return (f'the simulator had passed its start: answering a sample took more than a '
+                f'sample period of wall time, {1e3 * self.period_s / self.real_time_factor:.0f} '
+                f'ms at real-time factor {self.real_time_factor:g}')
+
+    def _summarise_late(self) -> None:
+        """Say how many programmes started late since the last line, at most once per
+        SUMMARY_PERIOD_S of wall time (the status and the final line count every one)."""
+        summary = self._late.due()
+        if summary is not None:
+            self.get_logger().warning(
+                f'{summary.count} more programmes on {PULSE_PROGRAM.name} arrived after their '
+                f'start in the last {summary.since_s:.0f} s of wall time and started late, at '
+                f'the next sample ({self._late_cause()}); {summary.total} late in all')
+
     def on_status_timer(self) -> None:
+        self._summarise_late()
         state = 'waiting for subscribers' if self._waiting() else 'running'
         left_out = self._reports.take_suppressed()  # a burst that ended: its count is said here
         self._publish_diagnostics(DiagnosticStatus.OK, state + (
@@ -374,13 +400,15 @@ class SimulatorNode(Node):
                                                    beams[1]))
 
     def summary(self) -> str:
-        """The final line: simulated time, samples, programmes, rejections, real-time factor,
-        and where each thread's wall time went."""
+        """The final line: simulated time, samples, programmes started, commands rejected,
+        dropped and still waiting for their start, real-time factor, and where each thread's
+        wall time went."""
         self._outbox.flush()  # what was handed over counts as published
         v = dict(self.status_values())
         return (f'simulator: simulated {self.runner.time_s:.3f} s, {v["samples"]} samples, '
-                f'{v["programmes"]} programmes ({v["late"]} late), {v["rejected"]} rejected, '
-                f'{v["dropped"]} dropped; '
+                f'{v["programmes"]} programmes started ({v["late"]} late), commands: '
+                f'{v["rejected"]} rejected, {v["dropped"]} dropped, {v["waiting"]} waiting for '
+                'their sample; '
                 f'real-time factor {float(v["real_time_factor"]):.3f}; of wall time: '
                 f'integrating {float(v["integrating_fraction"]):.0%} and waiting for '
                 f'publishing {float(v["waiting_for_publishing_fraction"]):.0%} (simulation '
