@@ -27,7 +27,8 @@ TRAJECTORY_OFFSET_S = 12.5
 
 
 def scenario_nodes(setpoint_s: float, plant: str, real_time_factor: float, seed: int,
-                   normal_subscribers: int, clock_subscribers: int) -> tuple[NodeSpec, ...]:
+                   normal_subscribers: int, clock_subscribers: int,
+                   check_fidelity: bool = False) -> tuple[NodeSpec, ...]:
     """The closed loop of the scenario, in start order: controller, reference, simulator.
 
     The simulator comes last, once the controller holds the reference, and holds simulated
@@ -48,7 +49,7 @@ def scenario_nodes(setpoint_s: float, plant: str, real_time_factor: float, seed:
         NodeSpec('simulator', tuple(parameter_args(
             plant=plant, seed=seed, real_time_factor=real_time_factor,
             wait_for_subscribers=normal_subscribers,
-            wait_for_clock_subscribers=clock_subscribers))),
+            wait_for_clock_subscribers=clock_subscribers, check_fidelity=check_fidelity))),
     )
 
 

@@ -281,3 +281,39 @@ def _stamp(t_s):
     from msg_defs.conversions import time_from_ns
 
     return time_from_ns(round(t_s * 1e9))
+
+
+def test_with_check_fidelity_the_simulator_says_how_far_each_kick_lands_from_the_full_model(
+        context):
+    """check_fidelity:=true runs the full model beside the plant in a process of its own; the
+    status publishes the rung that served the kicks and the divergence, the final line says it."""
+    from sphere_sim.kicks.design import KICK_RELAXATION, cardan_of_normal
+    from sphere_sim.kicks.lookup_table import LookupTable
+    from sphere_sim.kicks.plants import ContinuousPlant
+    from sphere_sim.model.assembly import assemble
+    from sphere_sim.model.initial_state import rest_state
+    from sphere_sim.model.scene import load_scene
+    from sphere_sim.twin.ladder import tilted_normal
+
+    model = assemble(load_scene('rest'))
+    normal = tilted_normal(20.0, 20.0)
+    plant = ContinuousPlant(model, rest_state(model, cardan_of_normal(normal),
+                                              relaxation=KICK_RELAXATION))
+    node = SimulatorNode(plant=plant, context=context, parameter_overrides=[
+        Parameter('real_time_factor', value=0.0), Parameter('check_fidelity', value=True)])
+    try:
+        node.on_timer()
+        node.on_pulse_program(programme_to_msg(
+            *LookupTable.load().programme(0, 1.0, normal).segments()))
+        for _ in range(8):  # the kick's 60 ms window and a sample
+            node.on_timer()
+        values = dict(node.status_values())
+        assert values['fidelity'] == 'full' and values['programmes'] == 1
+        line = node.summary()  # waits for the reference of the kick that landed
+        values = dict(node.status_values())
+        assert values['fidelity_checked'] == 1 and values['fidelity_skipped'] == 0
+        divergence = float(values['fidelity_divergence_max_rad'])
+        assert 0.0 <= divergence < 1e-4  # the live tolerance, off the mirror lines
+        assert 'model full; fidelity check: 1 kicks against the full model' in line
+    finally:
+        node.destroy_node()

@@ -91,6 +91,23 @@ def rung_named(name: str) -> Rung:
                             f'{", ".join(LADDER)}') from None
 
 
+def rung_of_scene(scene: Scene) -> Rung:
+    """The rung a scene is: the one that leaves out just what the scene's effects leave out of
+    the rungs' mechanisms (the full model where it leaves none of them out).
+
+    Raises
+    ------
+    FidelityError
+        For a scene that leaves out a combination no rung does.
+    """
+    off = {e for r in RUNGS.values() for e in r.effects_off if not getattr(scene.effects, e)}
+    for r in RUNGS.values():
+        if set(r.effects_off) == off:
+            return r
+    raise FidelityError(f'scene {scene.name!r} leaves out {", ".join(sorted(off))}: no rung '
+                        'of the ladder does')
+
+
 def carried_state(full: Model, reduced: Model, x: NDArray[np.float64]) -> NDArray[np.float64]:
     """A state of ``full`` as the reduced model carries it: the states both have (beams and
     sphere come first in either layout), without those of the mechanism left out.

@@ -15,6 +15,7 @@ from __future__ import annotations
 import concurrent.futures
 import dataclasses
 import math
+import multiprocessing
 import statistics
 
 import numpy as np
@@ -108,7 +109,10 @@ class FidelityCheck:
         self.window_s = window_s
         self.period_s = period_s
         self._own = executor is None
-        self._executor = executor or concurrent.futures.ProcessPoolExecutor(max_workers=1)
+        # A fresh interpreter, not a fork: the twin's process runs DDS threads a fork would copy
+        # in whatever state they are.
+        self._executor = executor or concurrent.futures.ProcessPoolExecutor(
+            max_workers=1, mp_context=multiprocessing.get_context('forkserver'))
         self._kicks: list[_Kick] = []
         self._errors: list[float] = []
         self.skipped = 0

@@ -15,7 +15,8 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
     from sphere_sim.kicks.lookup_table import ProgrammedKickPlant
-    from sphere_sim.kicks.plants import ContinuousPlant, DiscretePlant, RestPose
+    from sphere_sim.kicks.plants import ContinuousPlant, DiscretePlant, RestPose, TwinPlant
+    from sphere_sim.twin.fidelity_check import FidelityCheck
 
 # The first is the simulator's default: the physics, which publishes every topic.
 PLANT_KINDS = ('continuous', 'discrete')
@@ -63,6 +64,31 @@ def build_plant(kind: str, scene_name: str = 'rest', table_paths: Iterable[str |
     # The sphere and beams it reports rest where the continuous plant starts (the scene's
     # initial state), so both plants publish the same state until the first kick.
     return discrete_plant(kicks, normal_from_cardan(alpha, beta), RestPose.of_state(model, x0))
+
+
+def plant_rung(plant: ContinuousPlant | DiscretePlant | TwinPlant) -> str:
+    """The rung of the ladder of models that ``plant`` serves kicks from: its model's, the
+    table, or 'other' for a plant of neither kind (a test's)."""
+    from sphere_sim.kicks.plants import ContinuousPlant, DiscretePlant
+    from sphere_sim.model.fidelity import TABLE_RUNG, rung_of_scene
+
+    if isinstance(plant, ContinuousPlant):
+        return rung_of_scene(plant.model.scene).name
+    return TABLE_RUNG if isinstance(plant, DiscretePlant) else 'other'
+
+
+def fidelity_check(scene_name: str, params_name: str, period_s: float) -> FidelityCheck:
+    """The full model of the scene (with ``params_name``'s set, '' for its own) run beside the
+    twin on every kick, whichever plant serves them (:mod:`sphere_sim.twin.fidelity_check`)."""
+    from msg_defs.device import KICK_WINDOW_S
+    from sphere_sim.model.assembly import assemble
+    from sphere_sim.model.parameters import load_parameter_set
+    from sphere_sim.model.scene import load_scene
+    from sphere_sim.twin.fidelity_check import FidelityCheck
+
+    scene = load_scene(scene_name)
+    params = scene.parameters(load_parameter_set(params_name) if params_name else None)
+    return FidelityCheck(assemble(scene, params), KICK_WINDOW_S, period_s)
 
 
 def discrete_plant(kicks: ProgrammedKickPlant, normal0: NDArray[np.float64],

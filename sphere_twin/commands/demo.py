@@ -85,6 +85,8 @@ DEMO_CLOCK_SUBSCRIBERS = 2
 # the programmes that arrived after their start.
 REAL_TIME_FACTOR_PATTERN = re.compile(r'real-time factor (\S+?);?(?:\s|$)')
 LATE_PATTERN = re.compile(r'\((\d+) late\)')
+# The simulator's farewell with check_fidelity: the divergence from the full model.
+FIDELITY_CHECK_PATTERN = re.compile(r'fidelity check: ([^\n]*)')
 # What ends the demo as Ctrl-C does: it stops its nodes, summarises, and exits with 128 + the
 # signal's number (130, 143), as a shell reports a command a signal ended.
 DEMO_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -134,11 +136,13 @@ def demo_start_lines(plant: str, real_time_factor: float, setpoint_s: float,
 
 
 def demo_nodes(bag_dir: str | os.PathLike[str], setpoint_s: float, real_time_factor: float,
-               seed: int, plant: str = DEFAULT_PLANT) -> tuple[NodeSpec, ...]:
+               seed: int, plant: str = DEFAULT_PLANT,
+               check_fidelity: bool = False) -> tuple[NodeSpec, ...]:
     """What the demo starts, in start order (stopped in reverse: the recorder last)."""
     return (NodeSpec('recorder', tuple(parameter_args(output_dir=str(bag_dir)))),
             *scenario_nodes(setpoint_s, plant, real_time_factor, seed,
-                            DEMO_NORMAL_SUBSCRIBERS, DEMO_CLOCK_SUBSCRIBERS))
+                            DEMO_NORMAL_SUBSCRIBERS, DEMO_CLOCK_SUBSCRIBERS,
+                            check_fidelity=check_fidelity))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -233,7 +237,8 @@ def demo_domain_id(environ: Mapping[str, str]) -> tuple[int, str]:
 
 def run_demo(setpoint_s: float = DEFAULT_SETPOINT_S, trajectory_s: float = DEFAULT_TRAJECTORY_S,
              real_time_factor: float | None = None, bags_dir: str | os.PathLike[str] = 'bags',
-             seed: int = 0, out: TextIO | None = None, plant: str = DEFAULT_PLANT) -> int:
+             seed: int = 0, out: TextIO | None = None, plant: str = DEFAULT_PLANT,
+             check_fidelity: bool = False) -> int:
     """Run the scenario; returns 0 if the loop ran and every node exited cleanly, 1 if not,
     and 128 + the signal's number (130, 143) if SIGINT or SIGTERM stopped it.
 
@@ -262,7 +267,8 @@ def run_demo(setpoint_s: float = DEFAULT_SETPOINT_S, trajectory_s: float = DEFAU
     for line in demo_start_lines(plant, real_time_factor, setpoint_s, trajectory_s):
         say(line)
     with StopSignals() as stop:
-        live = _run_live(demo_nodes(bag_dir, setpoint_s, real_time_factor, seed, plant),
+        live = _run_live(demo_nodes(bag_dir, setpoint_s, real_time_factor, seed, plant,
+                                    check_fidelity),
                          domain_id, duration_s, real_time_factor, bag_dir, stop, say)
         failures = _report_exits(live.processes, say)
         _report_pace(live.processes, say, real_time_factor)
@@ -419,7 +425,7 @@ def _report_pace(processes: Iterable[NodeProcess], say: Callable[[str], None],
     """Say the real-time factor each node saw and the late programmes (those that started
     later than the controller asked: the simulator fell behind), from their farewell lines,
     and whether the simulator held the pace asked for."""
-    factors, late, held = [], None, None
+    factors, late, held, checked = [], None, None, ''
     for process in processes:
         text = process.stdout_text()
         found = REAL_TIME_FACTOR_PATTERN.findall(text)
@@ -429,8 +435,12 @@ def _report_pace(processes: Iterable[NodeProcess], say: Callable[[str], None],
                 held = float(found[-1])
         if process.name == 'simulator' and LATE_PATTERN.search(text):
             late = int(LATE_PATTERN.findall(text)[-1])
+        if process.name == 'simulator' and FIDELITY_CHECK_PATTERN.search(text):
+            checked = FIDELITY_CHECK_PATTERN.findall(text)[-1]
     say(f'demo: real-time factor: {", ".join(factors)}; late programmes: '
         f'{"unknown" if late is None else late}')
+    if checked:
+        say(f'demo: fidelity check: {checked}')
     if held is not None and held < PACE_HELD_FRACTION * asked_factor:
         say(f'demo: the pace slipped: asked {asked_factor:g}, the simulator held {held:.2f} '
             '(this machine could not integrate faster; a late programme starts at the next '
@@ -528,10 +538,13 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser.add_argument('--bags-dir', default='bags',
                         help='where the bag directory goes (created if missing)')
     parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--check-fidelity', action='store_true',
+                        help='run the full model (rtol 1e-6) beside the simulator on every '
+                             'kick, on the spare core, and say how far the landings diverged')
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of the subcommand; returns the exit code."""
     return run_demo(args.setpoint_s, args.trajectory_s, args.real_time_factor, args.bags_dir,
-                    args.seed, plant=args.plant)
+                    args.seed, plant=args.plant, check_fidelity=args.check_fidelity)

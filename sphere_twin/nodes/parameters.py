@@ -65,6 +65,10 @@ SIMULATOR_PARAMETERS = (
     ParameterSpec('lockstep', BOOL, False,
                   'Advance simulated time only while a command is in effect: runs are then '
                   'identical whatever the wall-clock timing.'),
+    ParameterSpec('check_fidelity', BOOL, False,
+                  'Run the full model (rtol 1e-6) beside the plant, in a process of its own, '
+                  'on every programme the plant starts, and publish how far the landings '
+                  'diverge on /diagnostics (docs/numerics.md, the ladder of models).'),
 )
 
 # --- controller --------------------------------------------------------------------------

@@ -103,7 +103,7 @@ class SimulatorNode(Node):
     """
 
     def __init__(self, plant: TwinPlant | None = None, **node_kwargs: Any) -> None:
-        from sphere_sim.twin.plant_setup import build_plant
+        from sphere_sim.twin.plant_setup import build_plant, fidelity_check, plant_rung
         from sphere_sim.twin.precompile import announce_compile
         from sphere_sim.twin.runner import TwinRunner
 
@@ -120,8 +120,12 @@ class SimulatorNode(Node):
             with announce_compile(self.get_logger().info):
                 plant = build_plant(p['plant'], p['scene'], [t for t in p['tables'] if t],
                                     p['params'])
+        # The full model beside the plant: its own process, on the spare core.
+        check = (fidelity_check(p['scene'], p['params'], self.period_s)
+                 if p['check_fidelity'] else None)
         self.runner = TwinRunner(plant, self.period_s, p['noise_std_rad'], p['seed'],
-                                 p['lockstep'])
+                                 p['lockstep'], check=check)
+        self.rung = plant_rung(plant)
         self._topic_publishers = {topic.name: self.create_publisher(
             topic.msg_type, topic.name, topic.qos.to_profile())
             for topic in (SURFACE_NORMAL, SPHERE_STATE, BEAM_STATE, BEAM_VOLTAGE, MARKERS,
@@ -323,7 +327,20 @@ class SimulatorNode(Node):
             ('publishing_fraction', f'{out.busy_s / wall:.4f}'),
             ('programme_latency_median_ms', f'{median_ms:.3f}'),
             ('programme_latency_max_ms', f'{max_ms:.3f}'),
-            ('programme_delay_median_ms', f'{1e3 * t.delay_median_s():.3f}'))
+            ('programme_delay_median_ms', f'{1e3 * t.delay_median_s():.3f}'),
+            # The rung of the ladder of models that served every kick, and, with
+            # check_fidelity, how far its landings were from the full model's.
+            ('fidelity', self.rung), *self._fidelity_values())
+
+    def _fidelity_values(self) -> tuple[tuple[str, int | str], ...]:
+        check = self.runner.check
+        if check is None:
+            return ()
+        d = check.divergence()
+        return (('fidelity_checked', d.checked), ('fidelity_pending', d.pending),
+                ('fidelity_skipped', d.skipped),
+                ('fidelity_divergence_median_rad', f'{d.median_rad:.3e}'),
+                ('fidelity_divergence_max_rad', f'{d.max_rad:.3e}'))
 
     def _publish_diagnostics(self, level: bytes, message: str) -> None:
         status = DiagnosticStatus(level=level, name='simulator: commands',
@@ -404,6 +421,8 @@ class SimulatorNode(Node):
         dropped and still waiting for their start, real-time factor, and where each thread's
         wall time went."""
         self._outbox.flush()  # what was handed over counts as published
+        if self.runner.check is not None:
+            self.runner.check.close(wait=True)  # the kicks that landed are all compared
         v = dict(self.status_values())
         return (f'simulator: simulated {self.runner.time_s:.3f} s, {v["samples"]} samples, '
                 f'{v["programmes"]} programmes started ({v["late"]} late), commands: '
@@ -412,12 +431,26 @@ class SimulatorNode(Node):
                 f'real-time factor {float(v["real_time_factor"]):.3f}; of wall time: '
                 f'integrating {float(v["integrating_fraction"]):.0%} and waiting for '
                 f'publishing {float(v["waiting_for_publishing_fraction"]):.0%} (simulation '
-                f'thread), publishing {float(v["publishing_fraction"]):.0%} (publishing thread)')
+                f'thread), publishing {float(v["publishing_fraction"]):.0%} (publishing thread)'
+                f'; model {v["fidelity"]}' + self._fidelity_text(v))
+
+    @staticmethod
+    def _fidelity_text(v: dict[str, int | str]) -> str:
+        if 'fidelity_checked' not in v:
+            return ''
+        from sphere_sim.twin.fidelity_check import CHECK_RTOL
+
+        return (f'; fidelity check: {v["fidelity_checked"]} kicks against the full model '
+                f'(rtol {CHECK_RTOL:g}), divergence median {v["fidelity_divergence_median_rad"]}'
+                f' rad, max {v["fidelity_divergence_max_rad"]} rad ({v["fidelity_skipped"]} '
+                f'skipped, {v["fidelity_pending"]} unfinished)')
 
     def destroy_node(self) -> None:
         # The queued messages go out (or, after a shutdown signal, fail quietly) before the
         # publishers they use are destroyed.
         self._outbox.close()
+        if self.runner.check is not None:
+            self.runner.check.close()
         super().destroy_node()
 
 
