@@ -31,7 +31,7 @@ setup(
         'console_scripts': [
             'sphere-twin = sphere_twin.cli:main',
             # `ros2 run sphere_twin compile_physics`: `sphere-twin compile` in a colcon workspace.
-            'compile_physics = sphere_twin.commands.compile:main',
+            'compile_physics = sphere_twin.cli:compile_physics',
             'simulator = sphere_twin.nodes.simulator_node:main',
             'monitor = sphere_twin.nodes.monitor_node:main',
             'recorder = sphere_twin.nodes.recorder_node:main',

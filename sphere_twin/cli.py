@@ -152,5 +152,12 @@ def _subcommands(args: argparse.Namespace) -> list[str]:
             if key.endswith('_command') and isinstance(value, str)]
 
 
+def compile_physics() -> int:
+    """``compile_physics``, the console script a colcon workspace runs
+    (``ros2 run sphere_twin compile_physics``): ``sphere-twin compile`` by another name. It
+    lives here, not beside the command, so that no command module imports the CLI back."""
+    return main(['compile', *sys.argv[1:]])
+
+
 if __name__ == '__main__':
     sys.exit(main())

@@ -74,7 +74,22 @@ def imports_of(name, path):
     return found
 
 
+CLI = 'sphere_twin.cli'
+
+
+def cli_command_modules():
+    """The command modules the CLI loads by name (``importlib``, which ``imports_of`` cannot
+    see), read from its ``COMMAND_MODULES`` table."""
+    tree = ast.parse(MODULES[CLI].read_text())
+    table = next(node.value for node in tree.body if isinstance(node, ast.Assign)
+                 and any(getattr(t, 'id', None) == 'COMMAND_MODULES' for t in node.targets))
+    return {f'sphere_twin.commands.{ast.literal_eval(element)}' for element in table.elts}
+
+
 IMPORTS = {name: imports_of(name, path) for name, path in MODULES.items()}
+# The CLI's loads by name count as imports: a command module that imported the CLI back would
+# be a circle all the same.
+IMPORTS[CLI] |= cli_command_modules()
 
 
 def project_target(target):
@@ -156,6 +171,23 @@ def test_no_package_or_room_imports_upward():
 
 def test_no_modules_import_each_other_in_a_circle():
     assert circles() == []
+
+
+def test_the_clis_loads_by_name_are_read_as_imports():
+    commands = cli_command_modules()
+    assert {'sphere_twin.commands.compile', 'sphere_twin.commands.demo'} <= commands
+    assert commands <= set(MODULES)  # every name in the table is a module that exists
+    assert commands <= IMPORTS[CLI]
+
+
+def test_the_architecture_page_draws_the_order_the_rules_keep():
+    """docs/architecture.md's one-way chains name the packages and sphere_sim's rooms in the
+    ranks this test enforces."""
+    page = (ROOT / 'docs' / 'architecture.md').read_text()
+    packages = ' ← '.join(f'`{p}`' for p in sorted(PACKAGE_RANK, key=PACKAGE_RANK.get))
+    rooms = ' ← '.join(sorted(ROOM_RANK, key=ROOM_RANK.get))
+    assert packages in page
+    assert rooms in ' '.join(page.split())
 
 
 def test_rclpy_only_in_the_nodes():

@@ -85,11 +85,3 @@ def compile_here(out: TextIO) -> int:
     print(f'compiled {report.kernels} kernels in {report.elapsed_s:.1f} s; cached in '
           f'{_places(report.cache_dirs)}', file=out)
     return 0
-
-
-def main() -> int:
-    """``compile_physics``, the console script a colcon workspace runs
-    (``ros2 run sphere_twin compile_physics``): ``sphere-twin compile`` by another name."""
-    from sphere_twin.cli import main as cli_main
-
-    return cli_main(['compile', *sys.argv[1:]])
