@@ -23,7 +23,6 @@ if TYPE_CHECKING:
     import numpy as np
     from numpy.typing import NDArray
 
-    from sphere_sim.kicks.plants import TwinPlant
     from sphere_sim.model.parameters import ParameterSet
     from sphere_twin.run_analysis import RecordedRun, ReplayResult
 
@@ -54,29 +53,6 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser.add_argument('--out', type=output_directory, default=None,
                         help='output directory (default: the working directory)')
     parser.set_defaults(func=run)
-
-
-def build_replay_plant(kind: str, normal0: NDArray[np.float64], time0_s: float,
-                       params: ParameterSet, tables: Iterable[str | Path] = ()) -> TwinPlant:
-    """A plant of parameter set ``params`` resting at ``normal0`` at ``time0_s``."""
-    from sphere_sim.kicks.design import cardan_of_normal
-    from sphere_sim.kicks.discrete import kick_period_s
-    from sphere_sim.kicks.lookup_table import load_kick_model
-    from sphere_sim.kicks.plants import ContinuousPlant
-    from sphere_sim.model.scene import load_scene
-    from sphere_sim.twin.plant_setup import discrete_plant
-
-    if kind == 'discrete':
-        plant: TwinPlant = discrete_plant(load_kick_model(tables, params), normal0)
-    else:
-        from sphere_sim.model.assembly import assemble
-        from sphere_sim.model.initial_state import rest_state
-
-        model = assemble(load_scene('rest'), params)
-        plant = ContinuousPlant(model, rest_state(model, cardan_of_normal(normal0)),
-                                kick_period_s=kick_period_s(load_kick_model(tables)))
-    plant.time_s = time0_s
-    return plant
 
 
 def recorded_from_the_physics(bag_dir: Path) -> bool:
@@ -170,7 +146,7 @@ def improvement_text(before_rms_rad: float, after_rms_rad: float) -> str:
 
 def _replay(recorded: RecordedRun, start: int, plant: str, params: ParameterSet,
             tables: Iterable[str | Path], label: str) -> ReplayResult:
-    from sphere_twin.run_analysis import replay
+    from sphere_twin.run_analysis import build_replay_plant, replay
 
     start_s = float(recorded.normal_t_s[start])
     replay_plant = build_replay_plant(plant, resting_start(recorded, start), start_s, params,
