@@ -13,10 +13,11 @@ clock.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import os
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
@@ -57,8 +58,12 @@ from sphere_twin.bag.reader import (
 )
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from msg_defs.programme_events import ProgrammeEvent
+    from sphere_sim.kicks.lookup_table import CombinedKickPlant, LookupTable
     from sphere_sim.kicks.plants import TwinPlant
+    from sphere_sim.model.parameters import ParameterSet
 
 # (start_s, times_s (k,), voltages_v (k, 4)) of a programme; (time_s, voltages_v (4,)) of a hold.
 Kick = tuple[float, NDArray[np.float64], NDArray[np.float64]]
@@ -443,6 +448,51 @@ class ReplayResult:
         return float(np.sqrt(np.mean(self.error_rad ** 2))) if self.error_rad.size else 0.0
 
 
+def build_replay_plant(kind: str, normal0: NDArray[np.float64], time0_s: float,
+                       params: ParameterSet, tables: Iterable[str | Path] = (),
+                       relaxation: str = 'radau') -> TwinPlant:
+    """A plant of parameter set ``params`` resting at ``normal0`` at ``time0_s``: the kick
+    table's (``kind`` 'discrete') or the physics at the live tolerance, from the rest state
+    at the normal's cardan angles (relaxed by ``relaxation``, see
+    :func:`~sphere_sim.model.initial_state.rest_state`)."""
+    from sphere_sim.kicks.design import cardan_of_normal
+    from sphere_sim.kicks.plants import ContinuousPlant
+    from sphere_sim.kicks.process_models import process_model
+    from sphere_sim.model.initial_state import rest_state
+    from sphere_sim.twin.plant_setup import discrete_plant
+
+    paths = tuple(str(path) for path in tables)
+    plant: TwinPlant
+    if kind == 'discrete':
+        plant = discrete_plant(_kick_model(paths, params), normal0)
+    else:
+        model = process_model(params)
+        plant = ContinuousPlant(model, rest_state(model, cardan_of_normal(normal0),
+                                                  relaxation=relaxation),
+                                kick_period_s=replay_kick_period_s(paths))
+    plant.time_s = time0_s
+    return plant
+
+
+def replay_kick_period_s(tables: Iterable[str | Path] = ()) -> float:
+    """How long after its start a programme's effect is over on a replay's plant: the kick
+    period of its tables (:func:`~sphere_sim.kicks.discrete.kick_period_s`), which the
+    simulator's plants use too."""
+    from sphere_sim.kicks.discrete import kick_period_s
+
+    return kick_period_s(_kick_model(tuple(str(path) for path in tables), None))
+
+
+@functools.lru_cache(maxsize=4)
+def _kick_model(paths: tuple[str, ...],
+                params: ParameterSet | None) -> LookupTable | CombinedKickPlant:
+    """The kick tables, loaded once per process: a replay one kick ahead builds a plant for
+    every kick, on every worker."""
+    from sphere_sim.kicks.lookup_table import load_kick_model
+
+    return load_kick_model(paths, params)
+
+
 def replay_start_index(run: RecordedRun, window_s: float) -> int:
     """First sample from which a replay can start: no kick recorded before it still acting."""
     t0 = run.normal_t_s[0]
@@ -461,19 +511,34 @@ def replay(run: RecordedRun, plant: TwinPlant, start_index: int = 0,
     starts at its stamp, each voltage command at its mapped receive time. ``progress`` is
     called with each sample's time once the plant has reached it (a long replay's progress).
     """
+    t0 = run.normal_t_s[start_index]
+    times = run.normal_t_s[start_index:]
+    errors: list[float] = []
+    for t, simulated, recorded in zip(times, replayed_normals(plant, times, run.kicks,
+                                                              run.holds, t0),
+                                      run.normals[start_index:], strict=True):
+        errors.append(angle_between(simulated, recorded))
+        if progress is not None:
+            progress(float(t))
+    return ReplayResult(times.copy(), np.array(errors))
+
+
+def replayed_normals(plant: TwinPlant, times_s: Iterable[float], kicks: Iterable[Kick],
+                     holds: Iterable[Hold], from_s: float) -> Iterator[NDArray[np.float64]]:
+    """The normal of ``plant`` at each of ``times_s`` (ascending), the recorded commands from
+    ``from_s`` on fed in as they fall due: a programme at its start, a voltage command at its
+    time, a programme before a voltage command at the same time. A command the plant refuses
+    is skipped, as the device's twin refused it when live."""
     from sphere_sim.kicks.plants import PlantError
     from sphere_sim.model.programme import PulseProgramme
 
-    t0 = run.normal_t_s[start_index]
     events: list[tuple[float, int, _ReplayEvent]] = sorted(
-                    [(t, 0, ('programme', times, volts)) for t, times, volts in run.kicks
-                     if t >= t0 - TIME_TOL_S]
-                    + [(t, 1, ('hold', volts)) for t, volts in run.holds if t >= t0],
+                    [(t, 0, ('programme', times, volts)) for t, times, volts in kicks
+                     if t >= from_s - TIME_TOL_S]
+                    + [(t, 1, ('hold', volts)) for t, volts in holds if t >= from_s],
                     key=lambda e: (e[0], e[1]))
-    errors: list[float] = []
     k = 0
-    for t, recorded in zip(run.normal_t_s[start_index:], run.normals[start_index:],
-                           strict=True):
+    for t in times_s:
         while k < len(events) and events[k][0] <= t + TIME_TOL_S:
             at, _, event = events[k]
             plant.advance(max(at, plant.time_s))
@@ -486,7 +551,4 @@ def replay(run: RecordedRun, plant: TwinPlant, start_index: int = 0,
                 pass  # refused on the device's twin as well
             k += 1
         plant.advance(max(t, plant.time_s))
-        errors.append(angle_between(plant.snapshot().normal, recorded))
-        if progress is not None:
-            progress(float(t))
-    return ReplayResult(run.normal_t_s[start_index:].copy(), np.array(errors))
+        yield plant.snapshot().normal

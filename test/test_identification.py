@@ -332,9 +332,14 @@ def test_replay_check_shows_the_error_before_and_after(device_bag, tmp_path, cap
     data = json.loads((tmp_path / f'{device_bag.name}_replay.json').read_text())
     assert data['plant'] == 'continuous' and data['before']['params'] == 'calibrated'
     assert data['rms_error_rad'] < data['before']['rms_error_rad']
-    assert lines[-3].startswith('replay error before (calibrated)')
-    assert lines[-2].startswith('replay error after (device_a_truth)')
-    assert lines[-1].startswith('improvement: RMS')
+    assert lines[-5].startswith('replay error before (calibrated): open loop max ')
+    assert lines[-4].startswith('replay error after (device_a_truth): open loop max ')
+    assert ' one kick ahead median ' in lines[-5] and ' one kick ahead median ' in lines[-4]
+    assert lines[-3].startswith('improvement: RMS')
+    assert lines[-1].startswith('replay error: one kick ahead median ')
+    # One kick ahead too, the device's own parameters land its kicks nearer.
+    assert data['one_kick_ahead']['kicks'] == data['before']['one_kick_ahead']['kicks'] == 6
+    assert data['one_kick_ahead']['median_rad'] < data['before']['one_kick_ahead']['median_rad']
 
 
 def test_a_start_set_given_as_a_file_is_kept_beside_the_fitted_one(tmp_path):

@@ -1,4 +1,5 @@
-"""``sphere-twin replay-check BAG``: the bag's commands replayed open loop through the twin."""
+"""``sphere-twin replay-check BAG``: the bag's commands replayed through the twin, open loop and
+one kick ahead."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import json
 import sys
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from msg_defs.device import DEFAULT_PARAMETER_SET, KICK_WINDOW_S
 from sphere_twin.commands.bag import BAG_HELP
@@ -17,14 +18,16 @@ from sphere_twin.commands.options import (
     add_params_option,
     output_directory,
     parameter_set,
+    positive_int,
 )
 
 if TYPE_CHECKING:
     import numpy as np
     from numpy.typing import NDArray
 
-    from sphere_sim.kicks.plants import TwinPlant
+    from sphere_sim.kicks.engine import SerialEngine
     from sphere_sim.model.parameters import ParameterSet
+    from sphere_twin.kick_ahead import KickAheadResult
     from sphere_twin.run_analysis import RecordedRun, ReplayResult
 
 # Resting samples that differ by more than this are a noisy sensor's, not rounding.
@@ -33,12 +36,16 @@ SCATTER_RAD = 1e-12
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     parser = subparsers.add_parser(
-        'replay-check', help='replay a bag\'s commands open loop and compare the normals',
+        'replay-check', help='replay a bag\'s commands open loop and one kick ahead, and '
+                             'compare the normals',
         description='Feed the recorded voltage commands and pulse programmes into the '
                     'simulator open loop, from the first recorded resting normal (the mean of '
                     'the samples before the first command), and report the '
-                    'simulated surface normal\'s error against the recorded one over time: the '
-                    'way to hold the twin against recordings of the real device.')
+                    'simulated surface normal\'s error against the recorded one over time; and '
+                    'run each programme alone from the recorded rest before it and report its '
+                    'landing\'s error against the recorded landing (one kick ahead: whether '
+                    'the model is right about one kick from where the device was). The way to '
+                    'hold the twin against recordings of the real device.')
     parser.add_argument('bag', help=BAG_HELP)
     parser.add_argument('--plant', choices=('discrete', 'continuous'), default=None,
                         help='the plant replayed (default: the one that recorded the bag, '
@@ -53,30 +60,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                              f'replayed too (default {DEFAULT_PARAMETER_SET})')
     parser.add_argument('--out', type=output_directory, default=None,
                         help='output directory (default: the working directory)')
+    parser.add_argument('--workers', type=positive_int, default=2,
+                        help='processes the kicks run one kick ahead spread over (default 2)')
     parser.set_defaults(func=run)
-
-
-def build_replay_plant(kind: str, normal0: NDArray[np.float64], time0_s: float,
-                       params: ParameterSet, tables: Iterable[str | Path] = ()) -> TwinPlant:
-    """A plant of parameter set ``params`` resting at ``normal0`` at ``time0_s``."""
-    from sphere_sim.kicks.design import cardan_of_normal
-    from sphere_sim.kicks.discrete import kick_period_s
-    from sphere_sim.kicks.lookup_table import load_kick_model
-    from sphere_sim.kicks.plants import ContinuousPlant
-    from sphere_sim.model.scene import load_scene
-    from sphere_sim.twin.plant_setup import discrete_plant
-
-    if kind == 'discrete':
-        plant: TwinPlant = discrete_plant(load_kick_model(tables, params), normal0)
-    else:
-        from sphere_sim.model.assembly import assemble
-        from sphere_sim.model.initial_state import rest_state
-
-        model = assemble(load_scene('rest'), params)
-        plant = ContinuousPlant(model, rest_state(model, cardan_of_normal(normal0)),
-                                kick_period_s=kick_period_s(load_kick_model(tables)))
-    plant.time_s = time0_s
-    return plant
 
 
 def recorded_from_the_physics(bag_dir: Path) -> bool:
@@ -99,10 +85,15 @@ def default_plant(bag_dir: Path, shipped_set: bool) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from sphere_sim.kicks.engine import engine_of
     from sphere_sim.model.parameters import load_parameter_set
     from sphere_twin.bag.locate import locate_bag
-    from sphere_twin.plots import plot_replay_errors
-    from sphere_twin.run_analysis import load_run, replay_start_index, unclosed_bag_warning
+    from sphere_twin.run_analysis import (
+        load_run,
+        replay_kick_period_s,
+        replay_start_index,
+        unclosed_bag_warning,
+    )
 
     bag = locate_bag(args.bag)
     if bag.note:
@@ -124,42 +115,90 @@ def run(args: argparse.Namespace) -> int:
     results = {label: _replay(recorded, start, plant, params, args.tables,
                               f'{label} ({params.name})' if before else '')
                for label, params in runs}
+    window_s = replay_kick_period_s(args.tables)
+    noisy = noisy_sensor(recorded, start)
+    with engine_of(args.workers) as engine:
+        ahead = {label: _kick_ahead(recorded, plant, params, args.tables, window_s, noisy,
+                                    engine, f'{label} ({params.name})' if before else '')
+                 for label, params in runs}
+    for line in dict.fromkeys(s.warning() for a in ahead.values() for s in a.skipped):
+        print(f'sphere-twin replay-check: warning: {line}', file=sys.stderr, flush=True)
     out = args.out or DEFAULT_OUT_DIR
     out.mkdir(parents=True, exist_ok=True)
     stem = out / f'{bag.name}_replay'
-    result = results['after']
-    labels = {'before': f'{plant} plant, {before.name if before else ""} (before)',
-              'after': f'{plant} plant, {args.params.name}' + (' (after)' if before else '')}
-    improvement = (improvement_text(results['before'].rms_error_rad, result.rms_error_rad)
+    improvement = (improvement_text(results['before'].rms_error_rad,
+                                    results['after'].rms_error_rad)
                    if before is not None else '')
+    _plot(results, stem.with_suffix('.png'), bag.name, plant, args.params.name,
+          before.name if before else None, improvement)
+    data = _json_data(args, plant, recorded, results, ahead, before, warning)
+    stem.with_suffix('.json').write_text(json.dumps(data, indent=2) + '\n')
+    print(f'replayed {len(recorded.kicks)} programmes and {len(recorded.holds)} voltage '
+          f'commands through the {plant} plant against {results["after"].times_s.size} '
+          'samples')
+    print(f'wrote {stem.with_suffix(".png")} and {stem.with_suffix(".json")}')
+    _print_errors(results, ahead, args.params.name, before.name if before else None,
+                  improvement)
+    return 0
+
+
+def _plot(results: dict[str, ReplayResult], path: Path, bag_name: str, plant: str,
+          params_name: str, before_name: str | None, improvement: str) -> None:
+    """The open loop's error against time (the replay's plot, as before)."""
+    from sphere_twin.plots import plot_replay_errors
+
+    labels = {'before': f'{plant} plant, {before_name} (before)',
+              'after': f'{plant} plant, {params_name}' + (' (after)' if before_name else '')}
     # In rad, as the lines below print it; the improvement's line is the title's second.
-    plot_replay_errors(result.times_s, {labels[k]: results[k].error_rad for k in results},
-                       stem.with_suffix('.png'),
-                       title='\n'.join(filter(None, (f'open-loop replay of {bag.name}',
+    plot_replay_errors(results['after'].times_s,
+                       {labels[k]: results[k].error_rad for k in results}, path,
+                       title='\n'.join(filter(None, (f'open-loop replay of {bag_name}',
                                                       improvement))))
-    data = {'bag': str(args.bag), 'plant': plant, 'samples': int(result.times_s.size),
-            'kicks': len(recorded.kicks), 'params': args.params.name,
-            'max_error_rad': result.max_error_rad, 'rms_error_rad': result.rms_error_rad,
-            **({'warning': warning} if warning else {})}
+
+
+def _json_data(args: argparse.Namespace, plant: str, recorded: RecordedRun,
+               results: dict[str, ReplayResult], ahead: dict[str, KickAheadResult],
+               before: ParameterSet | None, warning: str | None) -> dict[str, Any]:
+    """The replay's JSON: the open loop's error (``max_error_rad``, ``rms_error_rad``) and the
+    one-kick-ahead figures with every kick's landings, each error's question beside it."""
+    from sphere_twin.kick_ahead import ONE_KICK_AHEAD_QUESTION, OPEN_LOOP_QUESTION
+
+    result = results['after']
+    data: dict[str, Any] = {
+        'bag': str(args.bag), 'plant': plant, 'samples': int(result.times_s.size),
+        'kicks': len(recorded.kicks), 'params': args.params.name,
+        'questions': {'open_loop': OPEN_LOOP_QUESTION,
+                      'one_kick_ahead': ONE_KICK_AHEAD_QUESTION},
+        'max_error_rad': result.max_error_rad, 'rms_error_rad': result.rms_error_rad,
+        'one_kick_ahead': ahead['after'].to_dict(),
+        **({'warning': warning} if warning else {})}
     if before is not None:
         data['before'] = {'params': before.name,
                           'max_error_rad': results['before'].max_error_rad,
-                          'rms_error_rad': results['before'].rms_error_rad}
-    stem.with_suffix('.json').write_text(json.dumps(data, indent=2) + '\n')
-    print(f'replayed {len(recorded.kicks)} programmes and {len(recorded.holds)} voltage '
-          f'commands through the {plant} plant against {result.times_s.size} samples')
-    print(f'wrote {stem.with_suffix(".png")} and {stem.with_suffix(".json")}')
-    if before is not None:
-        b = results['before']
-        print(f'replay error before ({before.name}): max {b.max_error_rad:.3g} rad, RMS '
-              f'{b.rms_error_rad:.3g} rad')
-        print(f'replay error after ({args.params.name}): max {result.max_error_rad:.3g} rad, '
-              f'RMS {result.rms_error_rad:.3g} rad')
+                          'rms_error_rad': results['before'].rms_error_rad,
+                          'one_kick_ahead': ahead['before'].to_dict()}
+    return data
+
+
+def _print_errors(results: dict[str, ReplayResult], ahead: dict[str, KickAheadResult],
+                  params_name: str, before_name: str | None, improvement: str) -> None:
+    """The errors on stdout; the last line is the one-kick-ahead and open-loop summary."""
+    result, kicks = results['after'], ahead['after']
+    if before_name is not None:
+        for label, name in (('before', before_name), ('after', params_name)):
+            r = results[label]
+            print(f'replay error {label} ({name}): open loop max {r.max_error_rad:.3g} rad, RMS '
+                  f'{r.rms_error_rad:.3g} rad; one kick ahead {ahead[label].summary()}')
         print(improvement)
     else:
-        print(f'replay error: max {result.max_error_rad:.3g} rad, RMS '
+        print(f'open loop, from the first rest: max {result.max_error_rad:.3g} rad, RMS '
               f'{result.rms_error_rad:.3g} rad')
-    return 0
+    skipped = f' ({len(kicks.skipped)} skipped)' if kicks.skipped else ''
+    worst = f': the worst at {kicks.worst_s:.3f} s' if kicks.error_rad.size else ''
+    print(f'one kick ahead, each of {kicks.error_rad.size} kicks from the recorded rest before '
+          f'it{skipped}{worst}')
+    print(f'replay error: one kick ahead {kicks.summary()}; open loop max '
+          f'{result.max_error_rad:.3g} rad')
 
 
 def improvement_text(before_rms_rad: float, after_rms_rad: float) -> str:
@@ -170,13 +209,33 @@ def improvement_text(before_rms_rad: float, after_rms_rad: float) -> str:
 
 def _replay(recorded: RecordedRun, start: int, plant: str, params: ParameterSet,
             tables: Iterable[str | Path], label: str) -> ReplayResult:
-    from sphere_twin.run_analysis import replay
+    from sphere_twin.run_analysis import build_replay_plant, replay
 
     start_s = float(recorded.normal_t_s[start])
     replay_plant = build_replay_plant(plant, resting_start(recorded, start), start_s, params,
                                       tables)
     progress = _progress_line(label, start_s, float(recorded.normal_t_s[-1]))
     return replay(recorded, replay_plant, start, progress)
+
+
+def _kick_ahead(recorded: RecordedRun, plant: str, params: ParameterSet,
+                tables: Iterable[str | Path], window_s: float, noisy: bool,
+                engine: SerialEngine, label: str) -> KickAheadResult:
+    from sphere_twin.kick_ahead import ReplayPlantSpec, one_kick_ahead
+    from sphere_twin.run_analysis import ProgressClock
+
+    clock = ProgressClock()
+    what = f'one kick ahead {label}' if label else 'one kick ahead'
+
+    def report(done: int, total: int) -> None:
+        # On stderr every few seconds, as the open loop's: the example's 497 kicks take
+        # minutes on the physics.
+        if clock.due():
+            print(f'replay-check: {what}: {done} of {total} kicks ({100.0 * done / total:.0f}%)',
+                  file=sys.stderr, flush=True)
+
+    spec = ReplayPlantSpec(plant, params, tuple(str(t) for t in tables))
+    return one_kick_ahead(recorded, spec, window_s, engine, average=noisy, progress=report)
 
 
 def _progress_line(label: str, start_s: float, end_s: float) -> Callable[[float], None]:
@@ -203,13 +262,29 @@ def resting_start(recorded: RecordedRun, start: int) -> NDArray[np.float64]:
     rests there, and the mean beats the noise. (A noiseless recording keeps its first sample:
     a replay through contacts amplifies even a 1e-17 change to the live tolerance's 1e-5 rad.)
     """
+    from sphere_twin.kick_ahead import unit_mean
+
+    resting = _first_rest(recorded, start)
+    return unit_mean(resting) if _scatters(resting) else recorded.normals[start]
+
+
+def noisy_sensor(recorded: RecordedRun, start: int) -> bool:
+    """Whether the recording's sensor is noisy: its samples from ``start`` until the first
+    command, where the sphere rests, scatter by more than rounding."""
+    return _scatters(_first_rest(recorded, start))
+
+
+def _first_rest(recorded: RecordedRun, start: int) -> NDArray[np.float64]:
+    """The samples from ``start`` until the first command, shape (k, 3)."""
     import numpy as np
 
     t = recorded.normal_t_s
     first = min((k[0] for k in recorded.kicks if k[0] >= t[start] - 1e-9), default=np.inf)
     first = min([first] + [h[0] for h in recorded.holds if h[0] >= t[start]])
-    resting = recorded.normals[start:][t[start:] < first - 1e-9]
-    if len(resting) < 2 or np.ptp(resting, axis=0).max() < SCATTER_RAD:
-        return recorded.normals[start]
-    mean = resting.mean(axis=0)
-    return mean / np.linalg.norm(mean)
+    return recorded.normals[start:][t[start:] < first - 1e-9]
+
+
+def _scatters(resting: NDArray[np.float64]) -> bool:
+    import numpy as np
+
+    return len(resting) >= 2 and float(np.ptp(resting, axis=0).max()) >= SCATTER_RAD
