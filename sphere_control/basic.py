@@ -10,7 +10,7 @@ import dataclasses
 import numpy as np
 from numpy.typing import NDArray
 
-from sphere_control.command import Command, unit_xy
+from sphere_control.command import Command, KickBelief, unit_xy
 from sphere_control.geometry import error_angle_rad, error_direction_rad, nearest_action
 from sphere_sim.kicks.discrete import DIAGONAL_DIRECTIONS_RAD
 
@@ -58,3 +58,8 @@ class BasicController:
                                  command: Command) -> NDArray[np.float64]:
         return (self.params.full_width_rad * command.intensity
                 * unit_xy(self.params.directions_rad[command.action]))
+
+    def believed_kicks(self) -> KickBelief:
+        directions = np.array(self.params.directions_rad, dtype=float)
+        return KickBelief(directions, np.full(directions.shape, self.params.full_width_rad),
+                          learned=False)

@@ -27,9 +27,8 @@ from sphere_control.kick_cycle import KickCycle
 from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD
 
 if TYPE_CHECKING:
-    from sphere_control.basic import BasicController
+    from sphere_control.command import Controller
     from sphere_control.estimator import NormalKalmanFilter
-    from sphere_control.extended import ExtendedController
     from sphere_control.perturbations import NoisySensor
     from sphere_control.reference import Reference, ReferenceSample
     from sphere_sim.kicks.discrete import KickPlant
@@ -163,7 +162,7 @@ class LoopHistory:
         return bool(self.clamped.any())
 
 
-def run_closed_loop(controller: BasicController | ExtendedController, plant: KickPlant,
+def run_closed_loop(controller: Controller, plant: KickPlant,
                     start_normal: ArrayLike, reference: Reference,
                     settings: LoopSettings = LoopSettings(), sensor: NoisySensor | None = None,
                     estimator: NormalKalmanFilter | None = None) -> LoopHistory:

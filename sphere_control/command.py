@@ -15,6 +15,17 @@ class Command:
     intensity: float
 
 
+@dataclasses.dataclass(frozen=True)
+class KickBelief:
+    """What a controller believes of its kicks now: each action's direction and full-intensity
+    width (rad, shape (n_actions,)), and whether it learns them (the extended controller) or
+    holds its model's (the basic one)."""
+
+    directions_rad: NDArray[np.float64]
+    full_widths_rad: NDArray[np.float64]
+    learned: bool
+
+
 class Controller(Protocol):
     """A feedback law on the resting surface normal.
 
@@ -33,6 +44,9 @@ class Controller(Protocol):
     def expected_displacement_xy(self, normal: NDArray[np.float64],
                                  command: Command) -> NDArray[np.float64]:
         """The controller's own prediction of the kick's x-y displacement, shape (2,)."""
+
+    def believed_kicks(self) -> KickBelief:
+        """Its kicks as it believes them now (learned, or its model's)."""
 
 
 def unit_xy(direction_rad: float) -> NDArray[np.float64]:

@@ -12,6 +12,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from sphere_control.basic import BasicController, BasicParams
+from sphere_control.command import Controller
 from sphere_control.extended import ExtendedController, ExtendedParams
 from sphere_control.intensity_calibration import CalibratedKicks
 from sphere_sim.kicks.discrete import KickPlant
@@ -65,7 +66,7 @@ def direction_learning_floor_rad(kick_plant: KickPlant) -> float:
 def make_controller(kind: ControllerKind | str, phi_min_rad: float, full_width_rad: float,
                     directions_rad: Iterable[float],
                     direction_learning_min_rad: float = 0.0,
-                    ) -> BasicController | ExtendedController:
+                    ) -> Controller:
     """A fresh controller of ``kind`` (a :class:`ControllerKind` or its value).
 
     ``PRELEARNED`` gives an extended controller still to be taught by its caller.
@@ -91,7 +92,7 @@ def make_controller(kind: ControllerKind | str, phi_min_rad: float, full_width_r
 
 def controller_for(kind: ControllerKind | str, kick_plant: KickPlant,
                    phi_min_rad: float = DEFAULT_PHI_MIN_RAD,
-                   ) -> BasicController | ExtendedController:
+                   ) -> Controller:
     """A controller whose model is ``kick_plant``'s directions, full-kick width and
     direction-learning floor (:func:`direction_learning_floor_rad`)."""
     return make_controller(kind, phi_min_rad, full_kick_width_rad(kick_plant),

@@ -17,7 +17,7 @@ from typing import TypeVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sphere_control.command import Command, Controller, unit_xy
+from sphere_control.command import Command, Controller, KickBelief, unit_xy
 from sphere_control.geometry import (
     displacement_xy,
     error_angle_rad,
@@ -122,6 +122,10 @@ class ExtendedController:
                                  command: Command) -> NDArray[np.float64]:
         a = command.action
         return self.networks[a](command.intensity) * unit_xy(self.directions_rad[a])
+
+    def believed_kicks(self) -> KickBelief:
+        return KickBelief(self.directions_rad.copy(),
+                          np.array([net(1.0) for net in self.networks]), learned=True)
 
     def direction_errors_rad(self, true_directions_rad: Iterable[float]) -> NDArray[np.float64]:
         """|sigma_a - true direction| per action (rad), shape (n_actions,)."""

@@ -33,9 +33,7 @@ from sphere_control.reference_motion import ReferenceMotion
 
 if TYPE_CHECKING:
     from msg_defs.programme_events import ProgrammeEvent
-    from sphere_control.basic import BasicController
-    from sphere_control.command import Command
-    from sphere_control.extended import ExtendedController
+    from sphere_control.command import Command, Controller
 
 DEFAULT_STALE_TIMEOUT_S = 1.0
 # A kick is scheduled this many sample periods after the sample it was decided on: the time
@@ -123,7 +121,7 @@ class KickCycle:
         instead of at its newest sample.
     """
 
-    def __init__(self, controller: BasicController | ExtendedController, kick_period_s: float,
+    def __init__(self, controller: Controller, kick_period_s: float,
                  stale_timeout_s: float = DEFAULT_STALE_TIMEOUT_S,
                  lead_periods: int = DEFAULT_LEAD_PERIODS, preview: bool = False) -> None:
         self.controller = controller

@@ -5,7 +5,10 @@
 * :class:`EightDirectionPlant`: adds axis-parallel kicks to a four-direction plant by turning
   its diagonal kick by 45 deg (an assumption: the device has no such symmetry and the table
   holds only the diagonal kick; see docs/control.md).
-* :class:`ContinuousKickPlant`: one kick of the continuous model per call (seconds each).
+
+The physics' own kick models, the continuous model kicked from rest
+(:class:`sphere_sim.kicks.continuous_kicks.ContinuousKickPlant`) and the twin's plant kicked on
+(:class:`sphere_sim.twin.plants.TwinKickPlant`), live with the physics.
 """
 
 from __future__ import annotations
@@ -28,9 +31,7 @@ from sphere_sim.kicks.discrete import (
 )
 
 if TYPE_CHECKING:
-    from sphere_sim.kicks.lookup_table import ProgrammedKickPlant, TableSpec
-    from sphere_sim.kicks.plants import ContinuousPlant
-    from sphere_sim.model.parameters import ParameterSet
+    pass
 
 EIGHTH_TURN_RAD = 0.25 * math.pi
 
@@ -101,73 +102,3 @@ class EightDirectionPlant:
         turned = self.base.kick(_turn_xy(normal, -EIGHTH_TURN_RAD), base_action, intensity)
         return KickResult(_turn_xy(turned.normal, EIGHTH_TURN_RAD), turned.peak_deviation_rad,
                           turned.settle_time_s)
-
-
-class ContinuousKickPlant:
-    """The continuous model of §3 as a KickPlant: one simulated kick per call.
-
-    The sphere starts each kick at rest at the given normal; the outcome is the normal at the
-    end of the kick window, as in the lookup table, so both discrete models describe the same
-    kick.
-
-    Parameters
-    ----------
-    spec : sphere_sim.kicks.lookup_table.TableSpec
-        The table's kick: its reference (hind-left) design, turned a quarter turns for action
-        a, and its voltage offsets.
-    params : ParameterSet, optional
-        The default set unless given.
-    """
-
-    def __init__(self, spec: TableSpec, params: ParameterSet | None = None) -> None:
-        from sphere_sim.kicks.characteristics import KickBench
-
-        self.spec = spec
-        self.bench = KickBench(params)
-        self.directions_rad = tuple(spec.design.direction_rad + q * 0.5 * math.pi
-                                    for q in range(4))
-
-    def kick(self, normal: NDArray[np.float64], action: int, intensity: float) -> KickResult:
-        from sphere_sim.kicks.design import simulate_kick
-
-        normal = np.asarray(normal, dtype=float)
-        rest = self.bench.rest(normal)
-        kicked, _ = simulate_kick(self.bench.model, normal,
-                                  self.spec.programme(action, float(intensity), normal),
-                                  window_s=self.bench.window_s, rtol=self.bench.rtol,
-                                  x_rest=rest)
-        return kicked
-
-
-class TwinKickPlant:
-    """The simulator node's continuous plant as a KickPlant: the state carries over.
-
-    Unlike :class:`ContinuousKickPlant`, which starts every kick from rest, each call sends the
-    kick's programme to the twin's :class:`~sphere_sim.kicks.plants.ContinuousPlant` and lets
-    simulated time run on by one kick period, whatever the sphere, the beams and the friction
-    bristles were doing: the closed loop runs on the same plant as the running twin. The
-    ``normal`` passed in must be the plant's own (the closed loop passes back what the last
-    kick returned); resting steps do not advance the plant.
-
-    Parameters
-    ----------
-    kick_model : LookupTable or CombinedKickPlant
-        The kicks' programmes (``programme(action, intensity, normal)``, with the voltage
-        offset for the normal) and nominal directions.
-    plant : sphere_sim.kicks.plants.ContinuousPlant
-    period_s : float
-        Simulated time per kick (s), at least the longest programme.
-    """
-
-    def __init__(self, kick_model: ProgrammedKickPlant, plant: ContinuousPlant,
-                 period_s: float) -> None:
-        self.kick_model = kick_model
-        self.plant = plant
-        self.period_s = period_s
-        self.directions_rad = tuple(kick_model.directions_rad)
-
-    def kick(self, normal: NDArray[np.float64], action: int, intensity: float) -> KickResult:
-        programme = self.kick_model.programme(int(action), float(intensity), normal)
-        self.plant.run_programme(programme)
-        self.plant.advance(self.plant.time_s + max(self.period_s, programme.duration_s))
-        return KickResult(self.plant.snapshot().normal)

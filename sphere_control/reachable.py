@@ -22,8 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 from sphere_control import reference as ref
 
 if TYPE_CHECKING:
-    from sphere_control.basic import BasicController
-    from sphere_control.extended import ExtendedController
+    from sphere_control.command import Controller
 
 # Below this |det| two hull points are collinear with the ray; such a pair is an edge through 0.
 COLLINEAR_TOLERANCE = 1e-15
@@ -37,16 +36,11 @@ def kick_vectors(directions_rad: ArrayLike, widths_rad: ArrayLike) -> NDArray[np
     return np.column_stack([widths * np.cos(directions), widths * np.sin(directions)])
 
 
-def model_kicks(controller: BasicController | ExtendedController) -> NDArray[np.float64]:
-    """The kick vectors a controller believes in: its (learned) directions, and its
-    networks' full-intensity widths (extended) or its full-kick width (basic)."""
-    directions = getattr(controller, 'directions_rad', None)
-    if directions is None:
-        directions = controller.params.directions_rad
-    networks = getattr(controller, 'networks', None)
-    widths = ([net(1.0) for net in networks] if networks is not None
-              else controller.params.full_width_rad)
-    return kick_vectors(directions, widths)
+def model_kicks(controller: Controller) -> NDArray[np.float64]:
+    """The kick vectors a controller believes in: its (learned) directions and full-intensity
+    widths (:meth:`~sphere_control.command.Controller.believed_kicks`)."""
+    belief = controller.believed_kicks()
+    return kick_vectors(belief.directions_rad, belief.full_widths_rad)
 
 
 def reach_per_kick(kicks_xy: NDArray[np.float64], direction_rad: float) -> float:

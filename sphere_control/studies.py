@@ -43,6 +43,7 @@ from sphere_control.closed_loop import (
     Outcome,
     run_closed_loop,
 )
+from sphere_control.command import Controller
 from sphere_control.controllers import (
     ControllerKind,
     direction_learning_floor_rad,
@@ -71,8 +72,6 @@ from sphere_sim.kicks.discrete import (
 from sphere_sim.model.rotations import angle_between
 
 if TYPE_CHECKING:
-    from sphere_control.basic import BasicController
-    from sphere_control.extended import ExtendedController
     from sphere_sim.kicks.lookup_table import LookupTable
 
 # The paper's numbers (§4.1, §5).
@@ -261,7 +260,7 @@ class PlantUnderTest:
 def study_controller(kind: ControllerKind, phi_min: float, put: PlantUnderTest, plant: KickPlant,
                      config: EvaluationConfig, directions_rad: Sequence[float] | None = None,
                      direction_learning_min_rad: float = 0.0,
-                     ) -> BasicController | ExtendedController:
+                     ) -> Controller:
     """A fresh controller of ``kind`` whose model is the nominal plant ``put``.
 
     The pre-learned one has first learned on ``plant`` (the device it will run on).
@@ -461,7 +460,7 @@ def tracking_study(put: PlantUnderTest, plant: KickPlant, config: EvaluationConf
     if noise is not None:
         learning_min = max(learning_min, NOISE_LEARNING_SIGMAS * math.sqrt(2.0) * noise[0])
 
-    def run(controller: BasicController | ExtendedController) -> LoopHistory:
+    def run(controller: Controller) -> LoopHistory:
         sensor: NoisySensor | None = None
         estimator: NormalKalmanFilter | None = None
         if noise is not None:
@@ -497,7 +496,7 @@ def continuous_study(table: LookupTable, put: PlantUnderTest, config: Evaluation
     if config.continuous_kicks <= 0:
         return None
     if continuous_plant is None:
-        from sphere_control.kick_plants import ContinuousKickPlant
+        from sphere_sim.kicks.continuous_kicks import ContinuousKickPlant
 
         continuous_plant = ContinuousKickPlant(table.spec, table.parameters())
     recorder = _RecordingPlant(continuous_plant)
@@ -551,11 +550,10 @@ def twin_study(table: LookupTable, put: PlantUnderTest, config: EvaluationConfig
     they are, on both plants. The runs are the paper's set-up in ``put``'s calibrated
     intensities; the basic controller runs at ``basic_phi_min_rad``, the best on the table.
     """
-    from sphere_control.kick_plants import TwinKickPlant
-    from sphere_sim.kicks.plants import ContinuousPlant
     from sphere_sim.model.assembly import assemble
     from sphere_sim.model.initial_state import rest_state
     from sphere_sim.model.scene import load_scene
+    from sphere_sim.twin.plants import ContinuousPlant, TwinKickPlant
 
     config = config.for_plant(put)
     period = config.kick_period_s

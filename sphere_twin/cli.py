@@ -54,11 +54,11 @@ def user_errors() -> tuple[type[Exception], ...]:
     from sphere_sim.kicks.design import DesignError
     from sphere_sim.kicks.lookup_table import TableError
     from sphere_sim.kicks.offset_lookup import OffsetError
-    from sphere_sim.kicks.plants import PlantError
     from sphere_sim.model.initial_state import RestError
     from sphere_sim.model.parameters import ParameterError
     from sphere_sim.model.programme import ProgrammeError
     from sphere_sim.model.scene import SceneError
+    from sphere_sim.twin.plants import PlantError
     from sphere_twin.bag.reader import BagError
     from sphere_twin.commands.options import CommandError
 

@@ -31,8 +31,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from sphere_sim.kicks.plants import TIME_TOL_S
 from sphere_sim.model.rotations import angle_between
+from sphere_sim.twin.plants import TIME_TOL_S
 from sphere_twin.run_analysis import Hold, RecordedRun, build_replay_plant, replayed_normals
 
 if TYPE_CHECKING:

@@ -45,8 +45,8 @@ from msg_defs.topics import (
 )
 from msg_defs.voltage_rules import check_segments, check_voltages
 from sphere_control.reference_motion import JUMP_TOLERANCE
-from sphere_sim.kicks.plants import TIME_TOL_S
 from sphere_sim.model.rotations import angle_between
+from sphere_sim.twin.plants import TIME_TOL_S
 from sphere_twin.bag.reader import (
     BagError,
     deserialize,
@@ -62,8 +62,8 @@ if TYPE_CHECKING:
 
     from msg_defs.programme_events import ProgrammeEvent
     from sphere_sim.kicks.lookup_table import CombinedKickPlant, LookupTable
-    from sphere_sim.kicks.plants import TwinPlant
     from sphere_sim.model.parameters import ParameterSet
+    from sphere_sim.twin.plants import TwinPlant
 
 # (start_s, times_s (k,), voltages_v (k, 4)) of a programme; (time_s, voltages_v (4,)) of a hold.
 Kick = tuple[float, NDArray[np.float64], NDArray[np.float64]]
@@ -456,10 +456,10 @@ def build_replay_plant(kind: str, normal0: NDArray[np.float64], time0_s: float,
     at the normal's cardan angles (relaxed by ``relaxation``, see
     :func:`~sphere_sim.model.initial_state.rest_state`)."""
     from sphere_sim.kicks.design import cardan_of_normal
-    from sphere_sim.kicks.plants import ContinuousPlant
     from sphere_sim.kicks.process_models import process_model
     from sphere_sim.model.initial_state import rest_state
     from sphere_sim.twin.plant_setup import discrete_plant
+    from sphere_sim.twin.plants import ContinuousPlant
 
     paths = tuple(str(path) for path in tables)
     plant: TwinPlant
@@ -529,8 +529,8 @@ def replayed_normals(plant: TwinPlant, times_s: Iterable[float], kicks: Iterable
     ``from_s`` on fed in as they fall due: a programme at its start, a voltage command at its
     time, a programme before a voltage command at the same time. A command the plant refuses
     is skipped, as the device's twin refused it when live."""
-    from sphere_sim.kicks.plants import PlantError
     from sphere_sim.model.programme import PulseProgramme
+    from sphere_sim.twin.plants import PlantError
 
     events: list[tuple[float, int, _ReplayEvent]] = sorted(
                     [(t, 0, ('programme', times, volts)) for t, times, volts in kicks

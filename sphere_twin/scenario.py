@@ -16,7 +16,7 @@ if TYPE_CHECKING:
 
     from sphere_control.closed_loop import LoopHistory
     from sphere_control.reference import ScheduledReference
-    from sphere_sim.kicks.plants import ContinuousPlant
+    from sphere_sim.twin.plants import ContinuousPlant
     from sphere_twin.testing import TopicProbe
 
 SETPOINT_XY = (0.01, 0.02)  # Fig. 13
@@ -123,10 +123,10 @@ def offline_loop(setpoint_s: float, duration_s: float, plant: str = 'continuous'
     from sphere_control.closed_loop import LoopSettings, run_closed_loop
     from sphere_control.controllers import controller_for
     from sphere_control.intensity_calibration import IntensityCalibration
-    from sphere_control.kick_plants import TwinKickPlant
     from sphere_sim.kicks.discrete import kick_period_s
     from sphere_sim.kicks.lookup_table import load_kick_model
     from sphere_sim.twin.plant_setup import build_plant
+    from sphere_sim.twin.plants import TwinKickPlant
 
     kicks = load_kick_model()
     calibration = IntensityCalibration.of(kicks)

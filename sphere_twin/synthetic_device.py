@@ -30,9 +30,9 @@ from sphere_sim.kicks.discrete import NOISE_STUDY_STD_RAD
 
 if TYPE_CHECKING:
     from sphere_sim.kicks.lookup_table import CombinedKickPlant, LookupTable
-    from sphere_sim.kicks.plants import PlantSnapshot
     from sphere_sim.model.parameters import ParameterSet
     from sphere_sim.model.programme import PulseProgramme
+    from sphere_sim.twin.plants import PlantSnapshot
 
 INTENSITY_RANGE = (0.5, 1.0)
 # On the paper's device a kick below about 0.8 is no smooth function of the beams' parameters:
@@ -99,10 +99,10 @@ def record_device(bag_dir: str | os.PathLike[str], params: ParameterSet | None,
     from msg_defs.device import NS_PER_S
     from msg_defs.topics import PULSE_PROGRAM, SPHERE_STATE, SURFACE_NORMAL
     from sphere_sim.kicks.lookup_table import load_kick_model
-    from sphere_sim.kicks.plants import ContinuousPlant
     from sphere_sim.model.assembly import assemble
     from sphere_sim.model.initial_state import rest_state
     from sphere_sim.model.scene import load_scene
+    from sphere_sim.twin.plants import ContinuousPlant
     from sphere_sim.twin.runner import TwinRunner
     from sphere_twin.bag.writer import BagWriter
 

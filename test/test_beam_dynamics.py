@@ -99,7 +99,7 @@ def test_the_beams_own_centre_of_gravity_changes_little():
     """Table A1's L_cog (319 um) against the 402 um of the beam whose mass and inertia the table
     prints (docs/parameters.md): the pull-in threshold is the same to the bisection's 0.05 V and
     the optimised kick moves by less than 5 %, so the table's value is kept."""
-    from sphere_sim.kicks.calibration import threshold_v
+    from sphere_sim.fitting.calibration import threshold_v
     from sphere_sim.kicks.design import KickDesign, simulate_kick
     from sphere_sim.model.initial_state import rest_state
     from sphere_sim.model.parameters import load_parameter_set

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sphere_sim.kicks.calibration import bisect, with_value
+from sphere_sim.fitting.calibration import bisect, with_value
 from sphere_sim.kicks.design import KickDesign, simulate_kick
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import rest_state
@@ -75,7 +75,7 @@ def test_the_joint_fit_meets_the_pull_in_with_the_smallest_move(monkeypatch):
     """On a stand-in threshold the joint fit reaches the target, keeps every value inside its
     range and off its bounds, leaves the estimate alone, and moves less (in range
     coordinates) than any single parameter fitted alone would."""
-    from sphere_sim.kicks import calibration
+    from sphere_sim.fitting import calibration
     monkeypatch.setattr(calibration, 'threshold_v', stand_in_threshold_v)
     cal = load_parameter_set('calibrated')
     reference = load_parameter_set('table_a1')
@@ -100,7 +100,7 @@ def test_the_joint_fit_meets_the_pull_in_with_the_smallest_move(monkeypatch):
 def test_calibrate_reports_a_target_its_ranges_cannot_reach(monkeypatch):
     """A target beyond what the ranges give ends the fit at the margins, marked unreached: the
     ranges are never stretched."""
-    from sphere_sim.kicks import calibration
+    from sphere_sim.fitting import calibration
     monkeypatch.setattr(calibration, 'threshold_v',
                         lambda params: stand_in_threshold_v(params) - 40.0)
     cal = load_parameter_set('calibrated')
@@ -115,7 +115,7 @@ def test_calibrate_reports_a_target_its_ranges_cannot_reach(monkeypatch):
 def test_the_calibrated_set_is_the_joint_fit_of_its_declared_ranges():
     """The shipped values sit inside their ranges, off their bounds, and give the target
     (the pull-in with the sphere on), with the beams alone lower (§4.1)."""
-    from sphere_sim.kicks import calibration
+    from sphere_sim.fitting import calibration
     cal = load_parameter_set('calibrated')
     fitted = [s for s in cal.uncertain if s.target == 'fig4_threshold']
     assert {s.path for s in fitted} == {'beam.stiffness_z_n_per_m',

@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 
-from sphere_sim.kicks.plants import LIVE_ERROR_BOUND_RAD
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.fidelity import (
     FULL,
@@ -22,6 +21,7 @@ from sphere_sim.model.parameters import load_parameter_set
 from sphere_sim.model.rotations import angle_between
 from sphere_sim.model.scene import load_scene
 from sphere_sim.twin import ladder
+from sphere_sim.twin.plants import LIVE_ERROR_BOUND_RAD
 
 
 def test_an_unknown_rung_is_refused_naming_the_rungs():

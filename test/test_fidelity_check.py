@@ -8,7 +8,6 @@ import pytest
 
 from sphere_sim.kicks.design import KICK_RELAXATION, cardan_of_normal
 from sphere_sim.kicks.lookup_table import LookupTable
-from sphere_sim.kicks.plants import LIVE_ERROR_BOUND_RAD, ContinuousPlant
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.programme import PulseProgramme
@@ -16,6 +15,7 @@ from sphere_sim.model.rotations import angle_between
 from sphere_sim.model.scene import load_scene
 from sphere_sim.twin import fidelity_check as fc
 from sphere_sim.twin.ladder import tilted_normal
+from sphere_sim.twin.plants import LIVE_ERROR_BOUND_RAD, ContinuousPlant
 from sphere_sim.twin.runner import TwinRunner
 
 PERIOD_S = 0.01

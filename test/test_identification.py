@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 import yaml
 
-from sphere_sim.kicks import identification as idf
-from sphere_sim.kicks import observations as kobs
+from sphere_sim.fitting import identification as idf
+from sphere_sim.fitting import observations as kobs
 from sphere_sim.model.parameters import load_parameter_set
 
 BASE = load_parameter_set(idf.START_PARAMETER_SET)
@@ -392,7 +392,7 @@ class _AnalyticMisfit:
 
 
 def test_the_measured_curvature_of_a_parabola_is_its_own():
-    from sphere_sim.kicks import misfit_scan as scan
+    from sphere_sim.fitting import misfit_scan as scan
 
     for a, b in ((1.0, 0.0), (0.2, 0.5), (3.0, -1.0)):
         rise = lambda t, a=a, b=b: a * t * t + b * t  # noqa: E731

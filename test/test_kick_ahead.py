@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sphere_sim.kicks.discrete import normal_from_cardan, normal_from_xy
-from sphere_sim.kicks.plants import LIVE_ERROR_BOUND_RAD
+from sphere_sim.twin.plants import LIVE_ERROR_BOUND_RAD
 from sphere_twin import cli
 from sphere_twin.kick_ahead import kick_cases
 from sphere_twin.run_analysis import RecordedRun
@@ -90,10 +90,10 @@ def _continuous_plant():
     relaxes its start)."""
     from sphere_sim.kicks.discrete import kick_period_s
     from sphere_sim.kicks.lookup_table import load_kick_model
-    from sphere_sim.kicks.plants import ContinuousPlant
     from sphere_sim.kicks.process_models import process_model
     from sphere_sim.model.initial_state import rest_state
     from sphere_sim.model.parameters import load_parameter_set
+    from sphere_sim.twin.plants import ContinuousPlant
 
     model = process_model(load_parameter_set('calibrated'))
     return ContinuousPlant(model, rest_state(model, (*TILT_DEG, 0.0), relaxation='odeint'),

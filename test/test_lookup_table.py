@@ -222,7 +222,7 @@ def test_shipped_table_kick_needs_the_high_pairs_pull_in(shipped):
 def test_diagonal_and_axis_tables_combine_into_eight_directions(shipped):
     from sphere_sim.kicks.discrete import EIGHT_DIRECTIONS_RAD
     from sphere_sim.kicks.lookup_table import AXIS_TABLE_PATH, CombinedKickPlant
-    from sphere_sim.kicks.plants import decode_kick
+    from sphere_sim.twin.plants import decode_kick
 
     axis = LookupTable.load_current(AXIS_TABLE_PATH)
     eight = CombinedKickPlant([shipped, axis])

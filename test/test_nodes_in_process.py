@@ -10,7 +10,7 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from msg_defs.conversions import programme_to_msg, surface_normal_to_msg, voltages_to_msg
-from sphere_sim.kicks.plants import PlantSnapshot
+from sphere_sim.twin.plants import PlantSnapshot
 from sphere_twin.nodes.monitor_node import MonitorNode
 from sphere_twin.nodes.simulator_node import SimulatorNode
 
@@ -289,11 +289,11 @@ def test_with_check_fidelity_the_simulator_says_how_far_each_kick_lands_from_the
     status publishes the rung that served the kicks and the divergence, the final line says it."""
     from sphere_sim.kicks.design import KICK_RELAXATION, cardan_of_normal
     from sphere_sim.kicks.lookup_table import LookupTable
-    from sphere_sim.kicks.plants import ContinuousPlant
     from sphere_sim.model.assembly import assemble
     from sphere_sim.model.initial_state import rest_state
     from sphere_sim.model.scene import load_scene
     from sphere_sim.twin.ladder import tilted_normal
+    from sphere_sim.twin.plants import ContinuousPlant
 
     model = assemble(load_scene('rest'))
     normal = tilted_normal(20.0, 20.0)

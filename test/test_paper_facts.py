@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sphere_sim.fitting.calibration import evaluate
 from sphere_sim.kicks import holding
-from sphere_sim.kicks.calibration import evaluate
 from sphere_sim.kicks.characteristics import KickBench, direction_error
 from sphere_sim.kicks.design import KickDesign
 from sphere_sim.kicks.discrete import normal_from_xy

@@ -10,7 +10,10 @@ from msg_defs.programme_events import ProgrammeState
 from sphere_sim.kicks.design import simulate_kick
 from sphere_sim.kicks.discrete import normal_from_xy
 from sphere_sim.kicks.lookup_table import LookupTable
-from sphere_sim.kicks.plants import (
+from sphere_sim.model.programme import Pulse, PulseProgramme, VoltageSchedule
+from sphere_sim.model.rotations import angle_between, quat_to_matrix
+from sphere_sim.twin.plant_setup import build_plant
+from sphere_sim.twin.plants import (
     LIVE_ERROR_BOUND_RAD,
     LIVE_RTOL,
     ContinuousPlant,
@@ -18,9 +21,6 @@ from sphere_sim.kicks.plants import (
     PlantError,
     decode_kick,
 )
-from sphere_sim.model.programme import Pulse, PulseProgramme, VoltageSchedule
-from sphere_sim.model.rotations import angle_between, quat_to_matrix
-from sphere_sim.twin.plant_setup import build_plant
 from sphere_sim.twin.runner import MAX_START_AHEAD_S, CommandRejectedError, TwinRunner
 
 
@@ -323,10 +323,10 @@ def test_twin_kick_plant_carries_the_state_and_agrees_with_the_table(table):
     """The closed loop's view of the simulator's continuous plant: a full kick from level
     lands where the table says (to its one-step error, 0.002 deg measured in the evaluation),
     and the next kick starts from where the last one left the plant, not from rest."""
-    from sphere_control.kick_plants import TwinKickPlant
     from sphere_sim.model.assembly import assemble
     from sphere_sim.model.initial_state import rest_state
     from sphere_sim.model.scene import load_scene
+    from sphere_sim.twin.plants import TwinKickPlant
 
     model = assemble(load_scene('rest'), table.parameters())
     plant = ContinuousPlant(model, rest_state(model))

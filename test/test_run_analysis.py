@@ -9,8 +9,8 @@ import pytest
 from msg_defs.conversions import status_values
 from msg_defs.topics import CONTROLLER_STATUS, PULSE_PROGRAM
 from sphere_sim.kicks.discrete import normal_from_xy
-from sphere_sim.kicks.plants import LIVE_ERROR_BOUND_RAD
 from sphere_sim.model.scene import SCENES_DIR
+from sphere_sim.twin.plants import LIVE_ERROR_BOUND_RAD
 from sphere_twin.cli import build_parser
 from sphere_twin.processes import parameter_args
 from sphere_twin.run_analysis import (

@@ -14,7 +14,7 @@ from sphere_sim.integrate.solve import simulate
 from sphere_sim.integrate.tolerances import LIVE_RTOL
 from sphere_sim.kicks.design import KickDesign
 from sphere_sim.model import dynamics as dyn
-from sphere_sim.model.assembly import assemble
+from sphere_sim.model.assembly import assemble, rest_model
 from sphere_sim.model.contact_law import contact_force
 from sphere_sim.model.friction import bristle_rate, plastic_speed, sliding_coefficient
 from sphere_sim.model.initial_state import rest_state
@@ -30,12 +30,12 @@ BRISTLE_SETS = ('calibrated', 'dry_contact')  # the paper and stiction readings
 
 @pytest.fixture(scope='module', params=BRISTLE_SETS)
 def bristle_model(request):
-    return validation.rest_model(load_parameter_set(request.param))
+    return rest_model(load_parameter_set(request.param))
 
 
 @pytest.fixture(scope='module')
 def stiction_model():
-    return validation.rest_model(load_parameter_set('dry_contact'))
+    return rest_model(load_parameter_set('dry_contact'))
 
 
 @pytest.mark.parametrize('name', BRISTLE_SETS)
@@ -142,7 +142,7 @@ def test_energy_never_rises_above_the_electrical_work_with_the_bristles(name):
 @pytest.mark.parametrize('name', BRISTLE_SETS)
 def test_a_lossless_drop_keeps_its_energy_with_the_bristles_switched_off(name):
     # LOSSLESS switches friction off, so the bristles are not assembled at all.
-    lossless = validation.rest_model(load_parameter_set(name), **validation.LOSSLESS)
+    lossless = rest_model(load_parameter_set(name), **validation.LOSSLESS)
     assert not lossless.has_bristles
     surplus, impacts = validation.lossless_drop(params=load_parameter_set(name))
     assert impacts >= 2 and surplus < 1e-4

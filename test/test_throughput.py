@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from sphere_sim.fitting import throughput as tp
 from sphere_sim.kicks import optimization, process_models
-from sphere_sim.kicks import throughput as tp
 from sphere_sim.kicks.design import KickDesign, cardan_of_normal, final_normal, simulate_kick
 from sphere_sim.kicks.discrete import normal_from_xy
 from sphere_sim.kicks.engine import PoolEngine, SerialEngine, engine_for

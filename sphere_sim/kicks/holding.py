@@ -10,12 +10,11 @@ from sphere_sim.kicks.characteristics import KickBench, KickEffect
 from sphere_sim.kicks.design import KickDesign
 from sphere_sim.kicks.discrete import normal_from_cardan
 from sphere_sim.kicks.offset_lookup import OffsetLookup
-from sphere_sim.model.assembly import Model
+from sphere_sim.model.assembly import Model, rest_model
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.parameters import ParameterSet
 from sphere_sim.model.programme import Pulse, PulseProgramme
 from sphere_sim.model.rotations import angle_between
-from sphere_sim.studies.validation import rest_model
 
 # Holding is measured on a sphere that has landed from a kick, not on a solved equilibrium
 # (whose bristles start already loaded): it starts HOLD_SETTLE_S after the kick's rising edge,

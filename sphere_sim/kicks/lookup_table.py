@@ -51,7 +51,7 @@ class ProgrammedKickPlant(KickPlant, Protocol):
     its design and the pulse programme that makes it.
 
     The tables (:class:`LookupTable`, :class:`CombinedKickPlant`) implement it; the discrete
-    plant decodes programmes through it (:func:`sphere_sim.kicks.plants.decode_kick`), and the
+    plant decodes programmes through it (:func:`sphere_sim.twin.plants.decode_kick`), and the
     controllers send what ``programme`` gives.
     """
 

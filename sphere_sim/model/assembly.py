@@ -19,7 +19,7 @@ from sphere_sim.model.friction import BRISTLE_READINGS, READING_PAPER, READINGS
 from sphere_sim.model.parameters import ParameterSet
 from sphere_sim.model.rotations import quat_to_matrix
 from sphere_sim.model.scaling import state_scale
-from sphere_sim.model.scene import Scene
+from sphere_sim.model.scene import Scene, load_scene
 from sphere_sim.model.sphere_geometry import mass_properties
 
 SPHERE_STATES = dyn.SPHERE_STATES
@@ -448,3 +448,12 @@ def assemble(scene: Scene, params: ParameterSet | None = None, jit: bool = True)
                  beam_angles=angles,
                  beam_directions=np.stack([np.cos(angles), np.sin(angles)], axis=1),
                  rbf_cz=rbf_cz, rbf_cphi=rbf_cphi, rbf_w=rbf_w, jit=jit)
+
+
+def rest_model(params: ParameterSet | None = None, **effects: bool) -> Model:
+    """The shipped rest scene's model with a parameter set (default: the scene's) and some
+    effects switched (``damping=False``, ...)."""
+    scene = load_scene('rest')
+    if effects:
+        scene = scene.replace(effects=dataclasses.replace(scene.effects, **effects))
+    return assemble(scene, params)

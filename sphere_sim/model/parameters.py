@@ -118,7 +118,7 @@ class FrictionParams:
     breakaway_ratio: float
 
 
-# What a declared-uncertain parameter is fitted to (sphere_sim.kicks.calibration): only Fig. 4's
+# What a declared-uncertain parameter is fitted to (sphere_sim.fitting.calibration): only Fig. 4's
 # pull-in; the paper's other facts test the model and are never fitted. One held at a
 # physical estimate declares ESTIMATE_TARGET instead, and the calibration reports what the
 # observations do across its range.

@@ -10,27 +10,17 @@ from numpy.typing import NDArray
 from msg_defs.device import BEAM_COUNT
 from sphere_sim.integrate.solve import simulate
 from sphere_sim.integrate.tolerances import DEFAULT_RTOL
-from sphere_sim.model.assembly import Model, assemble
+from sphere_sim.model.assembly import Model, rest_model
 from sphere_sim.model.energy import energy_balance
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.parameters import ParameterSet
 from sphere_sim.model.programme import Pulse, PulseProgramme
 from sphere_sim.model.rotations import angle_between
-from sphere_sim.model.scene import load_scene
 
 LOSSLESS = dict(damping=False, contact_losses=False, viscous=False, coulomb=False,
                 stribeck=False)
 MIRROR_XZ_BEAMS = {1: 1, 2: 4, 3: 3, 4: 2}  # mirroring at the x-z plane swaps beams 2 and 4
 MIRROR_XZ_NORMAL = np.array([[1.0], [-1.0], [1.0]])
-
-
-def rest_model(params: ParameterSet | None = None, **effects: bool) -> Model:
-    """The shipped rest scene's model with a parameter set (default: the default set) and some
-    effects switched."""
-    scene = load_scene('rest')
-    if effects:
-        scene = scene.replace(effects=dataclasses.replace(scene.effects, **effects))
-    return assemble(scene, params)
 
 
 def all_beams(amplitudes_v: Sequence[float], width_s: float,

@@ -31,7 +31,6 @@ from sphere_sim.kicks.design import KICK_RELAXATION, cardan_of_normal
 from sphere_sim.kicks.discrete import NOISE_STUDY_STD_RAD
 from sphere_sim.kicks.engine import SerialEngine
 from sphere_sim.kicks.lookup_table import AXIS_TABLE_PATH, DEFAULT_TABLE_PATH, LookupTable
-from sphere_sim.kicks.plants import LIVE_ERROR_BOUND_RAD
 from sphere_sim.kicks.process_models import process_model
 from sphere_sim.model.assembly import Model, assemble
 from sphere_sim.model.fidelity import RUNGS, TABLE_RUNG, carried_state, rung_named
@@ -40,6 +39,7 @@ from sphere_sim.model.parameters import ParameterSet, load_parameter_set
 from sphere_sim.model.programme import PulseProgramme
 from sphere_sim.model.rotations import angle_between
 from sphere_sim.model.scene import load_scene
+from sphere_sim.twin.plants import LIVE_ERROR_BOUND_RAD
 
 # The reference: the full model at this tolerance (a kick then lands within about 1e-8 rad of
 # the converged landing, bench/results/work_precision.md).

@@ -15,8 +15,8 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
     from sphere_sim.kicks.lookup_table import ProgrammedKickPlant
-    from sphere_sim.kicks.plants import ContinuousPlant, DiscretePlant, RestPose, TwinPlant
     from sphere_sim.twin.fidelity_check import FidelityCheck
+    from sphere_sim.twin.plants import ContinuousPlant, DiscretePlant, RestPose, TwinPlant
 
 # The first is the simulator's default: the physics, which publishes every topic.
 PLANT_KINDS = ('continuous', 'discrete')
@@ -39,11 +39,11 @@ def build_plant(kind: str, scene_name: str = 'rest', table_paths: Iterable[str |
     """
     from sphere_sim.kicks.discrete import kick_period_s, normal_from_cardan
     from sphere_sim.kicks.lookup_table import load_kick_model
-    from sphere_sim.kicks.plants import ContinuousPlant, PlantError, RestPose
     from sphere_sim.model.assembly import assemble
     from sphere_sim.model.initial_state import initial_state
     from sphere_sim.model.parameters import load_parameter_set
     from sphere_sim.model.scene import load_scene
+    from sphere_sim.twin.plants import ContinuousPlant, PlantError, RestPose
 
     if kind not in PLANT_KINDS:
         raise PlantError(f'unknown plant {kind!r}; choose one of {", ".join(PLANT_KINDS)}')
@@ -69,8 +69,8 @@ def build_plant(kind: str, scene_name: str = 'rest', table_paths: Iterable[str |
 def plant_rung(plant: ContinuousPlant | DiscretePlant | TwinPlant) -> str:
     """The rung of the ladder of models that ``plant`` serves kicks from: its model's, the
     table, or 'other' for a plant of neither kind (a test's)."""
-    from sphere_sim.kicks.plants import ContinuousPlant, DiscretePlant
     from sphere_sim.model.fidelity import TABLE_RUNG, rung_of_scene
+    from sphere_sim.twin.plants import ContinuousPlant, DiscretePlant
 
     if isinstance(plant, ContinuousPlant):
         return rung_of_scene(plant.model.scene).name
@@ -96,7 +96,7 @@ def discrete_plant(kicks: ProgrammedKickPlant, normal0: NDArray[np.float64],
     """The discrete plant of the kick model ``kicks``, resting at ``normal0`` (and, given
     ``rest``, reporting the sphere's and beams' resting state too)."""
     from sphere_sim.kicks.discrete import kick_period_s
-    from sphere_sim.kicks.plants import DiscretePlant
+    from sphere_sim.twin.plants import DiscretePlant
 
     # A kick lands when it has settled (every kick of the shipped tables is within 0.005 deg
     # of its outcome by 45 ms), after the kick period the offline loop and the controller

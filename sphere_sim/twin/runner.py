@@ -21,9 +21,9 @@ from numpy.typing import ArrayLike, NDArray
 from msg_defs.device import VOLTAGE_LIMIT_V
 from msg_defs.programme_events import ProgrammeEvent, ProgrammeState
 from msg_defs.voltage_rules import VoltageRuleError, check_voltages
-from sphere_sim.kicks.plants import TIME_TOL_S, PlantError, PlantSnapshot, TwinPlant
 from sphere_sim.model.programme import ProgrammeError, PulseProgramme
 from sphere_sim.twin.fidelity_check import FidelityCheck
+from sphere_sim.twin.plants import TIME_TOL_S, PlantError, PlantSnapshot, TwinPlant
 
 # A programme may start at most this far after the simulated now. Stamps are simulated time;
 # one far ahead is a wall-clock stamp (`stamp: now` in `ros2 topic pub`), which would wait
@@ -140,7 +140,7 @@ class TwinRunner:
 
     Parameters
     ----------
-    plant : sphere_sim.kicks.plants.TwinPlant
+    plant : sphere_sim.twin.plants.TwinPlant
     period_s : float
         Simulated time between samples.
     noise_std_rad : float

@@ -39,9 +39,9 @@ from typing import Any, TextIO
 from tqdm import tqdm
 
 from msg_defs.device import KICK_WINDOW_S
+from sphere_sim.fitting import throughput as tp
 from sphere_sim.integrate.solve import DEFAULT_METHOD
 from sphere_sim.integrate.tolerances import DEFAULT_RTOL
-from sphere_sim.kicks import throughput as tp
 from sphere_sim.model.scene import load_scene
 from sphere_sim.studies.regularisation import STUDIES, STUDY_RTOLS, regularisation_rows
 from sphere_sim.studies.work_precision import (

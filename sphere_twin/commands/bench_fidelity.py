@@ -66,6 +66,8 @@ def table_lines(ladder: Ladder) -> list[str]:
                      f'{r.median_rad:.2e} | {r.p95_rad:.2e} | {r.max_rad:.2e} | '
                      f'{r.ms_per_kick:.3g} | {"yes" if r.meets_live_budget else "no"} |')
     lines.append('')
+    lines.append(f'the twin runs: {full.label}, '
+                 f'{"within" if full.meets_live_budget else "outside"} the live budget')
     live = ladder.live_rung()
     if live is None:
         lines.append(f'live rung none: no model rung meets the budget (full model '

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 import yaml
 from tqdm import tqdm
 
-from sphere_sim.kicks.calibration import (
+from sphere_sim.fitting.calibration import (
     CALIBRATED_SET,
     FIT_TOLERANCE_V,
     LITERAL_SET,

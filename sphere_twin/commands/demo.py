@@ -100,8 +100,8 @@ BAG_LAG_S = 0.5
 def model_fidelity(plant: str) -> tuple[str, str]:
     """The rung of the ladder of models (:mod:`sphere_sim.model.fidelity`) that ``plant``
     runs, and what that rung is, in words."""
-    from sphere_sim.kicks.plants import LIVE_RTOL
     from sphere_sim.model.fidelity import FULL, TABLE_RUNG
+    from sphere_sim.twin.plants import LIVE_RTOL
 
     if plant == 'discrete':
         return TABLE_RUNG, ("each kick's landing looked up in the kick tables, nothing "

@@ -1,7 +1,7 @@
 """``sphere-twin identify BAG [BAG ...]``: fit the twin's parameters to a device's recordings.
 
 Reads only what the device records (``/beams/pulse_program``, ``/beams/voltage_command``,
-``/sphere/surface_normal``), hands the kicks to :mod:`sphere_sim.kicks.identification`, and
+``/sphere/surface_normal``), hands the kicks to :mod:`sphere_sim.fitting.identification`, and
 writes a parameter file (``base:`` + ``overrides:``, with an ``identification:`` section of
 values, intervals and per-kick residuals) and a plot of recorded against fitted normals.
 """
@@ -25,7 +25,7 @@ import yaml
 from numpy.typing import NDArray
 from tqdm import tqdm
 
-from sphere_sim.kicks.identification import START_PARAMETER_SET
+from sphere_sim.fitting.identification import START_PARAMETER_SET
 from sphere_twin.commands.bag import BAG_HELP
 from sphere_twin.commands.options import (
     DEFAULT_OUT_DIR,
@@ -36,8 +36,8 @@ from sphere_twin.commands.options import (
 )
 
 if TYPE_CHECKING:
-    from sphere_sim.kicks.identification import Evaluator, IdentificationResult
-    from sphere_sim.kicks.observations import KickObservation, Observations
+    from sphere_sim.fitting.identification import Evaluator, IdentificationResult
+    from sphere_sim.fitting.observations import KickObservation, Observations
     from sphere_sim.model.parameters import ParameterSet
 
 TRUTH_FILE = 'truth.yaml'
@@ -77,7 +77,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 def read_observations(bag_dir: str | os.PathLike[str]) -> Observations:
     """The kicks of one bag, from the device's topics only."""
-    from sphere_sim.kicks.observations import SETTLE_S, observations_from_samples
+    from sphere_sim.fitting.observations import SETTLE_S, observations_from_samples
     from sphere_twin.run_analysis import DEVICE_TOPICS, load_run
 
     run = load_run(bag_dir, DEVICE_TOPICS)
@@ -86,8 +86,8 @@ def read_observations(bag_dir: str | os.PathLike[str]) -> Observations:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sphere_sim.kicks.identification import fit_parameters, identify
-    from sphere_sim.kicks.observations import IdentificationError, merge_observations
+    from sphere_sim.fitting.identification import fit_parameters, identify
+    from sphere_sim.fitting.observations import IdentificationError, merge_observations
     from sphere_sim.model.parameters import ParameterError, load_parameter_set
     from sphere_twin.bag.locate import locate_bag
 
@@ -322,7 +322,7 @@ def plot_fit(path: Path, obs: Observations, result: IdentificationResult, title:
 def report_truth(result: IdentificationResult, truth: ParameterSet,
                  fitted: ParameterSet) -> None:
     """Each parameter against the bag's ``truth.yaml``, and the count that the issue asks."""
-    from sphere_sim.kicks.identification import within_truth
+    from sphere_sim.fitting.identification import within_truth
 
     rows = within_truth(result, truth)
     print(f'against {TRUTH_FILE}:')

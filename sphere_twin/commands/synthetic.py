@@ -29,7 +29,7 @@ if TYPE_CHECKING:
     import numpy as np
     from numpy.typing import NDArray
 
-    from sphere_sim.kicks.identification import Evaluator
+    from sphere_sim.fitting.identification import Evaluator
     from sphere_twin.synthetic_device import SyntheticDevice
 
 DEFAULT_STUDY = Path('identification.md')  # the committed one: --out bench/results/...
@@ -107,8 +107,8 @@ def run_record(args: argparse.Namespace) -> int:
 
 
 def run_study(args: argparse.Namespace) -> int:
+    from sphere_sim.fitting.identification import fit_parameters, identify, within_truth
     from sphere_sim.kicks.engine import engine_of
-    from sphere_sim.kicks.identification import fit_parameters, identify, within_truth
     from sphere_sim.model.parameters import load_parameter_set
     from sphere_twin.commands.identify import read_observations
     from sphere_twin.synthetic_device import DEVICES, NOISE_STUDY_STD_RAD

@@ -235,14 +235,12 @@ class ControllerNode(Node):
         if decision.command is not None:
             values += [('action', decision.command.action),
                        ('intensity', f'{decision.command.intensity:.4f}')]
-        learned = getattr(self.cycle.controller, 'directions_rad', None)
-        if learned is not None:
+        belief = self.cycle.controller.believed_kicks()
+        if belief.learned:  # what it has learned so far; a fixed model is in its parameters
             values.append(('directions_deg', ' '.join(f'{math.degrees(d):.2f}'
-                                                      for d in learned)))
-        networks = getattr(self.cycle.controller, 'networks', None)
-        if networks is not None:
-            values.append(('full_widths_deg', ' '.join(f'{math.degrees(net(1.0)):.5f}'
-                                                       for net in networks)))
+                                                      for d in belief.directions_rad)))
+            values.append(('full_widths_deg', ' '.join(f'{math.degrees(w):.5f}'
+                                                       for w in belief.full_widths_rad)))
         message = (f'kick action {decision.command.action} at u_K '
                    f'{decision.command.intensity:.3f}' if decision.command is not None
                    else phase.value)

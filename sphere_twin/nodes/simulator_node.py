@@ -65,7 +65,7 @@ from sphere_twin.nodes.parameters import SIMULATOR_PARAMETERS
 
 if TYPE_CHECKING:
     from msg_defs.programme_events import ProgrammeEvent
-    from sphere_sim.kicks.plants import TwinPlant
+    from sphere_sim.twin.plants import TwinPlant
     from sphere_sim.twin.runner import Sample
 
 # The physics (scipy, numba, the kick table) is imported when the node is built, not with this
@@ -91,12 +91,12 @@ STATUS_PERIOD_S = 1.0
 
 
 class SimulatorNode(Node):
-    """Runs a plant (``sphere_sim.kicks.plants``) through
+    """Runs a plant (``sphere_sim.twin.plants``) through
     :class:`sphere_sim.twin.runner.TwinRunner`.
 
     Parameters
     ----------
-    plant : sphere_sim.kicks.plants.TwinPlant, optional
+    plant : sphere_sim.twin.plants.TwinPlant, optional
         Overrides the ``plant``/``scene``/``table`` parameters (for tests).
     **node_kwargs
         Passed to ``rclpy.node.Node`` (e.g. ``context``).

@@ -1,7 +1,7 @@
 """System identification: fit model parameters so that the continuous model reproduces kicks
 recorded on one device.
 
-The kicks come as observations (:mod:`sphere_sim.kicks.observations`): the programme, the
+The kicks come as observations (:mod:`sphere_sim.fitting.observations`): the programme, the
 resting normal before it and the resting normal after it, each a mean of settled samples.
 
 The residual of a kick is the model's resting normal after the programme, started at rest at
@@ -43,8 +43,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from threadpoolctl import threadpool_limits
 
+from sphere_sim.fitting import misfit_scan as scan
+from sphere_sim.fitting.observations import (
+    SETTLE_S,
+    IdentificationError,
+    KickObservation,
+    Observations,
+)
 from sphere_sim.integrate.tolerances import FIT_RTOL
-from sphere_sim.kicks import misfit_scan as scan
 from sphere_sim.kicks.design import (
     KICK_RELAXATION,
     KICK_SAMPLE_PERIOD_S,
@@ -52,12 +58,6 @@ from sphere_sim.kicks.design import (
     final_normal,
 )
 from sphere_sim.kicks.engine import SerialEngine, engine_for
-from sphere_sim.kicks.observations import (
-    SETTLE_S,
-    IdentificationError,
-    KickObservation,
-    Observations,
-)
 from sphere_sim.kicks.process_models import process_model
 from sphere_sim.kicks.table_build import BLAS_THREADS_PER_KICK
 from sphere_sim.model.initial_state import rest_state
@@ -67,7 +67,7 @@ from sphere_sim.model.parameters import ParameterSet
 # entangled one's) and the cosine of their effects.
 SetAside = tuple[str, int | None, float]
 
-# The fit's tolerance, a tenth of the live twin's (sphere_sim.kicks.plants.LIVE_RTOL). At the
+# The fit's tolerance, a tenth of the live twin's (sphere_sim.twin.plants.LIVE_RTOL). At the
 # live 3e-4 a kick ends within a few 1e-6 rad of the exact one, but that error jumps with the
 # step-size sequence as a parameter moves, and over 40 kicks the jumps moved the whitened misfit
 # by 2 to 4 within a standard error of the optimum (device_a): local dips deeper than the

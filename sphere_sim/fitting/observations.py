@@ -9,7 +9,7 @@ observation: the programme, the resting normal before it and the resting normal 
 
 The residuals are weighed by the sensor noise they carry, correlations included: the stretch
 after one kick is the stretch before the next, so one noise draw enters both. The fit itself is
-:mod:`sphere_sim.kicks.identification`.
+:mod:`sphere_sim.fitting.identification`.
 """
 
 from __future__ import annotations

@@ -26,9 +26,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from sphere_sim.fitting.calibration import with_value
 from sphere_sim.kicks import design as design_module
 from sphere_sim.kicks import table_build
-from sphere_sim.kicks.calibration import with_value
 from sphere_sim.kicks.design import KickDesign, simulate_kick
 from sphere_sim.kicks.engine import DaskEngine, PoolEngine, SerialEngine
 from sphere_sim.kicks.lookup_table import TableSpec

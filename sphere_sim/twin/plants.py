@@ -17,7 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 from msg_defs.device import BEAM_COUNT, KICK_WINDOW_S
 from sphere_sim.integrate.solve import simulate
 from sphere_sim.integrate.tolerances import LIVE_RTOL
-from sphere_sim.kicks.discrete import NOISE_STUDY_STD_RAD
+from sphere_sim.kicks.discrete import NOISE_STUDY_STD_RAD, KickResult
 from sphere_sim.model.assembly import Model
 from sphere_sim.model.initial_state import initial_state
 from sphere_sim.model.programme import PulseProgramme, VoltageSchedule
@@ -298,3 +298,37 @@ class DiscretePlant:
                              self.schedule.voltages_at(self.time_s),
                              None if rest is None else rest.turned_to(self.normal),
                              None if rest is None else rest.beams())
+
+
+class TwinKickPlant:
+    """The simulator node's continuous plant as a KickPlant: the state carries over.
+
+    Unlike :class:`ContinuousKickPlant`, which starts every kick from rest, each call sends the
+    kick's programme to the twin's :class:`~sphere_sim.twin.plants.ContinuousPlant` and lets
+    simulated time run on by one kick period, whatever the sphere, the beams and the friction
+    bristles were doing: the closed loop runs on the same plant as the running twin. The
+    ``normal`` passed in must be the plant's own (the closed loop passes back what the last
+    kick returned); resting steps do not advance the plant.
+
+    Parameters
+    ----------
+    kick_model : LookupTable or CombinedKickPlant
+        The kicks' programmes (``programme(action, intensity, normal)``, with the voltage
+        offset for the normal) and nominal directions.
+    plant : sphere_sim.twin.plants.ContinuousPlant
+    period_s : float
+        Simulated time per kick (s), at least the longest programme.
+    """
+
+    def __init__(self, kick_model: ProgrammedKickPlant, plant: ContinuousPlant,
+                 period_s: float) -> None:
+        self.kick_model = kick_model
+        self.plant = plant
+        self.period_s = period_s
+        self.directions_rad = tuple(kick_model.directions_rad)
+
+    def kick(self, normal: NDArray[np.float64], action: int, intensity: float) -> KickResult:
+        programme = self.kick_model.programme(int(action), float(intensity), normal)
+        self.plant.run_programme(programme)
+        self.plant.advance(self.plant.time_s + max(self.period_s, programme.duration_s))
+        return KickResult(self.plant.snapshot().normal)
