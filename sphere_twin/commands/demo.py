@@ -266,6 +266,9 @@ def run_demo(setpoint_s: float = DEFAULT_SETPOINT_S, trajectory_s: float = DEFAU
         f'{DISCOVERY_RANGE_VAR}={os.environ.get(DISCOVERY_RANGE_VAR, "LOCALHOST (default)")}')
     for line in demo_start_lines(plant, real_time_factor, setpoint_s, trajectory_s):
         say(line)
+    if check_fidelity:
+        say('demo: check_fidelity: the full model at rtol 1e-6 runs beside the simulator, kick '
+            'by kick, on the spare core; the summary says how far the landings diverged')
     with StopSignals() as stop:
         live = _run_live(demo_nodes(bag_dir, setpoint_s, real_time_factor, seed, plant,
                                     check_fidelity),
