@@ -120,3 +120,25 @@ def test_a_scene_has_one_parameter_set_whichever_way_it_is_asked_for():
         assert model.params == scene.parameters(replacement)
         assert model.params.beam.stiffness_phi_nm_per_rad == 2.5e-6
     assert assemble(scene, base, jit=False).params.name == base.name
+
+
+def test_one_table_gives_every_packed_quantity_its_index_and_its_value():
+    """sphere_sim.model.packed: indices 0..N-1 in the table's order, each quantity read from
+    its path (none twice), the derived ones computed by the assembly."""
+    from sphere_sim.model.assembly import pack_parameters
+    from sphere_sim.model.packed import DERIVED, N_PARAMS, Packed
+    from sphere_sim.model.parameters import load_parameter_set
+
+    assert [int(q) for q in Packed] == list(range(N_PARAMS))
+    paths = [q.path for q in Packed if q.path != DERIVED]
+    assert len(paths) == len(set(paths))
+    params = load_parameter_set('calibrated')
+    p = pack_parameters(params)
+    assert p.shape == (N_PARAMS,)
+    for quantity in Packed:
+        if quantity.path != DERIVED:
+            assert p[quantity] == params.get(quantity.path), quantity.name
+    assert np.all(p[Packed.JXX:Packed.JZZ + 1] > 0.0)  # the flattened sphere's inertia
+    model = assemble(scene_with())
+    np.testing.assert_array_equal(model.p[Packed.JXX:Packed.JZZ + 1],
+                                  p[Packed.JXX:Packed.JZZ + 1])

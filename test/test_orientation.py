@@ -7,9 +7,9 @@ import pytest
 from physics_helpers import scene_with
 
 from sphere_sim.integrate.solve import simulate
-from sphere_sim.model import dynamics
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.initial_state import explicit_state
+from sphere_sim.model.packed import Packed
 from sphere_sim.model.programme import PulseProgramme
 from sphere_sim.model.rotations import (
     cardan_to_matrix,
@@ -65,7 +65,7 @@ def test_torque_free_spin_conserves_angular_momentum():
     o = model.sphere_offset
     x[o + 10:o + 13] = [40.0, 0.0, 200.0]
     traj = simulate(model, x, 0.05, PulseProgramme(), rtol=1e-10, sample_period_s=1e-3)
-    inertia = model.p[dynamics.P_JXX:dynamics.P_JZZ + 1]
+    inertia = model.p[Packed.JXX:Packed.JZZ + 1]
     momenta = np.stack([quat_to_matrix(np.ascontiguousarray(traj.x[o + 3:o + 7, i]))
                         @ (inertia * traj.x[o + 10:o + 13, i]) for i in range(traj.t.size)])
     assert np.ptp(traj.x[o + 10], axis=0) > 10.0  # the body rates do precess

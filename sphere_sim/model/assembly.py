@@ -16,6 +16,7 @@ from sphere_sim.model import dynamics as dyn
 from sphere_sim.model import gaps as gap_kernels
 from sphere_sim.model.contact_law import contact_force, elastic_energy
 from sphere_sim.model.friction import BRISTLE_READINGS, READING_PAPER, READINGS
+from sphere_sim.model.packed import DERIVED, N_PARAMS, Packed
 from sphere_sim.model.parameters import ParameterSet
 from sphere_sim.model.rotations import quat_to_matrix
 from sphere_sim.model.scaling import state_scale
@@ -35,50 +36,16 @@ def beam_angle_rad(beam: int) -> float:
 
 
 def pack_parameters(params: ParameterSet) -> NDArray[np.float64]:
-    """The packed parameter vector ``p`` of :mod:`sphere_sim.model.dynamics`, shape (N_PARAMS,)."""
-    b, s, c, f = params.beam, params.sphere, params.contact, params.friction
+    """The packed parameter vector ``p`` of :mod:`sphere_sim.model.dynamics`, shape (N_PARAMS,):
+    each quantity of :class:`~sphere_sim.model.packed.Packed` from its path, and the sphere's
+    inertia from its shape (the capacitance fit's widths are set by :func:`assemble`)."""
+    p = np.zeros(N_PARAMS)
+    for quantity in Packed:
+        if quantity.path != DERIVED:
+            p[quantity] = params.get(quantity.path)
+    s = params.sphere
     mp = mass_properties(s.radius_m, s.cut_angle_rad, mass_kg=s.mass_kg)
-    p = np.zeros(dyn.N_PARAMS)
-    p[dyn.P_GRAVITY] = params.gravity_m_per_s2
-    p[dyn.P_BEAM_MASS] = b.mass_kg
-    p[dyn.P_BEAM_INERTIA_SUSP] = b.inertia_suspension_kg_m2
-    p[dyn.P_BEAM_COG] = b.cog_distance_m
-    p[dyn.P_BEAM_LENGTH] = b.length_m
-    p[dyn.P_SUSPENSION_RADIUS] = b.suspension_radius_m
-    p[dyn.P_SUSPENSION_Z] = b.suspension_z_m
-    p[dyn.P_KZ] = b.stiffness_z_n_per_m
-    p[dyn.P_KPHI] = b.stiffness_phi_nm_per_rad
-    p[dyn.P_DZ] = b.damping_z_ns_per_m
-    p[dyn.P_DPHI] = b.damping_phi_nms_per_rad
-    p[dyn.P_GROUND_Z] = b.ground_z_m
-    p[dyn.P_GROUND_LENGTH] = b.ground_length_m
-    p[dyn.P_ISO] = b.insulation_virtual_m
-    p[dyn.P_ES_LENGTH] = b.electrode_length_m
-    p[dyn.P_ES_WIDTH] = b.electrode_width_m
-    p[dyn.P_FRINGE_ANGLE] = params.electrostatics.fringe_angle_rad
-    p[dyn.P_SPHERE_RADIUS] = s.radius_m
-    p[dyn.P_SPHERE_MASS] = s.mass_kg
-    p[dyn.P_COG_OFFSET] = s.cog_offset_m
-    p[dyn.P_JXX:dyn.P_JZZ + 1] = mp.inertia_cog_kg_m2
-    p[dyn.P_D_ROT] = s.damping_rot_nms
-    p[dyn.P_D_TRANS] = s.damping_trans_ns_per_m
-    p[dyn.P_KC] = c.stiffness_n_per_m
-    p[dyn.P_C_TRANSITION] = c.transition_force_n
-    p[dyn.P_RD] = c.loss_s_per_m
-    p[dyn.P_MU_VISC] = f.viscous_ns_per_m
-    p[dyn.P_MU_C] = f.coulomb
-    p[dyn.P_V_C] = f.coulomb_velocity_m_per_s
-    p[dyn.P_MU_S] = f.stribeck
-    p[dyn.P_V_S] = f.stribeck_velocity_m_per_s
-    p[dyn.P_EPS] = f.epsilon_m2_per_s2
-    p[dyn.P_VISC_ONSET] = f.viscous_onset_m
-    p[dyn.P_PRESLIDING] = f.presliding_m
-    p[dyn.P_VISC_PER_NEWTON] = f.viscous_s_per_m
-    p[dyn.P_BRISTLE_DAMPING] = f.bristle_damping_s
-    p[dyn.P_STATIC_COEFF] = f.static_coefficient
-    p[dyn.P_BRISTLE_STIFFNESS] = f.bristle_stiffness_n_per_m
-    p[dyn.P_BRISTLE_SPEED] = f.bristle_speed_m_per_s
-    p[dyn.P_BREAKAWAY] = f.breakaway_ratio
+    p[Packed.JXX:Packed.JZZ + 1] = mp.inertia_cog_kg_m2
     return p
 
 
@@ -427,8 +394,8 @@ def assemble(scene: Scene, params: ParameterSet | None = None, jit: bool = True)
         rbf_cz = np.ascontiguousarray(fit.centres_z_m)
         rbf_cphi = np.ascontiguousarray(fit.centres_phi_rad)
         rbf_w = np.ascontiguousarray(fit.weights)
-        p[dyn.P_RBF_SIGMA_Z] = fit.sigma_z_m
-        p[dyn.P_RBF_SIGMA_PHI] = fit.sigma_phi_rad
+        p[Packed.RBF_SIGMA_Z] = fit.sigma_z_m
+        p[Packed.RBF_SIGMA_PHI] = fit.sigma_phi_rad
 
     parts = ['beams']
     if fx.electrostatics:

@@ -40,55 +40,9 @@ from sphere_sim.model.friction import (
     plastic_share,
     plastic_speed,
 )
+from sphere_sim.model.packed import Packed
 from sphere_sim.model.rotations import quat_rows
 from sphere_sim.model.vec3 import add, cross, dot, mat_t_vec, matvec, scale, sub
-
-# Indices into the packed parameter vector ``p`` (see model.pack_parameters).
-P_GRAVITY = 0
-P_BEAM_MASS = 1
-P_BEAM_INERTIA_SUSP = 2
-P_BEAM_COG = 3
-P_BEAM_LENGTH = 4
-P_SUSPENSION_RADIUS = 5
-P_SUSPENSION_Z = 6
-P_KZ = 7
-P_KPHI = 8
-P_DZ = 9
-P_DPHI = 10
-P_GROUND_Z = 11
-P_GROUND_LENGTH = 12
-P_ISO = 13
-P_ES_LENGTH = 14
-P_ES_WIDTH = 15
-P_FRINGE_ANGLE = 16
-P_SPHERE_RADIUS = 17
-P_SPHERE_MASS = 18
-P_COG_OFFSET = 19
-P_JXX = 20
-P_JYY = 21
-P_JZZ = 22
-P_D_ROT = 23
-P_D_TRANS = 24
-P_KC = 25
-P_C_TRANSITION = 26
-P_RD = 27
-P_MU_VISC = 28
-P_MU_C = 29
-P_V_C = 30
-P_MU_S = 31
-P_V_S = 32
-P_EPS = 33
-P_VISC_ONSET = 34
-P_RBF_SIGMA_Z = 35
-P_RBF_SIGMA_PHI = 36
-P_PRESLIDING = 37
-P_VISC_PER_NEWTON = 38
-P_BRISTLE_DAMPING = 39
-P_STATIC_COEFF = 40
-P_BRISTLE_STIFFNESS = 41
-P_BRISTLE_SPEED = 42
-P_BREAKAWAY = 43
-N_PARAMS = 44
 
 # Indices into the integer ``flags`` vector: which parts the scene assembled.
 F_N_BEAMS = 0
@@ -160,10 +114,10 @@ def kinematic_pairs(flags):
 def capacitance_of(z_m, phi_rad, p, flags, rbf_cz, rbf_cphi, rbf_w):
     """C (F) and its partial derivatives by z_S (F/m) and phi (F/rad) for one beam."""
     if flags[F_RBF]:
-        return rbf_evaluate(z_m, phi_rad, rbf_cz, rbf_cphi, p[P_RBF_SIGMA_Z],
-                            p[P_RBF_SIGMA_PHI], rbf_w)
-    return closed_form(z_m - p[P_GROUND_Z], phi_rad, p[P_ES_LENGTH], p[P_ES_WIDTH],
-                       p[P_FRINGE_ANGLE], flags[F_FRINGE] != 0)
+        return rbf_evaluate(z_m, phi_rad, rbf_cz, rbf_cphi, p[Packed.RBF_SIGMA_Z],
+                            p[Packed.RBF_SIGMA_PHI], rbf_w)
+    return closed_form(z_m - p[Packed.GROUND_Z], phi_rad, p[Packed.ELECTRODE_LENGTH],
+                       p[Packed.ELECTRODE_WIDTH], p[Packed.FRINGE_ANGLE], flags[F_FRINGE] != 0)
 
 
 @numba.njit(cache=True)
@@ -176,20 +130,20 @@ def _bristle_drag(x, ob, e, slip_t, f_n, gate, p, flags, dxdt):
     """
     bristle = (x[ob], x[ob + 1], x[ob + 2])
     speed_squared = dot(slip_t, slip_t)
-    mu_c = p[P_MU_C]
-    eta = p[P_VISC_PER_NEWTON] if flags[F_VISCOUS] else 0.0
-    mu_s = p[P_MU_S] if flags[F_STRIBECK] else mu_c + eta * p[P_V_S]
-    rate = bristle_rate(bristle, slip_t, gate, speed_squared, mu_c, mu_s, p[P_V_S], eta,
-                        p[P_PRESLIDING], p[P_EPS])
+    mu_c = p[Packed.COULOMB]
+    eta = p[Packed.VISCOUS_PER_NEWTON] if flags[F_VISCOUS] else 0.0
+    mu_s = p[Packed.STRIBECK] if flags[F_STRIBECK] else mu_c + eta * p[Packed.STRIBECK_VELOCITY]
+    rate = bristle_rate(bristle, slip_t, gate, speed_squared, mu_c, mu_s,
+                        p[Packed.STRIBECK_VELOCITY], eta, p[Packed.PRESLIDING], p[Packed.EPSILON])
     for i in range(BRISTLE_STATES):
         dxdt[ob + i] = rate[i]
     # The bristle's force: its deflection and, through the damping time, its rate, each
     # without the component along the normal.
-    tau = p[P_BRISTLE_DAMPING]
+    tau = p[Packed.BRISTLE_DAMPING]
     loaded = (bristle[0] + tau * rate[0], bristle[1] + tau * rate[1],
               bristle[2] + tau * rate[2])
     tangential = sub(loaded, scale(dot(e, loaded), e))
-    stiffness = mu_c * f_n / p[P_PRESLIDING]
+    stiffness = mu_c * f_n / p[Packed.PRESLIDING]
     return (-stiffness * tangential[0] - eta * f_n * slip_t[0],
             -stiffness * tangential[1] - eta * f_n * slip_t[1],
             -stiffness * tangential[2] - eta * f_n * slip_t[2])
@@ -209,24 +163,26 @@ def _elastoplastic_drag(x, ob, e, slip_t, f_n, gate, p, flags, dxdt):
     """
     bristle = (x[ob], x[ob + 1], x[ob + 2])
     speed = plastic_speed(dot(slip_t, slip_t))
-    viscous = p[P_MU_VISC] if flags[F_VISCOUS] else 0.0
-    coulomb = p[P_MU_C]
+    viscous = p[Packed.VISCOUS] if flags[F_VISCOUS] else 0.0
+    coulomb = p[Packed.COULOMB]
     # Without the Stribeck part its peak is nothing beyond the Coulomb term's value at v_s.
-    stribeck = (p[P_MU_S] if flags[F_STRIBECK]
-                else coulomb * math.tanh(p[P_V_S] / p[P_V_C]))
-    stiffness = p[P_BRISTLE_STIFFNESS]
-    steady = elastoplastic_steady_force(speed, f_n, gate, viscous, coulomb, p[P_V_C], stribeck,
-                                        p[P_V_S], p[P_STATIC_COEFF], p[P_BRISTLE_SPEED])
+    stribeck = (p[Packed.STRIBECK] if flags[F_STRIBECK]
+                else coulomb * math.tanh(p[Packed.STRIBECK_VELOCITY] / p[Packed.COULOMB_VELOCITY]))
+    stiffness = p[Packed.BRISTLE_STIFFNESS]
+    steady = elastoplastic_steady_force(speed, f_n, gate, viscous, coulomb,
+                                        p[Packed.COULOMB_VELOCITY], stribeck,
+                                        p[Packed.STRIBECK_VELOCITY], p[Packed.STATIC_COEFFICIENT],
+                                        p[Packed.BRISTLE_SPEED])
     steady_deflection = steady / stiffness
     length = math.sqrt(dot(bristle, bristle))
-    alpha = plastic_share(length / steady_deflection, p[P_BREAKAWAY])
+    alpha = plastic_share(length / steady_deflection, p[Packed.BREAKAWAY_RATIO])
     flow = alpha * speed / steady_deflection
     elastic = (slip_t[0] - flow * bristle[0], slip_t[1] - flow * bristle[1],
                slip_t[2] - flow * bristle[2])
     release = (1.0 - gate) / BRISTLE_RELEASE_S
     for i in range(BRISTLE_STATES):
         dxdt[ob + i] = gate * elastic[i] - release * bristle[i]
-    damping = p[P_BRISTLE_DAMPING] * (1.0 - alpha)
+    damping = p[Packed.BRISTLE_DAMPING] * (1.0 - alpha)
     loaded = (bristle[0] + damping * elastic[0], bristle[1] + damping * elastic[1],
               bristle[2] + damping * elastic[2])
     tangential = sub(loaded, scale(dot(e, loaded), e))
@@ -269,9 +225,10 @@ def rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, dxdt, dia
     """
     n = flags[F_N_BEAMS]
     has_sphere = flags[F_SPHERE] != 0
-    g = p[P_GRAVITY] if flags[F_GRAVITY] else 0.0
+    g = p[Packed.GRAVITY] if flags[F_GRAVITY] else 0.0
     damping = flags[F_DAMPING] != 0
-    r_d = p[P_RD] if flags[F_CONTACT_LOSSES] else 0.0
+    r_d = p[Packed.CONTACT_LOSS] if flags[F_CONTACT_LOSSES] else 0.0
+    k_c, c_transition = p[Packed.CONTACT_STIFFNESS], p[Packed.TRANSITION_FORCE]
     any_friction = flags[F_VISCOUS] or flags[F_COULOMB] or flags[F_STRIBECK]
     stiction = flags[F_STICTION] != 0
     for i in range(N_DIAG):
@@ -279,9 +236,9 @@ def rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, dxdt, dia
     diag[D_MIN_GROUND_GAP] = FAR_GAP_M
     diag[D_MIN_SPHERE_GAP] = FAR_GAP_M
 
-    m_b = p[P_BEAM_MASS]
-    l_cog = p[P_BEAM_COG]
-    l_b = p[P_BEAM_LENGTH]
+    m_b = p[Packed.BEAM_MASS]
+    l_cog = p[Packed.BEAM_COG]
+    l_b = p[Packed.BEAM_LENGTH]
 
     # Sphere kinematics, shared by all tips. Defaults keep every variable typed when absent.
     o = 4 * n
@@ -301,7 +258,8 @@ def rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, dxdt, dia
         omega_b = (x[o + 10], x[o + 11], x[o + 12])
         R = quat_rows(x[o + 3:o + 7])
         omega_i = matvec(R, omega_b)
-        r_sc = (R[0][2] * p[P_COG_OFFSET], R[1][2] * p[P_COG_OFFSET], R[2][2] * p[P_COG_OFFSET])
+        d_cog = p[Packed.COG_OFFSET]
+        r_sc = (R[0][2] * d_cog, R[1][2] * d_cog, R[2][2] * d_cog)
         centre = add(pos, r_sc)
         centre_vel = add(vel, cross(omega_i, r_sc))
 
@@ -321,12 +279,13 @@ def rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, dxdt, dia
         if own_forces:
             f1 = m_b * l_cog * sphi * phid * phid - m_b * g
             f2 = -m_b * g * l_cog * cphi
-            f1 -= p[P_KZ] * (z - p[P_SUSPENSION_Z])
-            f2 -= p[P_KPHI] * phi
+            f1 -= p[Packed.STIFFNESS_Z] * (z - p[Packed.SUSPENSION_Z])
+            f2 -= p[Packed.STIFFNESS_PHI] * phi
         if damping and own_forces:
-            f1 -= p[P_DZ] * zd
-            f2 -= p[P_DPHI] * phid
-            diag[D_POWER_DAMPING] -= p[P_DZ] * zd * zd + p[P_DPHI] * phid * phid
+            f1 -= p[Packed.DAMPING_Z] * zd
+            f2 -= p[Packed.DAMPING_PHI] * phid
+            diag[D_POWER_DAMPING] -= (p[Packed.DAMPING_Z] * zd * zd
+                                      + p[Packed.DAMPING_PHI] * phid * phid)
         if flags[F_ELECTROSTATICS] and u[k] != 0.0 and own_forces:
             _, dcdz, dcdphi = capacitance_of(z, phi, p, flags, rbf_cz, rbf_cphi, rbf_w)
             half_v2 = 0.5 * u[k] * u[k]
@@ -334,59 +293,61 @@ def rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, dxdt, dia
             f2 += half_v2 * dcdphi
             diag[D_POWER_ELECTROSTATIC] += half_v2 * (dcdz * zd + dcdphi * phid)
         if flags[F_GROUND_CONTACT] and own_forces:
-            gap_rear = z - p[P_GROUND_Z] - p[P_ISO]
-            lever = p[P_GROUND_LENGTH] / (cphi * cphi)
-            gap_front = gap_rear + p[P_GROUND_LENGTH] * sphi / cphi
+            gap_rear = z - p[Packed.GROUND_Z] - p[Packed.INSULATION]
+            lever = p[Packed.GROUND_LENGTH] / (cphi * cphi)
+            gap_front = gap_rear + p[Packed.GROUND_LENGTH] * sphi / cphi
             rate_front = zd + lever * phid
-            f_rear = contact_force(gap_rear, zd, p[P_KC], p[P_C_TRANSITION], r_d)
-            f_front = contact_force(gap_front, rate_front, p[P_KC], p[P_C_TRANSITION], r_d)
+            f_rear = contact_force(gap_rear, zd, k_c, c_transition, r_d)
+            f_front = contact_force(gap_front, rate_front, k_c, c_transition, r_d)
             f1 += f_rear + f_front
             f2 += f_front * lever
             if r_d != 0.0:
-                elastic_rear = contact_force(gap_rear, 0.0, p[P_KC], p[P_C_TRANSITION], 0.0)
-                elastic_front = contact_force(gap_front, 0.0, p[P_KC], p[P_C_TRANSITION], 0.0)
+                elastic_rear = contact_force(gap_rear, 0.0, k_c, c_transition, 0.0)
+                elastic_front = contact_force(gap_front, 0.0, k_c, c_transition, 0.0)
                 diag[D_POWER_CONTACT_LOSS] += ((f_rear - elastic_rear) * zd
                                                + (f_front - elastic_front) * rate_front)
             diag[D_MIN_GROUND_GAP] = min(diag[D_MIN_GROUND_GAP], gap_rear, gap_front)
         if has_sphere and flags[F_SPHERE_CONTACT]:
             cd = directions[k, 0]
             sd = directions[k, 1]
-            radial = -p[P_SUSPENSION_RADIUS] + l_b * cphi
+            radial = -p[Packed.SUSPENSION_RADIUS] + l_b * cphi
             tip = (radial * cd, radial * sd, z + l_b * sphi)
             dtip_dphi = (-l_b * sphi * cd, -l_b * sphi * sd, l_b * cphi)
             tip_vel = (dtip_dphi[0] * phid, dtip_dphi[1] * phid, dtip_dphi[2] * phid + zd)
             rel = sub(tip, centre)
             dist = math.sqrt(dot(rel, rel))
-            gap = dist - p[P_SPHERE_RADIUS]
+            gap = dist - p[Packed.SPHERE_RADIUS]
             diag[D_MIN_SPHERE_GAP] = min(diag[D_MIN_SPHERE_GAP], gap)
             ob = o + SPHERE_STATES + BRISTLE_STATES * k
             if gap < 0.0:
                 e = scale(1.0 / dist, rel)
                 rate = dot(e, sub(tip_vel, centre_vel))
-                f_n = contact_force(gap, rate, p[P_KC], p[P_C_TRANSITION], r_d)
+                f_n = contact_force(gap, rate, k_c, c_transition, r_d)
                 f1 += f_n * e[2]
                 f2 += f_n * dot(e, dtip_dphi)
                 push = scale(-f_n, e)
                 force_s = add(force_s, push)
                 torque_b = add(torque_b, mat_t_vec(R, cross(r_sc, push)))
                 if r_d != 0.0:
-                    elastic = contact_force(gap, 0.0, p[P_KC], p[P_C_TRANSITION], 0.0)
+                    elastic = contact_force(gap, 0.0, k_c, c_transition, 0.0)
                     diag[D_POWER_CONTACT_LOSS] += (f_n - elastic) * rate
                 if any_friction:
                     r_sp = sub(tip, pos)
                     slip = sub(add(vel, cross(omega_i, r_sp)), tip_vel)
                     slip_t = sub(slip, scale(dot(e, slip), e))
-                    gate = onset_gate(gap, p[P_VISC_ONSET])
+                    gate = onset_gate(gap, p[Packed.VISCOUS_ONSET])
                     if stiction and flags[F_FRICTION_READING] == READING_PAPER:
                         drag = _elastoplastic_drag(x, ob, e, slip_t, f_n, gate, p, flags, dxdt)
                     elif stiction:
                         drag = _bristle_drag(x, ob, e, slip_t, f_n, gate, p, flags, dxdt)
                     else:
-                        speed = math.sqrt(p[P_EPS] + dot(slip_t, slip_t))
+                        speed = math.sqrt(p[Packed.EPSILON] + dot(slip_t, slip_t))
                         f_t = friction_magnitude(
-                            speed, f_n, gate, p[P_MU_VISC], p[P_MU_C], p[P_V_C], p[P_MU_S],
-                            p[P_V_S], flags[F_VISCOUS] != 0, flags[F_COULOMB] != 0,
-                            flags[F_STRIBECK] != 0, flags[F_FRICTION_READING])
+                            speed, f_n, gate, p[Packed.VISCOUS], p[Packed.COULOMB],
+                            p[Packed.COULOMB_VELOCITY], p[Packed.STRIBECK],
+                            p[Packed.STRIBECK_VELOCITY], flags[F_VISCOUS] != 0,
+                            flags[F_COULOMB] != 0, flags[F_STRIBECK] != 0,
+                            flags[F_FRICTION_READING])
                         drag = scale(-f_t / speed, slip_t)
                     f1 -= drag[2]
                     f2 -= dot(drag, dtip_dphi)
@@ -399,7 +360,7 @@ def rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, dxdt, dia
 
         # M [zdd, phidd] = [f1, f2] with the 2x2 mass matrix of eq. (1)-(2).
         m12 = m_b * l_cog * cphi
-        m22 = p[P_BEAM_INERTIA_SUSP]
+        m22 = p[Packed.BEAM_INERTIA]
         det = m_b * m22 - m12 * m12
         dxdt[2 * k] = zd
         dxdt[2 * k + 1] = phid
@@ -407,14 +368,14 @@ def rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, dxdt, dia
         dxdt[2 * n + 2 * k + 1] = (m_b * f2 - m12 * f1) / det
 
     if has_sphere:
-        m_s = p[P_SPHERE_MASS]
+        m_s = p[Packed.SPHERE_MASS]
         force_s = (force_s[0], force_s[1], force_s[2] - m_s * g)
         if damping:
-            force_s = sub(force_s, scale(p[P_D_TRANS], vel))
-            torque_b = sub(torque_b, scale(p[P_D_ROT], omega_b))
-            diag[D_POWER_DAMPING] -= (p[P_D_TRANS] * dot(vel, vel)
-                                      + p[P_D_ROT] * dot(omega_b, omega_b))
-        inertia = (p[P_JXX], p[P_JYY], p[P_JZZ])
+            force_s = sub(force_s, scale(p[Packed.DAMPING_TRANS], vel))
+            torque_b = sub(torque_b, scale(p[Packed.DAMPING_ROT], omega_b))
+            diag[D_POWER_DAMPING] -= (p[Packed.DAMPING_TRANS] * dot(vel, vel)
+                                      + p[Packed.DAMPING_ROT] * dot(omega_b, omega_b))
+        inertia = (p[Packed.JXX], p[Packed.JYY], p[Packed.JZZ])
         spin = (inertia[0] * omega_b[0], inertia[1] * omega_b[1], inertia[2] * omega_b[2])
         torque_b = sub(torque_b, cross(omega_b, spin))
         w, qx, qy, qz = x[o + 3], x[o + 4], x[o + 5], x[o + 6]

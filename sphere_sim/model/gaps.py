@@ -9,6 +9,7 @@ import math
 import numba
 
 from sphere_sim.model import dynamics as dyn
+from sphere_sim.model.packed import Packed
 from sphere_sim.model.rotations import quat_rows
 
 
@@ -40,25 +41,25 @@ def contact_gaps(x, p, flags, directions, out):
     if sphere:
         o = 4 * n
         R = quat_rows(x[o + 3:o + 7])
-        d = p[dyn.P_COG_OFFSET]
+        d = p[Packed.COG_OFFSET]
         cx = x[o] + R[0][2] * d
         cy = x[o + 1] + R[1][2] * d
         cz = x[o + 2] + R[2][2] * d
-    l_b = p[dyn.P_BEAM_LENGTH]
+    l_b = p[Packed.BEAM_LENGTH]
     for k in range(n):
         z = x[2 * k]
         sin_phi = math.sin(x[2 * k + 1])
         cos_phi = math.cos(x[2 * k + 1])
         if ground:
-            out[k] = z - p[dyn.P_GROUND_Z] - p[dyn.P_ISO]
-            out[n + k] = out[k] + p[dyn.P_GROUND_LENGTH] * sin_phi / cos_phi
+            out[k] = z - p[Packed.GROUND_Z] - p[Packed.INSULATION]
+            out[n + k] = out[k] + p[Packed.GROUND_LENGTH] * sin_phi / cos_phi
         if sphere:
-            radial = -p[dyn.P_SUSPENSION_RADIUS] + l_b * cos_phi
+            radial = -p[Packed.SUSPENSION_RADIUS] + l_b * cos_phi
             rx = radial * directions[k, 0] - cx
             ry = radial * directions[k, 1] - cy
             rz = z + l_b * sin_phi - cz
             out[first_sphere_gap + k] = (math.sqrt(rx * rx + ry * ry + rz * rz)
-                                         - p[dyn.P_SPHERE_RADIUS])
+                                         - p[Packed.SPHERE_RADIUS])
 
 
 @numba.njit(cache=True)
@@ -91,8 +92,8 @@ def first_deep_closure(xs, p, flags, directions, depth_m, gaps_a, gaps_b):
 
 @numba.njit(cache=True, inline='always')
 def _electrode_gap(x, p, k):
-    gap = x[2 * k] - p[dyn.P_GROUND_Z]
-    return min(gap, gap + p[dyn.P_ES_LENGTH] * math.sin(x[2 * k + 1]))
+    gap = x[2 * k] - p[Packed.GROUND_Z]
+    return min(gap, gap + p[Packed.ELECTRODE_LENGTH] * math.sin(x[2 * k + 1]))
 
 
 @numba.njit(cache=True)
