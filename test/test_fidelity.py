@@ -118,3 +118,26 @@ def test_the_full_rung_at_the_live_tolerance_lands_where_the_reference_does_off_
     assert angle_between(reference, live) < 3.0 * LIVE_ERROR_BOUND_RAD
     sliding, _ = ladder.landing('sliding', kick, params)
     assert angle_between(kick.normal, sliding) > 1e-3
+
+
+def test_bench_fidelity_quick_writes_its_table_and_ends_with_the_live_rung(tmp_path, capsys):
+    """``sphere-twin bench fidelity --quick``: every row of the quick ladder, the budget, and
+    the last line in the form the docs quote, into --out only."""
+    import json
+    import re
+
+    from sphere_twin import cli
+
+    assert cli.main(['bench', 'fidelity', '--quick', '--workers', '1',
+                     '--out', str(tmp_path)]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert re.fullmatch(r'live rung (full \(rtol [0-9.e-]+\): p95 [0-9.e+-]+ rad, max '
+                        r'[0-9.e+-]+ rad, [0-9.]+ ms per kick \(full model at the live '
+                        r'tolerance [0-9.]+ ms\)|none: .*)', lines[-1])
+    assert lines[-2].startswith('the twin runs: full (rtol 0.0003), ')
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['fidelity_quick.json',
+                                                           'fidelity_quick.md']
+    data = json.loads((tmp_path / 'fidelity_quick.json').read_text())
+    assert [r['name'] for r in data['rungs']] == ['full', 'sliding', TABLE_RUNG]
+    assert all(len(r['errors_rad']) == ladder.QUICK_KICKS for r in data['rungs'])
+    assert data['live_max_budget_rad'] == pytest.approx(9.42e-4, rel=1e-3)
