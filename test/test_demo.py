@@ -11,8 +11,8 @@ import time
 import pytest
 
 from msg_defs.topics import ALL_TOPICS, CLOCK
+from sphere_sim.integrate.tolerances import LIVE_RTOL
 from sphere_sim.model.fidelity import FULL, TABLE_RUNG
-from sphere_sim.twin.plants import LIVE_RTOL
 from sphere_twin.cli import build_parser
 from sphere_twin.commands.demo import (
     DEFAULT_REAL_TIME_FACTOR,

@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from sphere_sim.integrate.tolerances import CHECK_RTOL
 from sphere_sim.kicks.design import KICK_RELAXATION, cardan_of_normal
 from sphere_sim.kicks.lookup_table import LookupTable
 from sphere_sim.model.assembly import assemble
@@ -68,7 +69,7 @@ def _advanced(model, x0, until_s):
 def _reference_at(model, x_start, programme, after_s):
     """The normal ``after_s`` into ``programme`` from ``x_start``: the twin's own plant at the
     check's tolerance."""
-    plant = ContinuousPlant(model, x_start, rtol=fc.CHECK_RTOL)
+    plant = ContinuousPlant(model, x_start, rtol=CHECK_RTOL)
     plant.run_programme(programme)
     for k in range(1, round(after_s / PERIOD_S) + 1):
         plant.advance(k * PERIOD_S)

@@ -17,6 +17,10 @@ DEFAULT_RTOL = 1e-6
 # (docs/twin.md). Across the ladder's 30 kicks it misses the live budget on two
 # (docs/numerics.md, "The ladder of models").
 LIVE_RTOL = 3e-4
+# check_fidelity's reference beside the live twin: the cheapest tolerance at which the full model
+# meets the live budget on the ladder's kick set (bench/results/fidelity.md: at 3e-6 p95 9e-6 rad
+# and max 1.4e-4 rad, at 1e-6 p95 8e-6 and max 6e-5 rad: the margin of a factor of two kept).
+CHECK_RTOL = 1e-6
 # Identification's: a tenth of the live tolerance, where the integrator's own jumps as a
 # parameter moves are worth well under one unit of misfit (misfit_scan). Written as its decimal:
 # LIVE_RTOL / 10 is one bit off it, and every committed fit was made at 3e-5.

@@ -134,13 +134,15 @@ def friction_magnitude(speed_m_per_s, normal_force_n, gate, viscous_ns_per_m, co
     ``gate`` scales the velocity-proportional terms, which do not scale with the normal force.
     """
     if reading == READING_PAPER:
-        f = 0.0
-        if use_coulomb:
-            f = paper_sliding_force(speed_m_per_s, normal_force_n, gate,
-                                    viscous_ns_per_m if use_viscous else 0.0, coulomb,
-                                    coulomb_velocity_m_per_s, stribeck,
-                                    stribeck_velocity_m_per_s)
-        return f
+        # The law the bristle slides with (dynamics._elastoplastic_drag), without the bristle:
+        # without the Stribeck part its peak is the Coulomb term's value at v_s.
+        if not use_coulomb:
+            return 0.0
+        peak = (stribeck if use_stribeck
+                else coulomb * math.tanh(stribeck_velocity_m_per_s / coulomb_velocity_m_per_s))
+        return paper_sliding_force(speed_m_per_s, normal_force_n, gate,
+                                   viscous_ns_per_m if use_viscous else 0.0, coulomb,
+                                   coulomb_velocity_m_per_s, peak, stribeck_velocity_m_per_s)
     bump = stribeck_bump(speed_m_per_s / stribeck_velocity_m_per_s)
     coulomb_shape = math.tanh(speed_m_per_s / coulomb_velocity_m_per_s)
     f = 0.0

@@ -22,15 +22,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sphere_sim.integrate.solve import simulate
+from sphere_sim.integrate.tolerances import CHECK_RTOL
 from sphere_sim.kicks.design import KICK_RELAXATION, cardan_of_normal
 from sphere_sim.model.assembly import Model
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.programme import PulseProgramme
 from sphere_sim.model.rotations import angle_between
 
-# The reference's tolerance: the cheapest at which the full model meets the live budget on the
-# ladder's kick set (bench/results/fidelity.md: p95 8e-6 rad, max 6e-5 rad).
-CHECK_RTOL = 1e-6
 # Kicks whose reference may be under way or waiting at once; beyond that a kick is skipped (the
 # check runs on one spare core and may be slower than the twin).
 MAX_PENDING = 8

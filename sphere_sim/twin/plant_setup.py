@@ -15,6 +15,8 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
     from sphere_sim.kicks.lookup_table import ProgrammedKickPlant
+    from sphere_sim.model.parameters import ParameterSet
+    from sphere_sim.model.scene import Scene
     from sphere_sim.twin.fidelity_check import FidelityCheck
     from sphere_sim.twin.plants import ContinuousPlant, DiscretePlant, RestPose, TwinPlant
 
@@ -41,14 +43,11 @@ def build_plant(kind: str, scene_name: str = 'rest', table_paths: Iterable[str |
     from sphere_sim.kicks.lookup_table import load_kick_model
     from sphere_sim.model.assembly import assemble
     from sphere_sim.model.initial_state import initial_state
-    from sphere_sim.model.parameters import load_parameter_set
-    from sphere_sim.model.scene import load_scene
     from sphere_sim.twin.plants import ContinuousPlant, PlantError, RestPose
 
     if kind not in PLANT_KINDS:
         raise PlantError(f'unknown plant {kind!r}; choose one of {", ".join(PLANT_KINDS)}')
-    scene = load_scene(scene_name)
-    params = scene.parameters(load_parameter_set(params_name) if params_name else None)
+    scene, params = scene_and_parameters(scene_name, params_name)
     alpha, beta, _ = scene.initial.sphere_angles_deg
     # The continuous plant takes only the kicks' timing from the tables (when a kick's effect
     # is over): they need not be built for this parameter set. Loaded first: a bad table is
@@ -82,13 +81,20 @@ def fidelity_check(scene_name: str, params_name: str, period_s: float) -> Fideli
     twin on every kick, whichever plant serves them (:mod:`sphere_sim.twin.fidelity_check`)."""
     from msg_defs.device import KICK_WINDOW_S
     from sphere_sim.model.assembly import assemble
-    from sphere_sim.model.parameters import load_parameter_set
-    from sphere_sim.model.scene import load_scene
     from sphere_sim.twin.fidelity_check import FidelityCheck
 
+    return FidelityCheck(assemble(*scene_and_parameters(scene_name, params_name)),
+                         KICK_WINDOW_S, period_s)
+
+
+def scene_and_parameters(scene_name: str, params_name: str) -> tuple[Scene, ParameterSet]:
+    """The simulator's scene and the set it runs on: ``params_name``'s (a shipped set or a
+    YAML file) with the scene's perturbation, or the scene's own for ''."""
+    from sphere_sim.model.parameters import load_parameter_set
+    from sphere_sim.model.scene import load_scene
+
     scene = load_scene(scene_name)
-    params = scene.parameters(load_parameter_set(params_name) if params_name else None)
-    return FidelityCheck(assemble(scene, params), KICK_WINDOW_S, period_s)
+    return scene, scene.parameters(load_parameter_set(params_name) if params_name else None)
 
 
 def discrete_plant(kicks: ProgrammedKickPlant, normal0: NDArray[np.float64],

@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 import numpy as np
 from numpy.typing import ArrayLike
 
+from sphere_sim.integrate.tolerances import CHECK_RTOL, LIVE_RTOL
 from sphere_sim.twin.plant_setup import PLANT_KINDS
 from sphere_twin.commands.options import (
     CommandError,
@@ -101,7 +102,6 @@ def model_fidelity(plant: str) -> tuple[str, str]:
     """The rung of the ladder of models (:mod:`sphere_sim.model.fidelity`) that ``plant``
     runs, and what that rung is, in words."""
     from sphere_sim.model.fidelity import FULL, TABLE_RUNG
-    from sphere_sim.twin.plants import LIVE_RTOL
 
     if plant == 'discrete':
         return TABLE_RUNG, ("each kick's landing looked up in the kick tables, nothing "
@@ -267,8 +267,9 @@ def run_demo(setpoint_s: float = DEFAULT_SETPOINT_S, trajectory_s: float = DEFAU
     for line in demo_start_lines(plant, real_time_factor, setpoint_s, trajectory_s):
         say(line)
     if check_fidelity:
-        say('demo: check_fidelity: the full model at rtol 1e-6 runs beside the simulator, kick '
-            'by kick, on the spare core; the summary says how far the landings diverged')
+        say(f'demo: check_fidelity: the full model at rtol {CHECK_RTOL:g} runs beside the '
+            'simulator, kick by kick, on the spare core; the summary says how far the landings '
+            'diverged')
     with StopSignals() as stop:
         live = _run_live(demo_nodes(bag_dir, setpoint_s, real_time_factor, seed, plant,
                                     check_fidelity),
@@ -542,8 +543,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         help='where the bag directory goes (created if missing)')
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--check-fidelity', action='store_true',
-                        help='run the full model (rtol 1e-6) beside the simulator on every '
-                             'kick, on the spare core, and say how far the landings diverged')
+                        help=f'run the full model (rtol {CHECK_RTOL:g}) beside the simulator '
+                             'on every kick, on the spare core, and say how far the landings '
+                             'diverged')
     parser.set_defaults(func=run)
 
 

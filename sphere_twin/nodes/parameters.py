@@ -12,6 +12,7 @@ from collections.abc import Sequence
 
 from msg_defs.device import SENSOR_RATE_HZ
 from msg_defs.topics import ALL_TOPICS, CLOCK, SURFACE_NORMAL
+from sphere_sim.integrate.tolerances import CHECK_RTOL
 from sphere_sim.twin.plant_setup import PLANT_KINDS
 from sphere_twin.node_runtime.parameter_specs import ParameterSpec, ParameterType
 
@@ -66,9 +67,9 @@ SIMULATOR_PARAMETERS = (
                   'Advance simulated time only while a command is in effect: runs are then '
                   'identical whatever the wall-clock timing.'),
     ParameterSpec('check_fidelity', BOOL, False,
-                  'Run the full model (rtol 1e-6) beside the plant, in a process of its own, '
-                  'on every programme the plant starts, and publish how far the landings '
-                  'diverge on /diagnostics (docs/numerics.md, the ladder of models).'),
+                  f'Run the full model (rtol {CHECK_RTOL:g}) beside the plant, in a process of '
+                  'its own, on every programme the plant starts, and publish how far the '
+                  'landings diverge on /diagnostics (docs/numerics.md, the ladder of models).'),
 )
 
 # --- controller --------------------------------------------------------------------------

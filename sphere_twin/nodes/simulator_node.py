@@ -438,7 +438,7 @@ class SimulatorNode(Node):
     def _fidelity_text(v: dict[str, int | str]) -> str:
         if 'fidelity_checked' not in v:
             return ''
-        from sphere_sim.twin.fidelity_check import CHECK_RTOL
+        from sphere_sim.integrate.tolerances import CHECK_RTOL
 
         return (f'; fidelity check: {v["fidelity_checked"]} kicks against the full model '
                 f'(rtol {CHECK_RTOL:g}), divergence median {v["fidelity_divergence_median_rad"]}'
