@@ -7,6 +7,9 @@ VENV    := .venv
 BIN     := $(VENV)/bin
 STAMP   := $(VENV)/.installed
 PYTEST_ARGS ?=
+# The rung of the ladder of models the demo's simulator serves kicks from (full, sliding,
+# table: docs/numerics.md); empty for the live default. `make demo FIDELITY=sliding`.
+FIDELITY ?=
 
 .PHONY: setup demo test lint typecheck bench clean clean-cache
 
@@ -27,7 +30,7 @@ $(STAMP): requirements.txt requirements-dev.txt constraints.txt setup.py setup.c
 	@echo "setup: .venv ready"
 
 demo: $(STAMP)
-	$(BIN)/sphere-twin demo
+	$(BIN)/sphere-twin demo $(if $(FIDELITY),--fidelity $(FIDELITY))
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -2,6 +2,7 @@
 
     ros2 launch sphere_twin twin.launch.py
     ros2 launch sphere_twin twin.launch.py plant:=discrete controller:=basic record:=true
+    ros2 launch sphere_twin twin.launch.py fidelity:=sliding
     ros2 launch sphere_twin twin.launch.py params_file:=my.yaml
     ros2 launch sphere_twin twin.launch.py rviz:=true
 
@@ -31,7 +32,13 @@ _FROM_FILE = ' Default "": the params file\'s value.'
 ARGUMENTS = {
     'plant': (NOT_GIVEN, 'Plant to run: continuous (the physics of §3) or discrete (the '
                          'lookup table of kicks: it starts faster; its sphere and beams rest '
-                         'between kicks).' + _FROM_FILE),
+                         'between kicks); "" for the one fidelity names (continuous where both '
+                         'are "").' + _FROM_FILE),
+    'fidelity': (NOT_GIVEN, 'Rung of the ladder of models the plant serves kicks from: full (the '
+                            'paper\'s model), sliding (leaves out stiction and presliding: '
+                            'cheaper, outside the live error budget) or table (the discrete '
+                            'plant); "" for the plant\'s own (full on the continuous plant, the '
+                            'live default).' + _FROM_FILE),
     'controller': (NOT_GIVEN, 'Control law: basic or extended (§4.2).' + _FROM_FILE),
     'scene': (NOT_GIVEN, 'Scene (shipped name or YAML path): parameters, beams, sphere and '
                          'initial state.' + _FROM_FILE),
@@ -63,6 +70,7 @@ ARGUMENTS = {
 # take it).
 PARAMETER_ARGUMENTS = {
     'plant': ('str', ('simulator',)),
+    'fidelity': ('str', ('simulator',)),
     'scene': ('str', ('simulator',)),
     'params': ('str', ('simulator',)),
     'seed': ('int', ('simulator',)),

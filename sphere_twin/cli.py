@@ -54,6 +54,7 @@ def user_errors() -> tuple[type[Exception], ...]:
     from sphere_sim.kicks.design import DesignError
     from sphere_sim.kicks.lookup_table import TableError
     from sphere_sim.kicks.offset_lookup import OffsetError
+    from sphere_sim.model.fidelity import FidelityError
     from sphere_sim.model.initial_state import RestError
     from sphere_sim.model.parameters import ParameterError
     from sphere_sim.model.programme import ProgrammeError
@@ -63,8 +64,8 @@ def user_errors() -> tuple[type[Exception], ...]:
     from sphere_twin.commands.options import CommandError
 
     return (CommandError, SceneError, ParameterError, ProgrammeError, TableError, BagError,
-            DesignError, OffsetError, VoltageRuleError, PlantError, RestError, SolverError,
-            yaml.YAMLError, OSError)
+            DesignError, OffsetError, VoltageRuleError, PlantError, FidelityError, RestError,
+            SolverError, yaml.YAMLError, OSError)
 
 
 def one_line(error: BaseException) -> str:

@@ -28,7 +28,7 @@ TRAJECTORY_OFFSET_S = 12.5
 
 def scenario_nodes(setpoint_s: float, plant: str, real_time_factor: float, seed: int,
                    normal_subscribers: int, clock_subscribers: int,
-                   check_fidelity: bool = False) -> tuple[NodeSpec, ...]:
+                   check_fidelity: bool = False, fidelity: str = '') -> tuple[NodeSpec, ...]:
     """The closed loop of the scenario, in start order: controller, reference, simulator.
 
     The simulator comes last, once the controller holds the reference, and holds simulated
@@ -47,7 +47,8 @@ def scenario_nodes(setpoint_s: float, plant: str, real_time_factor: float, seed:
         NodeSpec('controller', tuple(parameter_args(controller=CONTROLLER))),
         NodeSpec('reference', tuple(parameter_args(**reference_args))),
         NodeSpec('simulator', tuple(parameter_args(
-            plant=plant, seed=seed, real_time_factor=real_time_factor,
+            plant=plant, **({'fidelity': fidelity} if fidelity else {}), seed=seed,
+            real_time_factor=real_time_factor,
             wait_for_subscribers=normal_subscribers,
             wait_for_clock_subscribers=clock_subscribers, check_fidelity=check_fidelity))),
     )
@@ -111,11 +112,13 @@ class _WatchedReference:
 
 
 def offline_loop(setpoint_s: float, duration_s: float, plant: str = 'continuous',
-                 on_time: Callable[[float], None] | None = None) -> LoopHistory:
+                 on_time: Callable[[float], None] | None = None,
+                 fidelity: str = '') -> LoopHistory:
     """The scenario as an offline closed loop (:func:`~sphere_control.closed_loop.run_closed_loop`):
-    the controller node's controller and kick period, the simulator's plant from its
-    initial state (the continuous one carrying its state from kick to kick), the reference
-    node's schedule. Returns the :class:`~sphere_control.closed_loop.LoopHistory`.
+    the controller node's controller and kick period, the simulator's plant (on the rung
+    ``fidelity`` of the ladder of models, '' for the plant's own) from its initial state (the
+    continuous one carrying its state from kick to kick), the reference node's schedule.
+    Returns the :class:`~sphere_control.closed_loop.LoopHistory`.
 
     ``on_time`` is called with the simulated time of every step (progress; it may raise to
     stop the loop).
@@ -125,13 +128,14 @@ def offline_loop(setpoint_s: float, duration_s: float, plant: str = 'continuous'
     from sphere_control.intensity_calibration import IntensityCalibration
     from sphere_sim.kicks.discrete import kick_period_s
     from sphere_sim.kicks.lookup_table import load_kick_model
-    from sphere_sim.twin.plant_setup import build_plant
+    from sphere_sim.twin.plant_setup import build_plant, plant_and_fidelity
     from sphere_sim.twin.plants import TwinKickPlant
 
+    plant, fidelity = plant_and_fidelity(plant, fidelity)
     kicks = load_kick_model()
     calibration = IntensityCalibration.of(kicks)
     period_s = kick_period_s(kicks)
-    twin = build_plant(plant)
+    twin = build_plant(plant, fidelity=fidelity)
     start = twin.snapshot().normal
     # The continuous kind builds a ContinuousPlant.
     kick_plant = calibration.applied_to(TwinKickPlant(kicks, cast('ContinuousPlant', twin),

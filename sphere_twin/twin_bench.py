@@ -56,6 +56,9 @@ class TwinBenchResult:
     cycle: LoopCycle | None = None
     pace: float = 0.0
     waiting_fraction: float = 0.0
+    # The rung of the ladder of models that served the kicks ('' in results written before
+    # the simulator said it).
+    fidelity: str = ''
 
     @property
     def pace_name(self) -> str:
@@ -93,7 +96,7 @@ class TwinBenchResult:
                    float(values['integrating_fraction']), float(values['publishing_fraction']),
                    float(values['programme_latency_median_ms']),
                    float(values['programme_latency_max_ms']), cycle, pace,
-                   float(values['waiting_for_publishing_fraction']))
+                   float(values['waiting_for_publishing_fraction']), values.get('fidelity', ''))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -151,9 +154,11 @@ def _simulator_status(diagnostics: Sequence[Any]) -> dict[str, str]:
 
 def run_twin_bench(plant: str = 'continuous', duration_s: float = DEFAULT_DURATION_S,
                    seed: int = 0, progress: Callable[[float], object] | None = None,
-                   real_time_factor: float = 0.0) -> tuple[TwinBenchResult, str]:
+                   real_time_factor: float = 0.0,
+                   fidelity: str = '') -> tuple[TwinBenchResult, str]:
     """Run the loop (unpaced, or paced at ``real_time_factor``) until the simulator reports
-    ``duration_s`` of simulated time.
+    ``duration_s`` of simulated time, on the rung ``fidelity`` of the ladder of models ('' for
+    the plant's own).
 
     ``progress(simulated_s)`` is called as the status comes in. Returns a
     :class:`TwinBenchResult` and the simulator's farewell line.
@@ -171,7 +176,8 @@ def run_twin_bench(plant: str = 'continuous', duration_s: float = DEFAULT_DURATI
 
     domain_id = fresh_domain_id()
     *others, simulator = scenario_nodes(SETPOINT_S, plant, real_time_factor, seed,
-                                        NORMAL_SUBSCRIBERS, CLOCK_SUBSCRIBERS)
+                                        NORMAL_SUBSCRIBERS, CLOCK_SUBSCRIBERS,
+                                        fidelity=fidelity)
     with running_nodes(*others, domain_id=domain_id) as group:
         probe = TopicProbe(domain_id, (SURFACE_NORMAL, CONTROLLER_STATUS, DIAGNOSTICS))
         diagnostics = probe.messages[DIAGNOSTICS.name]
@@ -235,5 +241,6 @@ def summary_lines(result: TwinBenchResult) -> list[str]:
             f'simulated time the start delayed {r.cycle.start_delay_ms:.1f} ms, the kick in '
             f'effect until the deciding sample {r.cycle.settling_ms:.1f} ms, the lead to the '
             f'next start {r.cycle.lead_ms:.1f} ms']),
-        f'twin real-time factor: {r.real_time_factor:.2f} {r.pace_name} ({r.plant})',
+        f'twin real-time factor: {r.real_time_factor:.2f} {r.pace_name} ({r.plant}, '
+        f'{r.fidelity or "rung unreported"})',
     ]

@@ -58,6 +58,18 @@ def test_demo_bad_input_bags_dir_that_is_a_file_is_refused_at_once(tmp_path, cap
     assert a_file.read_text() == ''
 
 
+def test_demo_bad_input_a_plant_that_cannot_serve_the_fidelity_is_refused_at_once(
+        tmp_path, capsys):
+    bags = tmp_path / 'bags'
+    started = time.monotonic()
+    assert cli.main(['demo', '--plant', 'discrete', '--fidelity', 'sliding', '--bags-dir',
+                     str(bags)]) == 2
+    assert time.monotonic() - started < REFUSED_WITHIN_S
+    line = _one_error_line(capsys, 'demo')
+    assert "fidelity 'sliding' is served by the continuous plant, not the discrete one" in line
+    assert not bags.exists()
+
+
 def test_demo_bad_input_bags_dir_under_a_file_cannot_be_created(tmp_path, capsys):
     a_file = tmp_path / 'not_a_dir'
     a_file.write_text('')
@@ -175,5 +187,5 @@ def test_the_offline_loop_reports_its_simulated_time_and_can_be_stopped():
     stop = demo.StopSignals()
     stop.signum = 15
     lines = []
-    assert demo._offline_rms_rad(0.2, 0.4, 'discrete', stop, lines.append) is None
+    assert demo._offline_rms_rad(0.2, 0.4, 'discrete', 'table', stop, lines.append) is None
     assert lines[-1] == 'demo: got SIGTERM in the offline loop: no comparison with it'

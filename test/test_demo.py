@@ -42,8 +42,8 @@ def test_short_demo_runs_the_loop_records_a_bag_and_reports(tmp_path, plant):
     kicks = re.search(r'demo: (\d+) kicks in ([\d.]+) s simulated', text)
     assert kicks and int(kicks.group(1)) > 0 and float(kicks.group(2)) >= 5.0
     # What to expect comes first, right after the domain; the summary names the rung again.
-    assert lines[1:4] == demo_start_lines(plant, DEFAULT_REAL_TIME_FACTOR[plant], 3.0, 2.0)
     rung = FULL.name if plant == 'continuous' else TABLE_RUNG
+    assert lines[1:4] == demo_start_lines(plant, DEFAULT_REAL_TIME_FACTOR[plant], 3.0, 2.0, rung)
     assert re.search(rf'demo: \d+ kicks in [\d.]+ s simulated \([\d.]+ per second\) on the '
                      rf'{plant} plant, model {rung}, from the bag', text), text
     pace = re.search(r'demo: real-time factor: controller ([\d.]+), reference ([\d.]+), '
@@ -74,17 +74,19 @@ def test_short_demo_runs_the_loop_records_a_bag_and_reports(tmp_path, plant):
 @pytest.mark.parametrize(('plant', 'rung', 'model'), [
     ('continuous', FULL.name, f'the full model of the paper at the live tolerance (rtol '
                               f'{LIVE_RTOL:g})'),
-    ('discrete', TABLE_RUNG, "each kick's landing looked up in the kick tables")])
+    ('discrete', TABLE_RUNG, "each kick's landing looked up in the kick tables"),
+    ('continuous', 'sliding', f"the paper's model at the live tolerance (rtol {LIVE_RTOL:g}), "
+                              'leaving out stiction and presliding')])
 def test_the_demo_says_first_the_plant_its_rung_the_pace_and_the_wall_time(plant, rung, model):
-    plant_line, pace_line, scenario_line = demo_start_lines(plant, 0.25, 8.0, 25.0)
+    plant_line, pace_line, scenario_line = demo_start_lines(plant, 0.25, 8.0, 25.0, rung)
     assert plant_line.startswith(f'demo: {plant} plant, model {rung}: {model}')
     # 33 s of simulated time at a quarter of real time: 132 s of wall time.
     assert pace_line == ('demo: 33 s of simulated time at 0.25 of real time: about 2.2 min of '
                          'wall time, plus the offline loop')
     assert scenario_line.startswith('demo: scenario: setpoint (0.01, 0.02) for 8 s, then eq. '
                                     '(64)')
-    assert 'about 20 s of wall time' in demo_start_lines(plant, 0.25, 3.0, 2.0)[1]
-    assert 'about 1.5 h of wall time' in demo_start_lines(plant, 0.5, 2700.0, 0.0)[1]
+    assert 'about 20 s of wall time' in demo_start_lines(plant, 0.25, 3.0, 2.0, rung)[1]
+    assert 'about 1.5 h of wall time' in demo_start_lines(plant, 0.5, 2700.0, 0.0, rung)[1]
 
 
 def test_the_demo_simulator_waits_for_every_listener_of_the_clock(tmp_path):
@@ -102,10 +104,15 @@ def test_the_demo_simulator_waits_for_every_listener_of_the_clock(tmp_path):
 def test_cli_parses_the_scenario_and_rejects_non_positive_durations():
     parser = build_parser()
     args = parser.parse_args(['demo', '--setpoint-s', '2.5', '--real-time-factor', '10'])
-    assert (args.setpoint_s, args.real_time_factor, args.plant) == (2.5, 10.0, 'continuous')
+    # Plant and fidelity: '' leaves each to the other (plant_and_fidelity).
+    assert (args.setpoint_s, args.real_time_factor, args.plant, args.fidelity) == \
+        (2.5, 10.0, '', '')
     assert parser.parse_args(['demo', '--plant', 'discrete']).real_time_factor is None
+    assert parser.parse_args(['demo', '--fidelity', 'sliding']).fidelity == 'sliding'
     with pytest.raises(SystemExit):
         parser.parse_args(['demo', '--plant', 'table'])
+    with pytest.raises(SystemExit):
+        parser.parse_args(['demo', '--fidelity', 'fastest'])
     with pytest.raises(SystemExit):
         parser.parse_args(['demo', '--trajectory-s', '0'])
 

@@ -3,6 +3,7 @@ state, and is judged by its landing error against the full model (sphere_sim.twi
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -141,3 +142,75 @@ def test_bench_fidelity_quick_writes_its_table_and_ends_with_the_live_rung(tmp_p
     assert [r['name'] for r in data['rungs']] == ['full', 'sliding', TABLE_RUNG]
     assert all(len(r['errors_rad']) == ladder.QUICK_KICKS for r in data['rungs'])
     assert data['live_max_budget_rad'] == pytest.approx(9.42e-4, rel=1e-3)
+
+
+# --- the simulator's choice: plant and fidelity ------------------------------------------
+
+@pytest.mark.parametrize(('plant', 'fidelity', 'expected'), [
+    ('', '', ('continuous', 'full')),
+    ('continuous', '', ('continuous', 'full')),
+    ('discrete', '', ('discrete', 'table')),
+    ('', 'table', ('discrete', 'table')),
+    ('', 'sliding', ('continuous', 'sliding')),
+    ('continuous', 'sliding', ('continuous', 'sliding')),
+    ('discrete', 'table', ('discrete', 'table')),
+])
+def test_plant_and_fidelity_each_decide_alone_and_agree_together(plant, fidelity, expected):
+    from sphere_sim.twin.plant_setup import plant_and_fidelity
+
+    assert plant_and_fidelity(plant, fidelity) == expected
+
+
+@pytest.mark.parametrize(('plant', 'fidelity', 'named'), [
+    ('', 'fastest', LADDER), ('analogue', '', ('continuous', 'discrete')),
+    ('discrete', 'sliding', ('discrete', 'table')), ('continuous', 'table', ('full', 'sliding'))])
+def test_a_plant_and_fidelity_that_cannot_run_are_one_line_naming_the_choices(plant, fidelity,
+                                                                              named):
+    from sphere_sim.twin.plant_setup import plant_and_fidelity
+    from sphere_sim.twin.plants import PlantError
+
+    with pytest.raises(PlantError) as info:
+        plant_and_fidelity(plant, fidelity)
+    assert '\n' not in str(info.value)
+    assert all(name in str(info.value) for name in named)
+
+
+def test_the_simulator_offers_the_ladder_and_defaults_to_the_measured_live_rung():
+    """The node's choices, written out to keep it light, are the ladder's; its default is the
+    rung the committed ladder found fastest within the live budget."""
+    import json
+
+    from sphere_sim.twin.plant_setup import FIDELITIES, LIVE_FIDELITY, plant_and_fidelity
+
+    assert FIDELITIES == LADDER
+    committed = json.loads((Path(__file__).parents[1] / 'bench' / 'results'
+                            / 'fidelity.json').read_text())
+    assert committed['live_rung'].split()[0] == LIVE_FIDELITY
+    assert plant_and_fidelity() == ('continuous', LIVE_FIDELITY)
+
+
+def test_a_reduced_rung_plant_runs_the_rung_from_the_full_models_rest():
+    """fidelity sliding builds the continuous plant on the scene without its bristles,
+    started from the full model's rest: both plants report the same sphere until a kick."""
+    from sphere_sim.twin.plant_setup import build_plant, plant_rung
+
+    full, sliding = build_plant(fidelity='full'), build_plant(fidelity='sliding')
+    assert (plant_rung(full), plant_rung(sliding)) == ('full', 'sliding')
+    assert not sliding.model.has_bristles and full.model.has_bristles
+    assert sliding.model.n_states == full.model.n_states - 12
+    np.testing.assert_array_equal(sliding.model_state(),
+                                  full.model_state()[:sliding.model.n_states])
+    assert angle_between(sliding.snapshot().normal, full.snapshot().normal) == 0.0
+
+
+def test_a_rung_that_leaves_out_what_the_scene_lacks_is_refused_naming_it(tmp_path):
+    """The sliding rung on a scene that has no stiction: one line naming the mechanism."""
+    from sphere_sim.twin.plant_setup import build_plant
+
+    scene = tmp_path / 'no_stiction.yaml'
+    scene.write_text((Path(__file__).parents[1] / 'sphere_sim' / 'scenes' / 'rest.yaml')
+                     .read_text().replace('name: rest', 'name: no_stiction')
+                     + 'effects: {friction: {stiction: false}}\n')
+    with pytest.raises(FidelityError, match='stiction') as info:
+        build_plant(scene_name=str(scene), fidelity='sliding')
+    assert '\n' not in str(info.value) and 'no_stiction' in str(info.value)

@@ -39,10 +39,13 @@ def _specs(node):
 def _choice_parameters():
     """(node, parameter) -> what the code that takes the value accepts."""
     from sphere_control.controllers import CONTROLLER_KINDS
+    from sphere_sim.model.fidelity import LADDER
     from sphere_sim.twin.plant_setup import PLANT_KINDS
     from sphere_twin.bag.writer import COMPRESSIONS
 
-    return {('simulator', 'plant'): tuple(PLANT_KINDS),
+    # '' leaves each of the two to the other (plant_and_fidelity).
+    return {('simulator', 'plant'): ('', *PLANT_KINDS),
+            ('simulator', 'fidelity'): ('', *LADDER),
             ('controller', 'controller'): tuple(CONTROLLER_KINDS),
             ('recorder', 'compression'): tuple(COMPRESSIONS)}
 

@@ -317,3 +317,24 @@ def test_with_check_fidelity_the_simulator_says_how_far_each_kick_lands_from_the
         assert 'model full; fidelity check: 1 kicks against the full model' in line
     finally:
         node.destroy_node()
+
+
+def test_the_fidelity_parameter_picks_the_rung_that_serves_the_kicks(context):
+    """fidelity:=sliding builds the continuous plant on the sliding rung: the status and the
+    final line name it; a plant that cannot serve the rung is refused before anything is
+    built, in one line naming both."""
+    from sphere_sim.twin.plants import PlantError
+
+    node = SimulatorNode(context=context, parameter_overrides=[
+        Parameter('fidelity', value='sliding'), Parameter('real_time_factor', value=0.0)])
+    try:
+        assert not node.runner.plant.model.has_bristles
+        node.on_timer()
+        assert dict(node.status_values())['fidelity'] == 'sliding'
+        assert '; model sliding' in node.summary()
+    finally:
+        node.destroy_node()
+    with pytest.raises(PlantError, match=r"fidelity 'sliding' .* discrete") as info:
+        SimulatorNode(context=context, parameter_overrides=[
+            Parameter('plant', value='discrete'), Parameter('fidelity', value='sliding')])
+    assert '\n' not in str(info.value)

@@ -26,6 +26,8 @@ def runs():
 def test_the_status_accounts_for_the_run(runs, plant):
     result, farewell = runs[plant]
     assert result.plant == plant
+    # The rung that served the kicks, as the simulator says it: the plant's own.
+    assert result.fidelity == {'discrete': 'table', 'continuous': 'full'}[plant]
     assert result.simulated_s >= DURATION_S
     assert result.real_time_factor == pytest.approx(result.simulated_s / result.wall_s, rel=1e-3)
     assert result.programmes > 0
@@ -51,7 +53,8 @@ def test_the_physics_costs_integration_time_the_table_does_not(runs):
 def test_summary_ends_with_the_headline_and_the_result_round_trips(runs):
     result, _ = runs['continuous']
     lines = summary_lines(result)
-    assert lines[-1] == f'twin real-time factor: {result.real_time_factor:.2f} unpaced (continuous)'
+    assert lines[-1] == (f'twin real-time factor: {result.real_time_factor:.2f} unpaced '
+                         '(continuous, full)')
     data = result.to_dict()
     assert math.isclose(data['other_fraction'], result.other_fraction)
     assert TwinBenchResult.from_dict(data) == result
@@ -62,7 +65,7 @@ def test_cli_writes_the_results_and_prints_the_headline_last(tmp_path, capsys):
                  str(tmp_path)]) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[-1].startswith('twin real-time factor: ') and out[-1].endswith(
-        ' unpaced (discrete)')
+        ' unpaced (discrete, table)')
     data = json.loads((tmp_path / 'twin_discrete.json').read_text())
     assert data['simulated_s'] >= 1.0
     assert (tmp_path / 'twin_discrete.md').read_text().count('twin real-time factor') == 1

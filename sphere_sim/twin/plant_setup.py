@@ -22,14 +22,56 @@ if TYPE_CHECKING:
 
 # The first is the simulator's default: the physics, which publishes every topic.
 PLANT_KINDS = ('continuous', 'discrete')
+# The ladder of models (sphere_sim.model.fidelity.LADDER, written out: the node modules import
+# this one before numba loads; test_fidelity checks the two agree). The continuous plant
+# integrates a model rung, the discrete plant is the last rung, the table.
+FIDELITIES = ('full', 'sliding', 'table')
+TABLE_FIDELITY = FIDELITIES[-1]
+# The live default: the fastest rung within the live error budget on the ladder's kick set
+# (bench/results/fidelity.md). The sliding rung is a third of the cost but lands 5e-3 rad off
+# at the 95th percentile, fifty times the budget.
+LIVE_FIDELITY = 'full'
 
 
-def build_plant(kind: str, scene_name: str = 'rest', table_paths: Iterable[str | Path] = (),
-                params_name: str = '') -> ContinuousPlant | DiscretePlant:
-    """The plant of ``kind`` for the scene's parameters and initial tilt.
+def plant_and_fidelity(plant: str = '', fidelity: str = '') -> tuple[str, str]:
+    """The plant kind and the rung of the ladder it serves kicks from, from the simulator's
+    ``plant`` and ``fidelity`` parameters.
+
+    Either alone decides: ``fidelity`` 'table' is the discrete plant and a model rung the
+    continuous one; ``plant`` 'discrete' is the table and 'continuous' the live default rung.
+    '' leaves it to the other; both '' is the continuous plant on :data:`LIVE_FIDELITY`.
+
+    Raises
+    ------
+    PlantError
+        For an unknown plant or fidelity (naming the choices), or a pair that disagree.
+    """
+    from sphere_sim.twin.plants import PlantError
+
+    if plant and plant not in PLANT_KINDS:
+        raise PlantError(f'unknown plant {plant!r}; choose one of {", ".join(PLANT_KINDS)}')
+    if fidelity and fidelity not in FIDELITIES:
+        raise PlantError(f'unknown fidelity {fidelity!r}; choose one of '
+                         f'{", ".join(FIDELITIES)} (docs/numerics.md, the ladder of models)')
+    if not fidelity:
+        fidelity = TABLE_FIDELITY if plant == 'discrete' else LIVE_FIDELITY
+    kind = 'discrete' if fidelity == TABLE_FIDELITY else 'continuous'
+    if plant and plant != kind:
+        raise PlantError(f'fidelity {fidelity!r} is served by the {kind} plant, not the {plant} '
+                         'one: the discrete plant looks kicks up in the table, the continuous '
+                         f'plant integrates a model ({", ".join(FIDELITIES[:-1])})')
+    return kind, fidelity
+
+
+def build_plant(kind: str = '', scene_name: str = 'rest', table_paths: Iterable[str | Path] = (),
+                params_name: str = '', fidelity: str = '') -> ContinuousPlant | DiscretePlant:
+    """The plant of ``kind`` and ``fidelity`` (:func:`plant_and_fidelity`) for the scene's
+    parameters and initial tilt.
 
     ``params_name`` (a shipped set or a YAML file) replaces the scene's parameter set; '' keeps
-    it.
+    it. A reduced rung is the scene with the rung's mechanism left out
+    (:meth:`~sphere_sim.model.fidelity.Rung.scene`), started from the full model's rest: the
+    state the live twin would hold had it run the full model until then.
 
     The discrete plant executes the kicks of its tables and refuses tables built for other
     parameters than the scene's (:class:`~sphere_sim.kicks.lookup_table.TableError`).
@@ -37,17 +79,21 @@ def build_plant(kind: str, scene_name: str = 'rest', table_paths: Iterable[str |
     Raises
     ------
     PlantError
-        For an unknown kind.
+        For an unknown kind or fidelity, or a pair that disagree.
+    FidelityError
+        For a rung that leaves out a mechanism the scene does not have.
     """
     from sphere_sim.kicks.discrete import kick_period_s, normal_from_cardan
     from sphere_sim.kicks.lookup_table import load_kick_model
     from sphere_sim.model.assembly import assemble
+    from sphere_sim.model.fidelity import carried_state, rung_named
     from sphere_sim.model.initial_state import initial_state
-    from sphere_sim.twin.plants import ContinuousPlant, PlantError, RestPose
+    from sphere_sim.twin.plants import ContinuousPlant, RestPose
 
-    if kind not in PLANT_KINDS:
-        raise PlantError(f'unknown plant {kind!r}; choose one of {", ".join(PLANT_KINDS)}')
+    kind, fidelity = plant_and_fidelity(kind, fidelity)
     scene, params = scene_and_parameters(scene_name, params_name)
+    # Refused before the seconds below: a rung that cannot run the scene.
+    rung_scene = None if kind == 'discrete' else rung_named(fidelity).scene(scene)
     alpha, beta, _ = scene.initial.sphere_angles_deg
     # The continuous plant takes only the kicks' timing from the tables (when a kick's effect
     # is over): they need not be built for this parameter set. Loaded first: a bad table is
@@ -58,8 +104,10 @@ def build_plant(kind: str, scene_name: str = 'rest', table_paths: Iterable[str |
     # the rest scene against 4 s for Radau; the two rests lie 2e-10 m apart, where the
     # bristles' elastic zone leaves the equilibrium free).
     x0 = initial_state(model, relaxation='odeint')
-    if kind == 'continuous':
-        return ContinuousPlant(model, x0, kick_period_s=kick_period_s(kicks))
+    if rung_scene is not None:
+        rung_model = model if rung_scene is scene else assemble(rung_scene, params)
+        return ContinuousPlant(rung_model, carried_state(model, rung_model, x0),
+                               kick_period_s=kick_period_s(kicks))
     # The sphere and beams it reports rest where the continuous plant starts (the scene's
     # initial state), so both plants publish the same state until the first kick.
     return discrete_plant(kicks, normal_from_cardan(alpha, beta), RestPose.of_state(model, x0))

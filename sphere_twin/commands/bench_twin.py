@@ -10,7 +10,7 @@ import sys
 
 from tqdm import tqdm
 
-from sphere_sim.twin.plant_setup import PLANT_KINDS
+from sphere_sim.twin.plant_setup import FIDELITIES, LIVE_FIDELITY, PLANT_KINDS
 from sphere_twin.commands.options import (
     DEFAULT_OUT_DIR,
     CommandError,
@@ -31,8 +31,12 @@ def register(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
                     'its wall time spent integrating, publishing and in rclpy, the latency '
                     'from a pulse programme\'s arrival to its first effect, and the node '
                     'loop\'s kick cycle and its parts. Writes '
-                    'twin_<plant>[_paced].{json,md} into --out.')
+                    'twin_<plant>[_<fidelity>][_paced].{json,md} into --out (the fidelity '
+                    'only where it is not the plant\'s own).')
     parser.add_argument('--plant', choices=PLANT_KINDS, default='continuous')
+    parser.add_argument('--fidelity', choices=FIDELITIES[:-1], default=LIVE_FIDELITY,
+                        help='the model rung the continuous plant integrates (docs/numerics.md, '
+                             'the ladder of models); the discrete plant is the table')
     parser.add_argument('--duration-s', type=simulated_seconds, default=DEFAULT_DURATION_S,
                         help='simulated seconds to run, 0.001 to 3600')
     parser.add_argument('--real-time-factor', type=non_negative_float, default=0.0,
@@ -52,8 +56,10 @@ def run(args: argparse.Namespace) -> int:
             bar.update(min(simulated_s, args.duration_s) - bar.n)
 
         try:
-            result, farewell = run_twin_bench(args.plant, args.duration_s, progress=progress,
-                                              real_time_factor=args.real_time_factor)
+            result, farewell = run_twin_bench(
+                args.plant, args.duration_s, progress=progress,
+                real_time_factor=args.real_time_factor,
+                fidelity=args.fidelity if args.plant == 'continuous' else '')
         except BenchError as error:
             raise CommandError(str(error)) from None
     lines = summary_lines(result)
@@ -61,14 +67,18 @@ def run(args: argparse.Namespace) -> int:
             'at the end')
     args.out.mkdir(parents=True, exist_ok=True)
     paced = args.real_time_factor > 0.0
-    stem = args.out / f'twin_{args.plant}{"_paced" if paced else ""}'
+    reduced = args.plant == 'continuous' and args.fidelity != LIVE_FIDELITY
+    stem = args.out / (f'twin_{args.plant}{f"_{args.fidelity}" if reduced else ""}'
+                       f'{"_paced" if paced else ""}')
     stem.with_suffix('.json').write_text(json.dumps({**result.to_dict(), 'machine': load},
                                                    indent=2) + '\n')
-    command = (f'--plant {args.plant} --duration-s {args.duration_s:g}'
+    command = (f'--plant {args.plant}{f" --fidelity {args.fidelity}" if reduced else ""} '
+               f'--duration-s {args.duration_s:g}'
                + (f' --real-time-factor {args.real_time_factor:g}' if paced else ''))
     stem.with_suffix('.md').write_text(
-        f'# Live twin, {args.plant} plant, {result.pace_name}\n\nWritten by `sphere-twin bench '
-        f'twin {command}`.\n\n' + '\n'.join(f'- {line}' for line in lines)
+        f'# Live twin, {args.plant} plant, model {result.fidelity}, {result.pace_name}\n\n'
+        f'Written by `sphere-twin bench twin {command}`.\n\n'
+        + '\n'.join(f'- {line}' for line in lines)
         + f'\n- farewell: `{farewell}`\n- machine: {load}\n')
     print(load)
     print('\n'.join(lines))

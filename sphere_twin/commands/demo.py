@@ -36,7 +36,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from sphere_sim.integrate.tolerances import CHECK_RTOL, LIVE_RTOL
-from sphere_sim.twin.plant_setup import PLANT_KINDS
+from sphere_sim.twin.plant_setup import (
+    FIDELITIES,
+    LIVE_FIDELITY,
+    PLANT_KINDS,
+    plant_and_fidelity,
+)
 from sphere_twin.commands.options import (
     CommandError,
     check_output,
@@ -98,16 +103,18 @@ MAX_ROS_DOMAIN_ID = 232
 BAG_LAG_S = 0.5
 
 
-def model_fidelity(plant: str) -> tuple[str, str]:
-    """The rung of the ladder of models (:mod:`sphere_sim.model.fidelity`) that ``plant``
-    runs, and what that rung is, in words."""
-    from sphere_sim.model.fidelity import FULL, TABLE_RUNG
+def model_fidelity(fidelity: str) -> str:
+    """What the rung ``fidelity`` of the ladder of models (:mod:`sphere_sim.model.fidelity`)
+    is, in words."""
+    from sphere_sim.model.fidelity import FULL, TABLE_RUNG, rung_named
 
-    if plant == 'discrete':
-        return TABLE_RUNG, ("each kick's landing looked up in the kick tables, nothing "
-                            "integrated (the ladder's last rung)")
-    return FULL.name, (f'the full model of the paper at the live tolerance (rtol '
-                       f'{LIVE_RTOL:g})')
+    if fidelity == TABLE_RUNG:
+        return ("each kick's landing looked up in the kick tables, nothing integrated (the "
+                "ladder's last rung)")
+    if fidelity == FULL.name:
+        return f'the full model of the paper at the live tolerance (rtol {LIVE_RTOL:g})'
+    return (f'the paper\'s model at the live tolerance (rtol {LIVE_RTOL:g}), leaving out '
+            f'{rung_named(fidelity).leaves_out}')
 
 
 def wall_time_text(seconds: float) -> str:
@@ -120,13 +127,12 @@ def wall_time_text(seconds: float) -> str:
 
 
 def demo_start_lines(plant: str, real_time_factor: float, setpoint_s: float,
-                     trajectory_s: float) -> list[str]:
+                     trajectory_s: float, fidelity: str) -> list[str]:
     """What the demo says before it starts a node: the plant and its model's rung, the pace
     and the wall time it should take (the simulated duration over the pace), the scenario."""
-    rung, rung_text = model_fidelity(plant)
     duration_s = setpoint_s + trajectory_s
     return [
-        f'demo: {plant} plant, model {rung}: {rung_text}',
+        f'demo: {plant} plant, model {fidelity}: {model_fidelity(fidelity)}',
         f'demo: {duration_s:g} s of simulated time at {real_time_factor:g} of real time: about '
         f'{wall_time_text(duration_s / real_time_factor)} of wall time, plus the offline loop',
         f'demo: scenario: setpoint {SETPOINT_XY} for {setpoint_s:g} s, then eq. (64) (A_max '
@@ -136,13 +142,13 @@ def demo_start_lines(plant: str, real_time_factor: float, setpoint_s: float,
 
 
 def demo_nodes(bag_dir: str | os.PathLike[str], setpoint_s: float, real_time_factor: float,
-               seed: int, plant: str = DEFAULT_PLANT,
-               check_fidelity: bool = False) -> tuple[NodeSpec, ...]:
+               seed: int, plant: str = DEFAULT_PLANT, check_fidelity: bool = False,
+               fidelity: str = '') -> tuple[NodeSpec, ...]:
     """What the demo starts, in start order (stopped in reverse: the recorder last)."""
     return (NodeSpec('recorder', tuple(parameter_args(output_dir=str(bag_dir)))),
             *scenario_nodes(setpoint_s, plant, real_time_factor, seed,
                             DEMO_NORMAL_SUBSCRIBERS, DEMO_CLOCK_SUBSCRIBERS,
-                            check_fidelity=check_fidelity))
+                            check_fidelity=check_fidelity, fidelity=fidelity))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -237,20 +243,25 @@ def demo_domain_id(environ: Mapping[str, str]) -> tuple[int, str]:
 
 def run_demo(setpoint_s: float = DEFAULT_SETPOINT_S, trajectory_s: float = DEFAULT_TRAJECTORY_S,
              real_time_factor: float | None = None, bags_dir: str | os.PathLike[str] = 'bags',
-             seed: int = 0, out: TextIO | None = None, plant: str = DEFAULT_PLANT,
-             check_fidelity: bool = False) -> int:
+             seed: int = 0, out: TextIO | None = None, plant: str = '',
+             check_fidelity: bool = False, fidelity: str = '') -> int:
     """Run the scenario; returns 0 if the loop ran and every node exited cleanly, 1 if not,
     and 128 + the signal's number (130, 143) if SIGINT or SIGTERM stopped it.
 
-    ``real_time_factor`` defaults to the plant's (:data:`DEFAULT_REAL_TIME_FACTOR`).
+    ``plant`` and ``fidelity`` are the simulator's (either decides, '' leaves it to the other:
+    :func:`~sphere_sim.twin.plant_setup.plant_and_fidelity`). ``real_time_factor`` defaults
+    to the plant's (:data:`DEFAULT_REAL_TIME_FACTOR`).
 
     Raises
     ------
     CommandError
         Before any node starts, for a bags directory that cannot hold the bag or a
         ``ROS_DOMAIN_ID`` that is not a domain id.
+    PlantError
+        Before any node starts, for a plant and a fidelity that disagree.
     """
     out = sys.stdout if out is None else out
+    plant, fidelity = plant_and_fidelity(plant, fidelity)
     if real_time_factor is None:
         real_time_factor = DEFAULT_REAL_TIME_FACTOR[plant]
 
@@ -264,7 +275,7 @@ def run_demo(setpoint_s: float = DEFAULT_SETPOINT_S, trajectory_s: float = DEFAU
     duration_s = setpoint_s + trajectory_s
     say(f'demo: ROS_DOMAIN_ID={domain_id} ({domain_origin}), '
         f'{DISCOVERY_RANGE_VAR}={os.environ.get(DISCOVERY_RANGE_VAR, "LOCALHOST (default)")}')
-    for line in demo_start_lines(plant, real_time_factor, setpoint_s, trajectory_s):
+    for line in demo_start_lines(plant, real_time_factor, setpoint_s, trajectory_s, fidelity):
         say(line)
     if check_fidelity:
         say(f'demo: check_fidelity: the full model at rtol {CHECK_RTOL:g} runs beside the '
@@ -272,15 +283,16 @@ def run_demo(setpoint_s: float = DEFAULT_SETPOINT_S, trajectory_s: float = DEFAU
             'diverged')
     with StopSignals() as stop:
         live = _run_live(demo_nodes(bag_dir, setpoint_s, real_time_factor, seed, plant,
-                                    check_fidelity),
+                                    check_fidelity, fidelity),
                          domain_id, duration_s, real_time_factor, bag_dir, stop, say)
         failures = _report_exits(live.processes, say)
         _report_pace(live.processes, say, real_time_factor)
         offline_rms_rad = (None if stop.requested
-                           else _offline_rms_rad(setpoint_s, duration_s, plant, stop, say))
+                           else _offline_rms_rad(setpoint_s, duration_s, plant, fidelity,
+                                                 stop, say))
         problems = live.problems + failures
         problems += _report_bag(bag_dir, setpoint_s, live.simulated_s, say, offline_rms_rad,
-                                failures, plant)
+                                failures, plant, fidelity)
     say(f'demo: bag {bag_dir}')
     if stop.requested:
         say(f'demo: STOPPED by {stop.name}, exit status {stop.exit_status}'
@@ -384,8 +396,8 @@ def _bag_bytes(bag_dir: Path) -> int:
     return sum(path.stat().st_size for path in bag_dir.glob('*.mcap')) if bag_dir.is_dir() else 0
 
 
-def _offline_rms_rad(setpoint_s: float, duration_s: float, plant: str, stop: StopSignals,
-                     say: Callable[[str], None]) -> float | None:
+def _offline_rms_rad(setpoint_s: float, duration_s: float, plant: str, fidelity: str,
+                     stop: StopSignals, say: Callable[[str], None]) -> float | None:
     """The offline loop's trajectory RMS error (rad), saying its progress; None if a stop
     signal ended it."""
     from sphere_twin.run_analysis import ProgressClock
@@ -401,7 +413,7 @@ def _offline_rms_rad(setpoint_s: float, duration_s: float, plant: str, stop: Sto
             say(f'demo: progress: offline loop at {time_s:.1f} of {duration_s:g} s simulated')
 
     try:
-        offline = offline_loop(setpoint_s, duration_s, plant, on_time)
+        offline = offline_loop(setpoint_s, duration_s, plant, on_time, fidelity)
     except _StoppedError:
         say(f'demo: got {stop.name} in the offline loop: no comparison with it')
         return None
@@ -460,7 +472,8 @@ def _trajectory_rms_rad(times_s: ArrayLike, errors_rad: ArrayLike, setpoint_s: f
 
 def _report_bag(bag_dir: Path, setpoint_s: float, run_end_s: float,
                 say: Callable[[str], None], offline_rms_rad: float | None,
-                failures: Sequence[str] = (), plant: str = DEFAULT_PLANT) -> list[str]:
+                failures: Sequence[str] = (), plant: str = DEFAULT_PLANT,
+                fidelity: str = LIVE_FIDELITY) -> list[str]:
     """What the run did, every figure read back from its own bag as `sphere-twin report`
     reads it (never from a node's output: a recorder that died holds less than the run
     did, and figures from two sources would not agree), beside the offline loop's
@@ -468,7 +481,7 @@ def _report_bag(bag_dir: Path, setpoint_s: float, run_end_s: float,
 
     ``run_end_s`` is the simulated time the demo saw the run reach; a bag that ends well
     before it, or ``failures`` (a node's non-zero exit), is said before the figures. The kicks
-    line names ``plant`` and the rung of its model.
+    line names ``plant`` and the rung ``fidelity`` it served them from.
     """
     from sphere_twin.bag.reader import BagError
     from sphere_twin.run_analysis import (
@@ -499,7 +512,7 @@ def _report_bag(bag_dir: Path, setpoint_s: float, run_end_s: float,
     kicks = len(recorded.kicks)
     say(f'demo: {kicks} kicks in {bag_end_s:.1f} s simulated '
         f'({kicks / max(bag_end_s, 1e-9):.1f} per second) on the {plant} plant, model '
-        f'{model_fidelity(plant)[0]}, from the bag')
+        f'{fidelity}, from the bag')
     on_setpoint = (times > 0.5 * setpoint_s) & (times < setpoint_s)
     if on_setpoint.any():
         say(f'demo: setpoint: final error {math.degrees(errors[on_setpoint][-1]):.4f} deg')
@@ -532,9 +545,14 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         help='simulated seconds on the setpoint')
     parser.add_argument('--trajectory-s', type=simulated_seconds, default=DEFAULT_TRAJECTORY_S,
                         help='simulated seconds on the trajectory')
-    parser.add_argument('--plant', choices=PLANT_KINDS, default=DEFAULT_PLANT,
+    parser.add_argument('--plant', choices=PLANT_KINDS, default='',
                         help='the simulator\'s plant: the continuous model of §3, or the '
-                             'discrete table of kicks (the paper\'s shortcut)')
+                             'discrete table of kicks (the paper\'s shortcut); default: the '
+                             'one --fidelity names, else continuous')
+    parser.add_argument('--fidelity', choices=FIDELITIES, default='',
+                        help='the rung of the ladder of models the simulator serves kicks '
+                             f'from (docs/numerics.md); default: {LIVE_FIDELITY} on the '
+                             'continuous plant, table on the discrete one')
     parser.add_argument('--real-time-factor', type=positive_float, default=None,
                         help='simulated seconds per wall second (default: '
                              + ', '.join(f'{v:g} for the {k} plant'
@@ -552,4 +570,5 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 def run(args: argparse.Namespace) -> int:
     """Entry point of the subcommand; returns the exit code."""
     return run_demo(args.setpoint_s, args.trajectory_s, args.real_time_factor, args.bags_dir,
-                    args.seed, plant=args.plant, check_fidelity=args.check_fidelity)
+                    args.seed, plant=args.plant, check_fidelity=args.check_fidelity,
+                    fidelity=args.fidelity)

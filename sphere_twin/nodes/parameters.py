@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from msg_defs.device import SENSOR_RATE_HZ
 from msg_defs.topics import ALL_TOPICS, CLOCK, SURFACE_NORMAL
 from sphere_sim.integrate.tolerances import CHECK_RTOL
-from sphere_sim.twin.plant_setup import PLANT_KINDS
+from sphere_sim.twin.plant_setup import FIDELITIES, LIVE_FIDELITY, PLANT_KINDS
 from sphere_twin.node_runtime.parameter_specs import ParameterSpec, ParameterType
 
 BOOL = ParameterType.BOOL
@@ -30,10 +30,17 @@ MAX_INT32 = 2**31 - 1
 MAX_PUBLISH_RATE_HZ = 1000.0
 
 SIMULATOR_PARAMETERS = (
-    ParameterSpec('plant', STRING, PLANT_KINDS[0],
+    ParameterSpec('plant', STRING, '',
                   'Plant to run: continuous (the physics of §3) or discrete (the lookup table '
-                  'of kicks: it starts faster; its sphere and beams rest between kicks).',
-                  choices=PLANT_KINDS),
+                  'of kicks: it starts faster; its sphere and beams rest between kicks); "" '
+                  'for the one fidelity names (continuous where both are "").',
+                  choices=('', *PLANT_KINDS)),
+    ParameterSpec('fidelity', STRING, '',
+                  'Rung of the ladder of models the plant serves kicks from: full (the '
+                  'paper\'s model), sliding (leaves out stiction and presliding: cheaper, outside '
+                  'the live error budget) or table (the discrete plant); "" for the plant\'s own '
+                  f'({LIVE_FIDELITY} on the continuous plant, the live default).',
+                  choices=('', *FIDELITIES)),
     ParameterSpec('scene', STRING, 'rest', 'Scene (shipped name or YAML path): parameters, '
                   'beams, sphere and initial state.'),
     ParameterSpec('params', STRING, '',

@@ -103,7 +103,12 @@ class SimulatorNode(Node):
     """
 
     def __init__(self, plant: TwinPlant | None = None, **node_kwargs: Any) -> None:
-        from sphere_sim.twin.plant_setup import build_plant, fidelity_check, plant_rung
+        from sphere_sim.twin.plant_setup import (
+            build_plant,
+            fidelity_check,
+            plant_and_fidelity,
+            plant_rung,
+        )
         from sphere_sim.twin.precompile import announce_compile
         from sphere_sim.twin.runner import TwinRunner
 
@@ -115,11 +120,13 @@ class SimulatorNode(Node):
         self.publish_rate_hz = p['publish_rate_hz']
         self.period_s = 1.0 / self.publish_rate_hz
         self.real_time_factor = p['real_time_factor']
+        # Checked before the seconds of the build: a plant and a fidelity that disagree.
+        kind, fidelity = plant_and_fidelity(p['plant'], p['fidelity'])
         if plant is None:
             # A cold numba cache is compiled here, said in a line before and after.
             with announce_compile(self.get_logger().info):
-                plant = build_plant(p['plant'], p['scene'], [t for t in p['tables'] if t],
-                                    p['params'])
+                plant = build_plant(kind, p['scene'], [t for t in p['tables'] if t],
+                                    p['params'], fidelity)
         # The full model beside the plant: its own process, on the spare core.
         check = (fidelity_check(p['scene'], p['params'], self.period_s)
                  if p['check_fidelity'] else None)
@@ -165,8 +172,9 @@ class SimulatorNode(Node):
         self._pace_anchor = (self._wall_start_s, 0.0)
         self.get_logger().info(
             f'{DISCOVERY_RANGE_VAR}={os.environ.get(DISCOVERY_RANGE_VAR, "(unset)")}, domain id '
-            f'{self.context.get_domain_id()}; {p["plant"]} plant, scene {p["scene"]}, '
-            f'{self.publish_rate_hz:g} Hz, real-time factor {self.real_time_factor:g}'
+            f'{self.context.get_domain_id()}; {kind} plant, model {self.rung}, scene '
+            f'{p["scene"]}, {self.publish_rate_hz:g} Hz, real-time factor '
+            f'{self.real_time_factor:g}'
             f'{", lockstep" if p["lockstep"] else ""}; publishing {SURFACE_NORMAL.name}')
 
     def _declare_parameters(self) -> dict[str, Any]:
@@ -328,8 +336,9 @@ class SimulatorNode(Node):
             ('programme_latency_median_ms', f'{median_ms:.3f}'),
             ('programme_latency_max_ms', f'{max_ms:.3f}'),
             ('programme_delay_median_ms', f'{1e3 * t.delay_median_s():.3f}'),
-            # The rung of the ladder of models that served every kick, and, with
-            # check_fidelity, how far its landings were from the full model's.
+            # The rung of the ladder of models that served every kick (all the run's
+            # programmes: one rung a run), and, with check_fidelity, how far its landings
+            # were from the full model's.
             ('fidelity', self.rung), *self._fidelity_values())
 
     def _fidelity_values(self) -> tuple[tuple[str, int | str], ...]:
