@@ -320,7 +320,8 @@ def test_a_bad_request_is_one_line(device_bag, tmp_path, capsys, argv, message):
 
 
 def test_replay_check_shows_the_error_before_and_after(device_bag, tmp_path, capsys):
-    """The device's own parameters replay its recording better than the shipped set."""
+    """The device's own parameters replay its recording better than the set they change
+    (the file's base:, the set a fit starts from, which --before defaults to)."""
     import json
 
     from sphere_twin import cli
@@ -330,9 +331,9 @@ def test_replay_check_shows_the_error_before_and_after(device_bag, tmp_path, cap
     lines = capsys.readouterr().out.strip().splitlines()
     assert status == 0
     data = json.loads((tmp_path / f'{device_bag.name}_replay.json').read_text())
-    assert data['plant'] == 'continuous' and data['before']['params'] == 'calibrated'
+    assert data['plant'] == 'continuous' and data['before']['params'] == 'dry_contact'
     assert data['rms_error_rad'] < data['before']['rms_error_rad']
-    assert lines[-5].startswith('replay error before (calibrated): open loop max ')
+    assert lines[-5].startswith('replay error before (dry_contact): open loop max ')
     assert lines[-4].startswith('replay error after (device_a_truth): open loop max ')
     assert ' one kick ahead median ' in lines[-5] and ' one kick ahead median ' in lines[-4]
     assert lines[-3].startswith('improvement: RMS')

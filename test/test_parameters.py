@@ -79,6 +79,25 @@ def test_digest_tracks_values_not_names():
     assert cal.digest() == dataclasses.replace(cal, uncertain=(), name='x').digest()
 
 
+def test_a_set_of_overrides_remembers_the_set_it_changes_and_a_whole_set_none(tmp_path):
+    """base: is what a fitted set is compared with (replay-check --before); it is not a
+    physical value, so the digest ignores it, and a set written whole carries none."""
+    fitted = tmp_path / 'fitted.yaml'
+    fitted.write_text('name: fitted\nbase: calibrated\noverrides:\n'
+                      '  beam.damping_phi_nms_per_rad: 1.0e-9\n')
+    chained = tmp_path / 'chained.yaml'
+    chained.write_text(f'name: chained\nbase: {fitted}\noverrides: {{}}\n')
+    loaded = load_parameter_set(fitted)
+    assert loaded.base == 'calibrated' and load_parameter_set('calibrated').base == 'table_a1'
+    assert load_parameter_set('table_a1').base == ''
+    assert load_parameter_set(chained).base == str(fitted)
+    assert load_parameter_set(chained).digest() == loaded.digest()
+    assert loaded.get('beam.damping_phi_nms_per_rad') == 1.0e-9
+    unchanged = tmp_path / 'unchanged.yaml'
+    unchanged.write_text('base: calibrated\n')
+    assert load_parameter_set(unchanged).digest() == load_parameter_set('calibrated').digest()
+
+
 def test_unknown_parameter_set_and_key_are_named(tmp_path):
     with pytest.raises(ParameterError, match='available'):
         load_parameter_set('no_such_set')

@@ -169,6 +169,9 @@ class ParameterSet:
     contact: ContactParams
     friction: FrictionParams
     uncertain: tuple[UncertainParameter, ...] = ()
+    # The set a file's overrides change, as its ``base:`` names it ('' for a set of its own):
+    # what a fitted set is compared with (replay-check --before).
+    base: str = ''
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -177,7 +180,7 @@ class ParameterSet:
         """Short content hash of the physical values (name, description and the calibration's
         declarations excluded: rewording a reason must not invalidate a table)."""
         physical = {k: v for k, v in self.to_dict().items()
-                    if k not in ('name', 'description', 'uncertain')}
+                    if k not in ('name', 'description', 'uncertain', 'base')}
         text = json.dumps(physical, sort_keys=True, default=str)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -426,6 +429,7 @@ def _from_dict(data: dict[str, Any]) -> ParameterSet:
         description=str(data.get('description', '')),
         gravity_m_per_s2=float(check_parameter('gravity_m_per_s2', data['gravity_m_per_s2'])),
         uncertain=_uncertain_entries(data.get('uncertain')),
+        base=str(data.get('base', '')),
         **kwargs,
     )
 
@@ -567,7 +571,7 @@ def _resolve(data: dict[str, Any], source: Path, seen: tuple[str, ...] = ()) -> 
     for key in ('name', 'description', 'uncertain'):
         if key in data:
             merged[key] = data[key]
-    merged.pop('base', None)
+    merged['base'] = base
     return merged
 
 

@@ -225,7 +225,9 @@ def base_reference(params: ParameterSet, path: Path) -> str:
             load_parameter_set(params.name).digest() == params.digest():
         return params.name
     start = path.with_name(f'{path.stem}_start.yaml')
-    start.write_text(yaml.safe_dump(json_safe(params.to_dict()), sort_keys=False, width=96))
+    # Whole, so without the base it was derived from (a base would make its sections unread).
+    whole = {k: v for k, v in params.to_dict().items() if k != 'base'}
+    start.write_text(yaml.safe_dump(json_safe(whole), sort_keys=False, width=96))
     return str(start.resolve())
 
 

@@ -57,7 +57,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser.add_argument('--before', type=parameter_set, default=None, metavar='NAME|FILE',
                         help='with a --params other than the shipped set (a file that '
                              '`sphere-twin identify` fitted, say): the set to compare it with, '
-                             f'replayed too (default {DEFAULT_PARAMETER_SET})')
+                             'replayed too (default: the file\'s base:, else '
+                             f'{DEFAULT_PARAMETER_SET})')
     parser.add_argument('--out', type=output_directory, default=None,
                         help='output directory (default: the working directory)')
     parser.add_argument('--workers', type=positive_int, default=2,
@@ -110,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
     plant = args.plant or default_plant(bag.directory, args.params.digest() == shipped.digest())
     before = args.before
     if before is None and args.params.digest() != shipped.digest():
-        before = shipped
+        # A fitted file is compared with the set it was fitted from.
+        before = load_parameter_set(args.params.base) if args.params.base else shipped
     runs = ([('before', before)] if before is not None else []) + [('after', args.params)]
     results = {label: _replay(recorded, start, plant, params, args.tables,
                               f'{label} ({params.name})' if before else '')
