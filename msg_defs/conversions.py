@@ -243,6 +243,21 @@ def beam_state_from_msg(msg: Any) -> tuple[NDArray[np.float64], NDArray[np.float
     return position[0::2].copy(), position[1::2].copy()
 
 
+def beam_rates_from_msg(msg: Any) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    """The rates (m/s, rad/s) of beam 1..4 in a ``/beams/state`` message, or None where it
+    carries none (``velocity`` empty).
+
+    Raises
+    ------
+    ValueError
+        If the rates are not finite, or not one per joint.
+    """
+    if len(msg.velocity) == 0:
+        return None
+    velocity = finite_vector(msg.velocity, 2 * BEAM_COUNT, 'beam velocity')
+    return velocity[0::2].copy(), velocity[1::2].copy()
+
+
 def _interleave(z_values: ArrayLike, phi_values: ArrayLike, what: str) -> NDArray[np.float64]:
     joined = np.empty(2 * BEAM_COUNT)
     joined[0::2] = finite_vector(z_values, BEAM_COUNT, f'{what} z')
@@ -380,6 +395,21 @@ def sphere_state_from_msg(msg: Any) -> tuple[NDArray[np.float64], NDArray[np.flo
                               'position')
     o = pose.orientation
     return position, finite_vector((o.w, o.x, o.y, o.z), 4, 'quaternion')
+
+
+def sphere_twist_from_msg(msg: Any) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(velocity_m_per_s in ``world``, omega_body_rad_per_s) of a ``/sphere/state`` message:
+    what :func:`sphere_state_to_msg` was given (the message carries the velocity in
+    ``sphere``, as nav_msgs/Odometry requires)."""
+    _, q = sphere_state_from_msg(msg)
+    q = unit_quaternion(q)
+    twist = msg.twist.twist
+    v_body = finite_vector((twist.linear.x, twist.linear.y, twist.linear.z), 3, 'velocity')
+    omega = finite_vector((twist.angular.x, twist.angular.y, twist.angular.z), 3,
+                          'angular velocity')
+    # v_world = R(q) v_body, with R(q) v = v + 2 u x (u x v + w v) for q = (w, u).
+    u = q[1:]
+    return v_body + 2.0 * np.cross(u, np.cross(u, v_body) + q[0] * v_body), omega
 
 
 # How a programme's states map onto an action's goal states (the programme is the goal).

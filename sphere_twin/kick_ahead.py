@@ -17,6 +17,14 @@ noisy sensor (``average``: the samples before the first command scatter, as
 recorded landing and the simulated one alike over the settled samples after the kick. A kick
 without a rest before it is skipped and said (:class:`SkippedKick`): the kicks are
 independent, so no other is lost.
+
+Where the device actually was is known best where the bag records it: a twin's bag carries
+its sphere's and beams' state (``/sphere/state``, ``/beams/state``), and the physics then
+starts each kick from that state at the last sample before it, its motion included (only the
+bristles' strain, which no topic carries, is the rest's at that pose). A device's bag has the
+measured normal alone, and a kick starts from the rest at it. On a twin's bag the difference
+is what the restart decides on the high pair's pull-in, where a state 1e-6 rad apart can land
+1e-3 rad apart (docs/twin.md, "Recording and replaying").
 """
 
 from __future__ import annotations
@@ -33,7 +41,14 @@ from numpy.typing import NDArray
 
 from sphere_sim.model.rotations import angle_between
 from sphere_sim.twin.plants import TIME_TOL_S
-from sphere_twin.run_analysis import Hold, RecordedRun, build_replay_plant, replayed_normals
+from sphere_twin.run_analysis import (
+    Hold,
+    RecordedRun,
+    RecordedTruth,
+    TruthSample,
+    build_replay_plant,
+    replayed_normals,
+)
 
 if TYPE_CHECKING:
     from sphere_sim.kicks.engine import SerialEngine
@@ -75,6 +90,8 @@ class KickCase:
         How many of the last of them the landing is the mean of (1: the last sample alone).
     recorded_landing : ndarray, shape (3,)
         The recorded normal at the landing.
+    truth0 : TruthSample or None
+        The recorded sphere and beams at the last sample before it (a twin's bag), or None.
     """
 
     start_s: float
@@ -85,6 +102,7 @@ class KickCase:
     sample_t_s: NDArray[np.float64]
     landing_samples: int
     recorded_landing: NDArray[np.float64]
+    truth0: TruthSample | None = None
 
     @property
     def landing_s(self) -> float:
@@ -102,14 +120,15 @@ class SkippedKick:
         return f'kick at {self.start_s:.3f} s: {self.reason}; skipped'
 
 
-def kick_cases(run: RecordedRun, window_s: float,
-               average: bool = False) -> tuple[list[KickCase], list[SkippedKick]]:
+def kick_cases(run: RecordedRun, window_s: float, average: bool = False,
+               truth: RecordedTruth | None = None) -> tuple[list[KickCase], list[SkippedKick]]:
     """The programmes of ``run`` that can be run from a recorded rest, and those that cannot.
 
     ``window_s`` is the plant's kick period: a programme's effect is over that long after its
     start (or at its end, if later), and the samples from then until the next start are the
     rest it left. With ``average`` (a noisy sensor) a resting normal is the mean of the rest's
-    samples, not its last sample.
+    samples, not its last sample. With ``truth`` (a twin's bag) each case carries the recorded
+    sphere and beams at the last sample before its start.
     """
     t, normals = run.normal_t_s, run.normals
     cases: list[KickCase] = []
@@ -139,7 +158,8 @@ def kick_cases(run: RecordedRun, window_s: float,
             tuple(h for h in run.holds
                   if start_s - TIME_TOL_S <= h[0] <= landing_s + TIME_TOL_S),
             t[rest_end:land_end].copy(), land_end - land_first,
-            unit_mean(normals[land_first:land_end])))
+            unit_mean(normals[land_first:land_end]),
+            None if truth is None else truth.at(float(t[rest_end - 1]))))
     return cases, skipped
 
 
@@ -163,6 +183,7 @@ class KickAheadResult:
     error_rad: NDArray[np.float64]
     skipped: list[SkippedKick]
     averaged: bool = False  # resting normals as the means of their samples (a noisy sensor)
+    from_truth: int = 0  # kicks started from the recorded sphere and beams (a twin's bag)
 
     @property
     def median_rad(self) -> float:
@@ -187,6 +208,17 @@ class KickAheadResult:
         return (f'median {self.median_rad:.3g} p95 {self.p95_rad:.3g} max {self.max_rad:.3g} '
                 'rad')
 
+    def start_text(self) -> str:
+        """Where the kicks started, in words."""
+        kicks = int(self.error_rad.size)
+        if self.from_truth == 0:
+            return 'the rest at the recorded normal'
+        text = ('the recorded sphere and beams (the bristles\' strain the rest\'s at that '
+                'pose)')
+        return text if self.from_truth == kicks else \
+            (f'{text} for {self.from_truth} of {kicks}, the rest at the recorded normal for '
+             'the others')
+
     def to_dict(self) -> dict[str, Any]:
         def number(value: float) -> float | None:  # JSON has no NaN
             return value if math.isfinite(value) else None
@@ -196,6 +228,7 @@ class KickAheadResult:
                 'max_rad': number(self.max_rad), 'worst_time_s': number(self.worst_s),
                 'resting_normals': ('the mean of the resting samples (a noisy sensor)'
                                     if self.averaged else 'the last resting sample'),
+                'started_from': self.start_text(),
                 'skipped': [{'time_s': s.start_s, 'reason': s.reason} for s in self.skipped],
                 'per_kick': [{'time_s': float(t), 'landing_s': float(t_land),
                               'recorded': rec.tolist(), 'simulated': sim.tolist(),
@@ -228,7 +261,8 @@ def run_case(spec: ReplayPlantSpec, case: KickCase) -> NDArray[np.float64] | str
     with threadpool_limits(limits=BLAS_THREADS_PER_KICK):
         try:
             plant = build_replay_plant(spec.kind, case.normal0, case.start_s, spec.params,
-                                       spec.tables, relaxation=KICK_RELAXATION)
+                                       spec.tables, relaxation=KICK_RELAXATION,
+                                       truth=case.truth0)
         except RestError as error:
             return f'no rest of the model at its recorded normal ({error})'
         # Sampled at every recorded time, as the live plant advanced; the last ones are the
@@ -241,12 +275,15 @@ def run_case(spec: ReplayPlantSpec, case: KickCase) -> NDArray[np.float64] | str
 
 def one_kick_ahead(run: RecordedRun, spec: ReplayPlantSpec, window_s: float,
                    engine: SerialEngine, average: bool = False,
-                   progress: Callable[[int, int], None] | None = None) -> KickAheadResult:
+                   progress: Callable[[int, int], None] | None = None,
+                   truth: RecordedTruth | None = None) -> KickAheadResult:
     """Every programme of ``run`` run alone from the recorded rest before it on the plant of
     ``spec`` (``window_s``: its kick period; ``average``: resting normals as means, for a
-    noisy sensor; :func:`kick_cases`), the kicks spread over ``engine``'s workers;
+    noisy sensor; ``truth``: the recorded sphere and beams of a twin's bag, the physics' start
+    where it has the sample; :func:`kick_cases`), the kicks spread over ``engine``'s workers;
     ``progress(done, total)`` after each."""
-    cases, skipped = kick_cases(run, window_s, average)
+    cases, skipped = kick_cases(run, window_s, average,
+                                truth if spec.kind == 'continuous' else None)
     landed: list[tuple[KickCase, NDArray[np.float64]]] = []
     done = 0
 
@@ -269,7 +306,7 @@ def one_kick_ahead(run: RecordedRun, spec: ReplayPlantSpec, window_s: float,
         np.array([c.start_s for c, _ in landed]), np.array([c.landing_s for c, _ in landed]),
         recorded, simulated,
         np.array([angle_between(s, r) for s, r in zip(simulated, recorded, strict=True)]),
-        skipped, average)
+        skipped, average, sum(c.truth0 is not None for c, _ in landed))
 
 
 def _in_order(engine: SerialEngine, func: Callable[[KickCase], NDArray[np.float64] | str],

@@ -450,11 +450,16 @@ class ReplayResult:
 
 def build_replay_plant(kind: str, normal0: NDArray[np.float64], time0_s: float,
                        params: ParameterSet, tables: Iterable[str | Path] = (),
-                       relaxation: str = 'radau') -> TwinPlant:
+                       relaxation: str = 'radau',
+                       truth: TruthSample | None = None) -> TwinPlant:
     """A plant of parameter set ``params`` resting at ``normal0`` at ``time0_s``: the kick
     table's (``kind`` 'discrete') or the physics at the live tolerance, from the rest state
     at the normal's cardan angles (relaxed by ``relaxation``, see
-    :func:`~sphere_sim.model.initial_state.rest_state`)."""
+    :func:`~sphere_sim.model.initial_state.rest_state`).
+
+    Given ``truth`` (a twin's bag records it), the physics starts from the recorded sphere and
+    beams instead, their positions and rates; only the bristles' strain, which no topic
+    carries, is the rest's at the recorded sphere's normal."""
     from sphere_sim.kicks.design import cardan_of_normal
     from sphere_sim.kicks.process_models import process_model
     from sphere_sim.model.initial_state import rest_state
@@ -467,11 +472,98 @@ def build_replay_plant(kind: str, normal0: NDArray[np.float64], time0_s: float,
         plant = discrete_plant(_kick_model(paths, params), normal0)
     else:
         model = process_model(params)
-        plant = ContinuousPlant(model, rest_state(model, cardan_of_normal(normal0),
-                                                  relaxation=relaxation),
+        rest_normal = normal0 if truth is None else truth.normal
+        x0 = rest_state(model, cardan_of_normal(rest_normal), relaxation=relaxation)
+        plant = ContinuousPlant(model, x0 if truth is None else truth.state_of(model, x0),
                                 kick_period_s=replay_kick_period_s(paths))
     plant.time_s = time0_s
     return plant
+
+
+@dataclasses.dataclass(frozen=True)
+class TruthSample:
+    """The sphere's and the beams' state at one sample, as a twin's bag records them
+    (``/sphere/state``, ``/beams/state``).
+
+    Attributes
+    ----------
+    sphere : ndarray, shape (13,)
+        Centre (m), quaternion (w, x, y, z), centre velocity in ``world`` (m/s), angular
+        velocity in ``sphere`` (rad/s): the model's sphere state.
+    beams : ndarray, shape (16,)
+        z (m) and phi (rad) of beam 1..4 interleaved, then their rates likewise: the model's
+        beam states.
+    """
+
+    sphere: NDArray[np.float64]
+    beams: NDArray[np.float64]
+
+    @property
+    def normal(self) -> NDArray[np.float64]:
+        from sphere_sim.model.rotations import quat_to_matrix
+
+        q = self.sphere[3:7] / np.linalg.norm(self.sphere[3:7])
+        return quat_to_matrix(np.ascontiguousarray(q))[:, 2].copy()
+
+    def state_of(self, model: Any, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``x`` (a state of ``model``, a :class:`~sphere_sim.model.assembly.Model` with the
+        sphere and four beams) with the recorded sphere and beams in place of its own."""
+        n = model.n_beams
+        if 4 * n != self.beams.size:
+            raise ValueError(f'the recording has {self.beams.size // 4} beams, the model {n}')
+        x = np.array(x, dtype=float)
+        x[:4 * n] = self.beams
+        x[model.sphere_offset:model.sphere_offset + 13] = self.sphere
+        return x
+
+
+@dataclasses.dataclass(frozen=True)
+class RecordedTruth:
+    """A twin's bag's record of its sphere and beams (a device's bag has none): the samples
+    where both topics carry the full state, rates included, by stamp."""
+
+    t_s: NDArray[np.float64]
+    samples: tuple[TruthSample, ...]
+
+    def at(self, time_s: float) -> TruthSample | None:
+        """The sample stamped ``time_s`` (within ``TIME_TOL_S``), or None."""
+        i = int(np.searchsorted(self.t_s, time_s - TIME_TOL_S))
+        return (self.samples[i] if i < self.t_s.size and abs(self.t_s[i] - time_s) <= TIME_TOL_S
+                else None)
+
+
+def load_truth(bag_dir: str | os.PathLike[str]) -> RecordedTruth | None:
+    """The sphere's and the beams' recorded state (:class:`RecordedTruth`), or None where the
+    bag holds no sample with both (a device's, or the discrete plant's without rates)."""
+    from msg_defs.conversions import (
+        beam_rates_from_msg,
+        beam_state_from_msg,
+        sphere_state_from_msg,
+        sphere_twist_from_msg,
+    )
+    from msg_defs.topics import BEAM_STATE, SPHERE_STATE
+
+    spheres: dict[int, NDArray[np.float64]] = {}
+    beams: dict[int, NDArray[np.float64]] = {}
+    for raw in read_messages(bag_dir, [SPHERE_STATE.name, BEAM_STATE.name]):
+        try:
+            msg = deserialize(raw)
+            stamp_ns = ns_from_time(msg.header.stamp)
+            if raw.topic == SPHERE_STATE.name:
+                spheres[stamp_ns] = np.concatenate([*sphere_state_from_msg(msg),
+                                                    *sphere_twist_from_msg(msg)])
+            else:
+                rates = beam_rates_from_msg(msg)
+                if rates is not None:
+                    positions = np.ravel(np.column_stack(beam_state_from_msg(msg)))
+                    beams[stamp_ns] = np.concatenate([positions, np.ravel(np.column_stack(rates))])
+        except ValueError:
+            continue  # a message that breaks the contract: no state there
+    stamps = sorted(set(spheres) & set(beams))
+    if not stamps:
+        return None
+    return RecordedTruth(np.array(stamps, dtype=float) / NS_PER_S,
+                         tuple(TruthSample(spheres[t], beams[t]) for t in stamps))
 
 
 def replay_kick_period_s(tables: Iterable[str | Path] = ()) -> float:

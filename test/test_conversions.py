@@ -187,6 +187,31 @@ def test_sphere_state_message_carries_the_body_frame_twist():
     np.testing.assert_allclose(quaternion, q, atol=1e-15)
 
 
+def test_the_sphere_twist_reads_back_as_it_was_given():
+    """A tilted, turned sphere: the world velocity and the body rate come back as given."""
+    from msg_defs.conversions import sphere_state_to_msg, sphere_twist_from_msg
+
+    q = np.array([0.9, 0.1, -0.3, 0.2])
+    q /= np.linalg.norm(q)
+    velocity, omega = np.array([1e-3, -2e-3, 5e-4]), np.array([0.3, -0.1, 2.0])
+    back_velocity, back_omega = sphere_twist_from_msg(
+        sphere_state_to_msg([0.0, 0.0, 1e-3], q, velocity, omega))
+    np.testing.assert_allclose(back_velocity, velocity, rtol=0, atol=1e-18)
+    np.testing.assert_array_equal(back_omega, omega)
+
+
+def test_the_beam_rates_read_back_and_their_absence_is_none():
+    from msg_defs.conversions import beam_rates_from_msg, beam_state_to_msg
+
+    z, phi = [1e-7, 2e-7, 3e-7, 4e-7], [1e-3, 2e-3, 3e-3, 4e-3]
+    rates = beam_rates_from_msg(beam_state_to_msg(z, phi, [0.1, 0.2, 0.3, 0.4],
+                                                  [1.0, 2.0, 3.0, 4.0]))
+    assert rates is not None
+    np.testing.assert_array_equal(rates[0], [0.1, 0.2, 0.3, 0.4])
+    np.testing.assert_array_equal(rates[1], [1.0, 2.0, 3.0, 4.0])
+    assert beam_rates_from_msg(beam_state_to_msg(z, phi)) is None
+
+
 @pytest.mark.parametrize('state', ['started', 'ended', 'cut', 'refused'])
 def test_a_programme_report_round_trips_and_names_its_programme_by_its_stamp(state):
     from action_msgs.msg import GoalStatus, GoalStatusArray

@@ -25,15 +25,17 @@ SUMMARY = (r'^replay error: one kick ahead median (\S+) p95 (\S+) max (\S+) rad;
            r'open loop max (\S+) rad$')
 
 
-def _record(bag_dir, plant, kicks=KICKS, samples=SAMPLES, first_sample=0):
+def _record(bag_dir, plant, kicks=KICKS, samples=SAMPLES, first_sample=0, beams=False):
     """``plant`` driven as the simulator drives it (the twin's runner, no sensor noise): the
     table's programme of each kick of ``kicks`` from the normal it rests at, each started at
     its sample. Written as the recorder writes it: the surface normal and the sphere's state
     from sample ``first_sample`` on (a recorder that joined late), the programmes stamped with
-    their starts, the programme reports."""
+    their starts, the programme reports; with ``beams``, the beams' state too (the simulator
+    publishes it)."""
     from rclpy.serialization import serialize_message
 
     from msg_defs.conversions import (
+        beam_state_to_msg,
         programme_event_to_msg,
         programme_to_msg,
         sphere_state_to_msg,
@@ -41,7 +43,13 @@ def _record(bag_dir, plant, kicks=KICKS, samples=SAMPLES, first_sample=0):
         time_from_ns,
     )
     from msg_defs.device import NS_PER_S
-    from msg_defs.topics import PROGRAMME_STATUS, PULSE_PROGRAM, SPHERE_STATE, SURFACE_NORMAL
+    from msg_defs.topics import (
+        BEAM_STATE,
+        PROGRAMME_STATUS,
+        PULSE_PROGRAM,
+        SPHERE_STATE,
+        SURFACE_NORMAL,
+    )
     from sphere_sim.kicks.lookup_table import load_kick_model
     from sphere_sim.twin.runner import TwinRunner
     from sphere_twin.bag.writer import BagWriter
@@ -50,7 +58,8 @@ def _record(bag_dir, plant, kicks=KICKS, samples=SAMPLES, first_sample=0):
     runner = TwinRunner(plant, PERIOD_S)
     by_sample = {k: (action, intensity) for k, action, intensity in kicks}
     topics = (SURFACE_NORMAL, PULSE_PROGRAM, PROGRAMME_STATUS) + (
-        (SPHERE_STATE,) if plant.snapshot().sphere is not None else ())
+        (SPHERE_STATE,) if plant.snapshot().sphere is not None else ()) + (
+        (BEAM_STATE,) if beams else ())
     with BagWriter(bag_dir) as bag:
         for topic in topics:
             bag.add_contract_topic(topic)
@@ -75,6 +84,9 @@ def _record(bag_dir, plant, kicks=KICKS, samples=SAMPLES, first_sample=0):
             if sample.snapshot.sphere is not None:
                 bag.write(SPHERE_STATE.name, serialize_message(
                     sphere_state_to_msg(*sample.snapshot.sphere, stamp=stamp)), ns)
+            if beams:
+                bag.write(BEAM_STATE.name, serialize_message(
+                    beam_state_to_msg(*sample.snapshot.beams, stamp=stamp)), ns)
     return bag_dir
 
 
@@ -155,6 +167,40 @@ def test_the_physics_replays_one_kick_ahead_to_the_live_tolerance(tmp_path, caps
     assert worst == pytest.approx(max(errors), rel=1e-2)
     assert open_loop == pytest.approx(data['max_error_rad'], rel=1e-2)
     assert ahead['worst_time_s'] == ahead['per_kick'][int(np.argmax(errors))]['time_s']
+
+
+def test_from_a_twins_bag_each_kick_starts_where_the_twin_was(tmp_path, capsys):
+    """The simulator records its sphere and beams: a kick then starts from their recorded
+    state at the last sample before it, its motion included, and the state read back is the
+    plant's own but for the bristles' strain, which no topic carries."""
+    from sphere_twin.run_analysis import load_truth
+
+    plant = _continuous_plant()
+    bag = _record(tmp_path / 'with_beams', plant, beams=True)
+    truth = load_truth(bag)
+    assert truth is not None and truth.t_s.size == SAMPLES
+    # The last sample is the plant's state now, the bristles aside.
+    model, x = plant.model, plant.model_state()
+    assert truth.t_s[-1] == pytest.approx(plant.time_s)
+    sample = truth.at(plant.time_s)
+    assert sample is not None and truth.at(plant.time_s - 0.5 * PERIOD_S) is None
+    rebuilt = sample.state_of(model, np.zeros(model.n_states))
+    # The message carries the quaternion normalised (the integrated one drifts off unit length
+    # by about 1e-13) and the velocity in the body frame: both come back to rounding.
+    np.testing.assert_allclose(rebuilt[:model.bristle_offset], x[:model.bristle_offset],
+                               rtol=1e-12, atol=1e-18)
+    assert not rebuilt[model.bristle_offset:].any()
+    lines, _, data = _replay_check(bag, tmp_path, capsys)
+    ahead = data['one_kick_ahead']
+    assert ahead['started_from'].startswith('the recorded sphere and beams')
+    assert 'kicks from the recorded rest before it (the recorded sphere and beams' in lines[-2]
+    errors = [k['error_rad'] for k in ahead['per_kick']]
+    assert len(errors) == 3 and max(errors) < LIVE_ERROR_BOUND_RAD
+    # A bag with the sphere alone (the beams unrecorded) starts from the rest, as a device's.
+    sphere_only = _record(tmp_path / 'sphere_only', _continuous_plant())
+    assert load_truth(sphere_only) is None
+    assert _replay_check(sphere_only, tmp_path, capsys)[2]['one_kick_ahead'][
+        'started_from'] == 'the rest at the recorded normal'
 
 
 def test_a_kick_without_a_rest_before_it_is_said_and_skipped(tmp_path, capsys, monkeypatch):

@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from sphere_sim.kicks.engine import SerialEngine
     from sphere_sim.model.parameters import ParameterSet
     from sphere_twin.kick_ahead import KickAheadResult
-    from sphere_twin.run_analysis import RecordedRun, ReplayResult
+    from sphere_twin.run_analysis import RecordedRun, RecordedTruth, ReplayResult
 
 # Resting samples that differ by more than this are a noisy sensor's, not rounding.
 SCATTER_RAD = 1e-12
@@ -91,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
     from sphere_twin.bag.locate import locate_bag
     from sphere_twin.run_analysis import (
         load_run,
+        load_truth,
         replay_kick_period_s,
         replay_start_index,
         unclosed_bag_warning,
@@ -119,9 +120,11 @@ def run(args: argparse.Namespace) -> int:
                for label, params in runs}
     window_s = replay_kick_period_s(args.tables)
     noisy = noisy_sensor(recorded, start)
+    # A twin's bag records where its sphere and beams were: one kick ahead starts there.
+    truth = load_truth(bag.directory) if plant == 'continuous' else None
     with engine_of(args.workers) as engine:
         ahead = {label: _kick_ahead(recorded, plant, params, args.tables, window_s, noisy,
-                                    engine, f'{label} ({params.name})' if before else '')
+                                    engine, f'{label} ({params.name})' if before else '', truth)
                  for label, params in runs}
     for line in dict.fromkeys(s.warning() for a in ahead.values() for s in a.skipped):
         print(f'sphere-twin replay-check: warning: {line}', file=sys.stderr, flush=True)
@@ -198,7 +201,7 @@ def _print_errors(results: dict[str, ReplayResult], ahead: dict[str, KickAheadRe
     skipped = f' ({len(kicks.skipped)} skipped)' if kicks.skipped else ''
     worst = f': the worst at {kicks.worst_s:.3f} s' if kicks.error_rad.size else ''
     print(f'one kick ahead, each of {kicks.error_rad.size} kicks from the recorded rest before '
-          f'it{skipped}{worst}')
+          f'it ({kicks.start_text()}){skipped}{worst}')
     print(f'replay error: one kick ahead {kicks.summary()}; open loop max '
           f'{result.max_error_rad:.3g} rad')
 
@@ -222,7 +225,8 @@ def _replay(recorded: RecordedRun, start: int, plant: str, params: ParameterSet,
 
 def _kick_ahead(recorded: RecordedRun, plant: str, params: ParameterSet,
                 tables: Iterable[str | Path], window_s: float, noisy: bool,
-                engine: SerialEngine, label: str) -> KickAheadResult:
+                engine: SerialEngine, label: str,
+                truth: RecordedTruth | None) -> KickAheadResult:
     from sphere_twin.kick_ahead import ReplayPlantSpec, one_kick_ahead
     from sphere_twin.run_analysis import ProgressClock
 
@@ -237,7 +241,8 @@ def _kick_ahead(recorded: RecordedRun, plant: str, params: ParameterSet,
                   file=sys.stderr, flush=True)
 
     spec = ReplayPlantSpec(plant, params, tuple(str(t) for t in tables))
-    return one_kick_ahead(recorded, spec, window_s, engine, average=noisy, progress=report)
+    return one_kick_ahead(recorded, spec, window_s, engine, average=noisy, progress=report,
+                          truth=truth)
 
 
 def _progress_line(label: str, start_s: float, end_s: float) -> Callable[[float], None]:
