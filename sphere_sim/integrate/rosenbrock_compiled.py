@@ -170,7 +170,7 @@ def integrate(t_start, t_end, x_start, u, arrays, rtol, atol, jac_scale, t_eval,
     h_next : float
     i_eval : int
     """
-    p, flags, directions, rbf_cz, rbf_cphi, rbf_w = arrays
+    p, flags, directions = arrays[0], arrays[1], arrays[2]
     n = x_start.size
     diag = np.empty(dyn.N_DIAG)
     t = t_start
