@@ -8,16 +8,18 @@ hands each, as a :class:`~sphere_sim.integrate.segment.Segment`, to the method's
 
 Methods (docs/numerics.md compares them):
 
-========  ====================================================================================
-fast      the compiled Radau IIA of :mod:`~sphere_sim.integrate.radau_compiled` (the default)
-Radau     scipy's Radau IIA, BDF, LSODA and the explicit DOP853, stepped one step at a time
-BDF       from Python on the same compiled right-hand side and Jacobian
+==========  ==================================================================================
+fast        the compiled Radau IIA of :mod:`~sphere_sim.integrate.radau_compiled` (the default)
+rosenbrock  the compiled Rosenbrock W-method ROS34PW2 of
+            :mod:`~sphere_sim.integrate.rosenbrock_compiled` (order 3, no Newton iteration)
+Radau       scipy's Radau IIA, BDF, LSODA and the explicit DOP853, stepped one step at a time
+BDF         from Python on the same compiled right-hand side and Jacobian
 LSODA
 DOP853
-odeint    the same Fortran LSODA through ``scipy.integrate.odeint``: its step loop runs in
-          Fortran and calls back only for the right-hand side and the Jacobian
-CVODE     SUNDIALS CVODE (BDF, dense direct solver) through scikit-sundae
-========  ====================================================================================
+odeint      the same Fortran LSODA through ``scipy.integrate.odeint``: its step loop runs in
+            Fortran and calls back only for the right-hand side and the Jacobian
+CVODE       SUNDIALS CVODE (BDF, dense direct solver) through scikit-sundae
+==========  ==================================================================================
 
 Every method restarts at each voltage edge of the programme, so no step straddles a jump of
 the input, and none steps over a contact onset: a contact open at the start of a step may not
@@ -38,7 +40,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sphere_sim.integrate import fast_segment, library_segments
+from sphere_sim.integrate import fast_segment, library_segments, rosenbrock_segment
 from sphere_sim.integrate.segment import (
     Budget,
     Segment,
@@ -118,6 +120,7 @@ SegmentMethod = Callable[[Segment], tuple[NDArray[np.float64], NDArray[np.float6
 # its METHODS.
 SEGMENT_METHODS: dict[str, SegmentMethod] = {
     'fast': fast_segment.segment_fast,
+    'rosenbrock': rosenbrock_segment.segment_rosenbrock,
     'Radau': functools.partial(library_segments.segment_scipy, 'Radau'),
     'BDF': functools.partial(library_segments.segment_scipy, 'BDF'),
     'LSODA': functools.partial(library_segments.segment_scipy, 'LSODA'),

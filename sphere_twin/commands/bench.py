@@ -56,7 +56,7 @@ from sphere_sim.studies.work_precision import (
     work_precision,
 )
 from sphere_twin.commands import bench_fidelity, bench_levers, bench_startup, bench_twin
-from sphere_twin.commands.bench_scenes import optimised_design, scenes_of_this_tree
+from sphere_twin.commands.bench_scenes import optimised_design, work_precision_scenes
 from sphere_twin.commands.options import DEFAULT_OUT_DIR, output_directory, worker_counts
 
 
@@ -65,7 +65,7 @@ def run_work_precision_bench(quick: bool = False,
                              stream: TextIO = sys.stdout,
                              ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Run the benchmark with a progress bar, write its results; returns (rows, summary)."""
-    scenes = scenes_of_this_tree()
+    scenes = work_precision_scenes()
     with tqdm(desc='work-precision', unit='run', file=sys.stderr) as bar:
         rows, summary = work_precision(scenes, Plan.of(quick), bar,
                                        lambda line: print(line, file=stream, flush=True))
@@ -93,6 +93,11 @@ def write_results(rows: Sequence[Mapping[str, Any]], summary: Mapping[str, Any],
                              for k, v in row.items()})
     (out_dir / f'{stem}.md').write_text(markdown(rows, summary, scenes))
     plot(rows, scenes, out_dir / f'{stem}.png')
+
+
+def _seconds(t: float) -> str:
+    """A time in s, or - where no run reached the error it is read at."""
+    return f'{t:.4g} s' if math.isfinite(t) else '-'
 
 
 def markdown(rows: Sequence[Mapping[str, Any]], summary: Mapping[str, Any],
@@ -132,9 +137,11 @@ def markdown(rows: Sequence[Mapping[str, Any]], summary: Mapping[str, Any],
                       f"{p['fast_s']:.4g} s, best scipy ({p['best_scipy']}) "
                       f"{p['best_scipy_s']:.4g} s: {p['speedup']:.1f}x. By the last sample's "
                       f"error alone: fast {q['fast_s']:.4g} s, best scipy ({q['best_scipy']}) "
-                      f"{q['best_scipy_s']:.4g} s: {q['speedup']:.1f}x.", '',
+                      f"{q['best_scipy_s']:.4g} s: {q['speedup']:.1f}x. The compiled "
+                      'Rosenbrock W-method (rosenbrock) at 1e-6 rad: '
+                      + _seconds(p.get('rosenbrock_s', math.nan)) + '.', '',
                       'Each library method at 1e-6 rad (interpolated; - where no run reaches '
-                      'it): ' + ', '.join(f'{m} ' + (f'{t:.4g} s' if math.isfinite(t) else '-')
+                      'it): ' + ', '.join(f'{m} ' + _seconds(t)
                                           for m, t in p['scipy_s'].items()) + '.', '']
             if math.isfinite(p.get('kernels_s', math.nan)):
                 lines += [f"{p['best_scipy']}'s kernel evaluations alone in its run at "
@@ -167,7 +174,7 @@ def plot(rows: Sequence[Mapping[str, Any]], scenes: Sequence[BenchScene], path: 
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(2, len(scenes), figsize=(4.2 * len(scenes), 7.5), squeeze=False)
-    markers = dict(zip(METHODS, 'os^v<Dx', strict=True))
+    markers = dict(zip(METHODS, 'oPs^v<Dx', strict=True))
     for col, scene in enumerate(scenes):
         for row_index, key, label in ((0, 'angle_error_rad', 'final-angle error (rad)'),
                                       (1, 'state_error', 'largest scaled state error')):

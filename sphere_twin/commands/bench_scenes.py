@@ -11,8 +11,9 @@ from typing import Any
 
 from sphere_sim.kicks.design import KickDesign
 from sphere_sim.model.assembly import assemble
+from sphere_sim.model.fidelity import rung_named
 from sphere_sim.model.scene import load_scene
-from sphere_sim.studies.work_precision import BenchScene, bench_scenes
+from sphere_sim.studies.work_precision import BenchScene, bench_scenes, sliding_scene
 
 RESULTS_DIR = Path(__file__).resolve().parents[2] / 'bench' / 'results'
 KICK_FILE = RESULTS_DIR / 'kick_optimization.json'
@@ -37,3 +38,11 @@ def scenes_of_this_tree() -> list[BenchScene]:
     return bench_scenes(assemble(load_scene('rest')), design.programme(), label)
 
 
+
+
+def work_precision_scenes() -> list[BenchScene]:
+    """:func:`scenes_of_this_tree` and the same kick on the ladder's sliding rung."""
+    design, optimised = optimised_design()
+    label = 'optimised diagonal kick' if optimised else '35 V / 80 V asymmetric pulse pair'
+    sliding = assemble(rung_named('sliding').scene(load_scene('rest')))
+    return [*scenes_of_this_tree(), sliding_scene(sliding, design.programme(), label)]
