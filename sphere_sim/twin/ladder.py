@@ -57,13 +57,19 @@ STARTS_DEG = ((0.0, 0.0), (20.0, 20.0), (20.0, 200.0), (35.0, 20.0), (35.0, 200.
 QUICK_KICKS = 4
 # CPU time of a rung's kick: the fastest of this many runs (the machine is shared).
 TIMING_REPEATS = 2
-# The ladder's rows: a rung and the tolerance it is integrated at (None for the table). The
-# full model at tighter tolerances shows what the live tolerance itself costs in landing error.
-ROWS: tuple[tuple[str, float | None], ...] = (
-    ('full', LIVE_RTOL), ('full', 1e-5), ('full', 3e-6), ('full', 1e-6),
-    ('sliding', LIVE_RTOL), (TABLE_RUNG, None))
-QUICK_ROWS: tuple[tuple[str, float | None], ...] = (
-    ('full', LIVE_RTOL), ('sliding', LIVE_RTOL), (TABLE_RUNG, None))
+# The ladder's rows: a rung, the tolerance it is integrated at (None for the table) and the
+# method. The full model at tighter tolerances shows what the live tolerance itself costs in
+# landing error; the Rosenbrock W-method (docs/numerics.md) what a cheaper step buys on each
+# model rung.
+LIVE_METHOD = 'fast'
+ROWS: tuple[tuple[str, float | None, str], ...] = (
+    ('full', LIVE_RTOL, LIVE_METHOD), ('full', 1e-5, LIVE_METHOD), ('full', 3e-6, LIVE_METHOD),
+    ('full', 1e-6, LIVE_METHOD), ('full', LIVE_RTOL, 'rosenbrock'),
+    ('full', 1e-5, 'rosenbrock'), ('sliding', LIVE_RTOL, LIVE_METHOD),
+    ('sliding', LIVE_RTOL, 'rosenbrock'), (TABLE_RUNG, None, LIVE_METHOD))
+QUICK_ROWS: tuple[tuple[str, float | None, str], ...] = (
+    ('full', LIVE_RTOL, LIVE_METHOD), ('sliding', LIVE_RTOL, LIVE_METHOD),
+    (TABLE_RUNG, None, LIVE_METHOD))
 
 
 def tilted_normal(tilt_deg: float, azimuth_deg: float) -> NDArray[np.float64]:
@@ -125,10 +131,11 @@ def _programme_of(kick: LadderKick, params: ParameterSet) -> PulseProgramme:
     return _table(kick.design, params).programme(0, kick.intensity, kick.normal)
 
 
-def landing(rung: str, kick: LadderKick, params: ParameterSet,
-            rtol: float = LIVE_RTOL) -> tuple[NDArray[np.float64], float]:
-    """(landing normal, CPU s) of ``kick`` on ``rung``: a model rung integrated at ``rtol`` from
-    the full model's rest state (the state the live twin holds), the table looked up."""
+def landing(rung: str, kick: LadderKick, params: ParameterSet, rtol: float = LIVE_RTOL,
+            method: str = LIVE_METHOD) -> tuple[NDArray[np.float64], float]:
+    """(landing normal, CPU s) of ``kick`` on ``rung``: a model rung integrated at ``rtol`` by
+    ``method`` from the full model's rest state (the state the live twin holds), the table
+    looked up."""
     window_s = _table(kick.design, params).spec.window_s
     if rung == TABLE_RUNG:
         started = time.process_time()
@@ -139,7 +146,8 @@ def landing(rung: str, kick: LadderKick, params: ParameterSet,
     x0 = carried_state(full, model, _rest(params, kick.tilt_deg, kick.azimuth_deg))
     programme = _programme_of(kick, params)
     started = time.process_time()
-    traj = simulate(model, x0, window_s, programme, rtol=rtol, sample_period_s=window_s)
+    traj = simulate(model, x0, window_s, programme, rtol=rtol, sample_period_s=window_s,
+                    method=method)
     cpu_s = time.process_time() - started
     return model.surface_normal(traj.final_state), cpu_s
 
@@ -153,17 +161,21 @@ def reference_landing(job: tuple[LadderKick, ParameterSet, float]) -> NDArray[np
 @dataclasses.dataclass(frozen=True)
 class RungResult:
     """A rung's landing errors (rad) and CPU seconds, kick by kick, at tolerance ``rtol`` (None
-    for the table)."""
+    for the table) by ``method``."""
 
     name: str
     leaves_out: str
     errors_rad: tuple[float, ...]
     cpu_s: tuple[float, ...]
     rtol: float | None = None
+    method: str = LIVE_METHOD
 
     @property
     def label(self) -> str:
-        return self.name if self.rtol is None else f'{self.name} (rtol {self.rtol:g})'
+        if self.rtol is None:
+            return self.name
+        method = '' if self.method == LIVE_METHOD else f'{self.method}, '
+        return f'{self.name} ({method}rtol {self.rtol:g})'
 
     @property
     def median_rad(self) -> float:
@@ -186,7 +198,8 @@ class RungResult:
         return self.p95_rad <= LIVE_P95_BUDGET_RAD and self.max_rad <= LIVE_MAX_BUDGET_RAD
 
     def to_dict(self) -> dict[str, object]:
-        return {'name': self.name, 'rtol': self.rtol, 'leaves_out': self.leaves_out,
+        return {'name': self.name, 'rtol': self.rtol, 'method': self.method,
+                'leaves_out': self.leaves_out,
                 'median_rad': self.median_rad, 'p95_rad': self.p95_rad,
                 'max_rad': self.max_rad, 'ms_per_kick': self.ms_per_kick,
                 'meets_live_budget': self.meets_live_budget,
@@ -201,10 +214,12 @@ class Ladder:
     reference_rtol: float
     rungs: tuple[RungResult, ...]
 
-    def rung(self, name: str, rtol: float | None = LIVE_RTOL) -> RungResult:
-        """The row of rung ``name`` at ``rtol`` (the table's has none)."""
+    def rung(self, name: str, rtol: float | None = LIVE_RTOL,
+             method: str = LIVE_METHOD) -> RungResult:
+        """The row of rung ``name`` at ``rtol`` by ``method`` (the table's has neither)."""
         return next(r for r in self.rungs
-                    if r.name == name and (r.rtol == rtol or r.name == TABLE_RUNG))
+                    if r.name == name and (r.name == TABLE_RUNG
+                                           or (r.rtol == rtol and r.method == method)))
 
     def live_rung(self) -> RungResult | None:
         """The fastest model rung within the live budget (the continuous plant's choice) at
@@ -246,16 +261,18 @@ def measure_ladder(params: ParameterSet | None = None, quick: bool = False,
         f'({engine.workers} worker(s))')
     references = engine(reference_landing, [(k, params, rtol) for k in kicks])
     results = []
-    for name, row_rtol in (QUICK_ROWS if quick else ROWS):
-        say(f'rung {name}' + ('' if row_rtol is None else f' at rtol {row_rtol:g}'))
+    for name, row_rtol, method in (QUICK_ROWS if quick else ROWS):
+        say(f'rung {name}' + ('' if row_rtol is None else f' at rtol {row_rtol:g} ({method})'))
         errors, cpu = [], []
         for kick, reference in zip(kicks, references, strict=True):
-            normal, best_s = landing(name, kick, params, row_rtol or LIVE_RTOL)
+            normal, best_s = landing(name, kick, params, row_rtol or LIVE_RTOL, method)
             for _ in range(TIMING_REPEATS - 1):
-                best_s = min(best_s, landing(name, kick, params, row_rtol or LIVE_RTOL)[1])
+                best_s = min(best_s,
+                             landing(name, kick, params, row_rtol or LIVE_RTOL, method)[1])
             errors.append(angle_between(reference, normal))
             cpu.append(best_s)
         leaves_out = RUNGS[name].leaves_out if name in RUNGS else \
             'the whole transient: the landing interpolated in the tables built on the full model'
-        results.append(RungResult(name, leaves_out, tuple(errors), tuple(cpu), row_rtol))
+        results.append(RungResult(name, leaves_out, tuple(errors), tuple(cpu), row_rtol,
+                                  method))
     return Ladder(tuple(kicks), rtol, tuple(results))
