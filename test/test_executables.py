@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from sphere_twin.nodes import executables
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -46,3 +48,32 @@ def test_the_executables_module_imports_neither_rclpy_nor_numpy():
     done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
                           cwd=ROOT, timeout=60, check=True)
     assert done.stdout.strip() == '[]'
+
+
+# The child signals itself once the node's module reaches the import of `module`: a Ctrl-C
+# that lands inside the node's imports, deterministically.
+INTERRUPTED_IMPORT = '''
+import os, signal, sys
+
+class InterruptAt:
+    def find_spec(self, name, path=None, target=None):
+        if name == {module!r}:
+            os.kill(os.getpid(), signal.SIGINT)
+        return None
+
+sys.meta_path.insert(0, InterruptAt())
+from sphere_twin.nodes.executables import {executable}
+sys.exit({executable}())
+'''
+
+
+@pytest.mark.parametrize('executable, module', [('controller', 'rclpy'),
+                                                ('simulator', 'numpy'),
+                                                ('reference', 'rclpy')])
+def test_a_sigint_inside_the_nodes_imports_is_a_clean_stop(executable, module):
+    """`ros2 launch` stopped in its first second: the nodes were still importing rclpy, numpy
+    and numba, and each printed a KeyboardInterrupt traceback and died with -2."""
+    code = INTERRUPTED_IMPORT.format(module=module, executable=executable)
+    done = subprocess.run([sys.executable, '-c', code, '--ros-args'], capture_output=True,
+                          text=True, cwd=ROOT, timeout=120)
+    assert (done.returncode, done.stdout, done.stderr) == (0, '', '')
