@@ -32,12 +32,13 @@ setup(
             'sphere-twin = sphere_twin.cli:main',
             # `ros2 run sphere_twin compile_physics`: `sphere-twin compile` in a colcon workspace.
             'compile_physics = sphere_twin.cli:compile_physics',
-            'simulator = sphere_twin.nodes.simulator_node:main',
-            'monitor = sphere_twin.nodes.monitor_node:main',
-            'recorder = sphere_twin.nodes.recorder_node:main',
-            'player = sphere_twin.nodes.player_node:main',
-            'controller = sphere_twin.nodes.controller_node:main',
-            'reference = sphere_twin.nodes.reference_node:main',
+            # A node's executable takes a Ctrl-C as a clean stop before it imports the node.
+            'simulator = sphere_twin.nodes.executables:simulator',
+            'monitor = sphere_twin.nodes.executables:monitor',
+            'recorder = sphere_twin.nodes.executables:recorder',
+            'player = sphere_twin.nodes.executables:player',
+            'controller = sphere_twin.nodes.executables:controller',
+            'reference = sphere_twin.nodes.executables:reference',
         ],
     },
 )

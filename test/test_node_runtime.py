@@ -89,3 +89,35 @@ def test_a_finaliser_error_after_a_shutdown_signal_is_dropped_and_reported_befor
     CutMidConstruction()
     gc.collect()
     assert capfd.readouterr().err == ''  # the shutdown's debris: dropped
+
+
+def test_a_signal_while_the_node_module_imports_ends_the_executable_cleanly(
+        fresh_signals, tmp_path, monkeypatch):
+    """`ros2 launch` stopped in its first second: the node's module (rclpy, numpy, numba) is
+    still being imported when the Ctrl-C arrives. The executable exits 0, its main never
+    runs, and the late signals are ignored (no traceback, no -2)."""
+    (tmp_path / 'interrupted_node.py').write_text(
+        'import os, signal, time\n'
+        'os.kill(os.getpid(), signal.SIGINT)\n'
+        'time.sleep(5)  # the import goes on: the interrupt must end it\n'
+        'def main(args=None):\n'
+        '    raise AssertionError("main ran after the signal")\n')
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, 'interrupted_node', raising=False)
+    assert ros_env.run_node_module('interrupted_node') == 0
+    assert ros_env.shutdown_requested()
+    assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+
+
+def test_without_a_signal_the_node_modules_import_error_is_reported(fresh_signals):
+    with pytest.raises(ModuleNotFoundError):
+        ros_env.run_node_module('sphere_twin.nodes.no_such_node')
+    assert not ros_env.shutdown_requested()
+
+
+def test_an_executable_hands_its_arguments_to_the_node_modules_main(
+        fresh_signals, tmp_path, monkeypatch):
+    (tmp_path / 'plain_node.py').write_text('def main(args=None):\n    return len(args)\n')
+    monkeypatch.syspath_prepend(str(tmp_path))
+    assert ros_env.run_node_module('plain_node', ['--ros-args']) == 1
+    assert signal.getsignal(signal.SIGINT) is ros_env._raise_keyboard_interrupt

@@ -189,6 +189,26 @@ def test_rate_noise_and_pace_change_at_run_time_and_the_fixed_parameters_say_why
         node.destroy_node()
 
 
+def test_the_simulator_refuses_to_follow_the_clock_it_publishes_at_run_time(context):
+    """`ros2 param set /simulator use_sim_time true` was taken silently and froze the twin:
+    the node clock then waited for the /clock that only its own sampling publishes. It is
+    refused as at start-up, with the reason; false (what it is) is still taken."""
+    node = SimulatorNode(plant=RecordingPlant(), context=context,
+                         parameter_overrides=[Parameter('real_time_factor', value=0.0)])
+    try:
+        refused = node.set_parameters([Parameter('use_sim_time', value=True)])[0]
+        assert not refused.successful
+        assert refused.reason.startswith('parameter use_sim_time = True refused: the '
+                                         'simulator is the clock (it publishes /clock)')
+        assert node.get_parameter('use_sim_time').value is False
+        for _ in range(2):
+            node.on_timer()
+        assert node.runner.time_s > 0.0  # still sampling on its own pace
+        assert node.set_parameters([Parameter('use_sim_time', value=False)])[0].successful
+    finally:
+        node.destroy_node()
+
+
 def test_monitor_completes_at_max_messages_and_stops_counting(context):
     node = MonitorNode(context=context, parameter_overrides=[Parameter('max_messages', value=3)])
     try:

@@ -15,7 +15,7 @@ import dataclasses
 import difflib
 import enum
 import math
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -101,21 +101,32 @@ def spec_descriptor(spec: ParameterSpec) -> ParameterDescriptor:
 
 
 def accept_parameter_changes(node: Any, specs: Iterable[ParameterSpec],
-                             apply: Callable[[str, Any], None]) -> None:
+                             apply: Callable[[str, Any], None],
+                             refuse: Mapping[str, Callable[[Any], str | None]] | None = None
+                             ) -> None:
     """Let ``ros2 param set`` change ``node``'s parameters that are not read-only.
 
     A new value is checked as at start-up (:func:`value_problem`; refused with that line) and
     then handed to ``apply(name, value)``, doubles as floats. rclpy itself refuses the
     read-only ones ("Trying to set a read-only parameter"); their descriptors say why.
+    ``refuse`` holds rules for parameters that rclpy declares, not the specs (``use_sim_time``):
+    ``rule(value)`` says why the node refuses ``value`` (after ``parameter <name> = <value>``),
+    or None; a value the node refused at start-up is refused at run time too, where it would
+    otherwise be taken silently.
     """
     from rcl_interfaces.msg import SetParametersResult
 
     settable = {spec.name: spec for spec in specs if not spec.read_only}
+    rules = dict(refuse or {})
 
     def check(parameters: list[Any]) -> SetParametersResult:
         for parameter in parameters:
             spec = settable.get(parameter.name)
             problem = None if spec is None else value_problem(spec, parameter.value)
+            rule = rules.get(parameter.name)
+            reason = None if rule is None else rule(parameter.value)
+            if reason is not None:
+                problem = f'parameter {parameter.name} = {parameter.value!r} {reason}'
             if problem is not None:
                 return SetParametersResult(successful=False, reason=problem)
         return SetParametersResult(successful=True)

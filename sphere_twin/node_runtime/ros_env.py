@@ -6,6 +6,7 @@ unless the user chose a range explicitly.
 
 from __future__ import annotations
 
+import importlib
 import os
 import re
 import signal
@@ -200,6 +201,31 @@ def run_node(build: Callable[[], Any], args: list[str] | None = None,
         _ignore_late_signals()
         rclpy.try_shutdown()  # where the interrupted shutdown did not get to it
         return 0
+
+
+def run_node_module(module_name: str, args: list[str] | None = None) -> int:
+    """An executable's entry point: SIGINT and SIGTERM end it cleanly from its first moment,
+    then the ``main()`` of its node's module.
+
+    Importing a node's module takes from half a second to seconds (rclpy, numpy, numba), and
+    a console script imports it before it calls anything: a Ctrl-C in that time (``ros2
+    launch`` stopped in its first second) would raise ``KeyboardInterrupt`` inside an import,
+    print its traceback and end the node with -2, which launch reports as a death. Here the
+    shutdown handlers are installed first; a signal during the import ends the node with
+    status 0 and nothing printed (whatever the interrupted import raised: it can land inside a
+    C extension, which reports it as its own error), as a signal during start-up does.
+    """
+    install_shutdown_signal_handlers()
+    main = None
+    try:
+        main = importlib.import_module(module_name).main
+    except BaseException:
+        if not shutdown_requested():
+            raise
+    if main is None or shutdown_requested():
+        _ignore_late_signals()
+        return 0
+    return main(args)
 
 
 def _run(build: Callable[[], Any], args: list[str] | None,

@@ -88,6 +88,15 @@ CATCH_UP_SPEEDUP = 2
 # The status on /diagnostics is published at this wall-clock period, so that a healthy twin
 # is visible to `ros2 topic echo /diagnostics` and to a supervisor.
 STATUS_PERIOD_S = 1.0
+# Why the simulator never takes use_sim_time, at start-up or from `ros2 param set`: its node
+# clock would wait for the /clock that only its own sampling publishes.
+IS_THE_CLOCK = ('is the clock (it publishes /clock): run it without use_sim_time; the other '
+                'nodes take use_sim_time:=true')
+
+
+def _clock_follower(use_sim_time: bool) -> str | None:
+    """Why ``ros2 param set /simulator use_sim_time true`` is refused, or None for false."""
+    return f'refused: the simulator {IS_THE_CLOCK}' if use_sim_time else None
 
 
 class SimulatorNode(Node):
@@ -114,8 +123,7 @@ class SimulatorNode(Node):
 
         super().__init__('simulator', **node_kwargs)
         if self.get_parameter('use_sim_time').value:
-            raise StartupError('the simulator is the clock (it publishes /clock): run it '
-                               'without use_sim_time; the other nodes take use_sim_time:=true')
+            raise StartupError(f'the simulator {IS_THE_CLOCK}')
         p = self._declare_parameters()
         self.publish_rate_hz = p['publish_rate_hz']
         self.period_s = 1.0 / self.publish_rate_hz
@@ -179,7 +187,9 @@ class SimulatorNode(Node):
 
     def _declare_parameters(self) -> dict[str, Any]:
         parameters = declare_node_parameters(self, SIMULATOR_PARAMETERS)
-        accept_parameter_changes(self, SIMULATOR_PARAMETERS, self._parameter_changed)
+        # Following /clock, which its own sampling publishes, would stop it for good.
+        accept_parameter_changes(self, SIMULATOR_PARAMETERS, self._parameter_changed,
+                                 refuse={'use_sim_time': _clock_follower})
         return parameters
 
     def _start_sample_timer(self) -> None:
