@@ -79,11 +79,33 @@ def test_a_table_at_more_intensities_reuses_the_kicks_it_shares(serial_table):
     np.testing.assert_array_equal(table.displacement[:, :, 0], fresh.displacement[:, :, 0])
 
 
+def test_a_table_with_other_offsets_reuses_only_the_nodes_whose_programme_is_unchanged(
+        serial_table):
+    """New offsets (a search that went on where it had stopped short) change the programme at
+    some nodes only: those are simulated again, the others are the old table's, and the result
+    is what a fresh build gives."""
+    moved = (0.06, 0.06)
+    offsets = OffsetLookup(SMALL_OFFSETS.grid_step, tuple(
+        (x, y, v + 2.0 if (x, y) == moved else v) for x, y, v in SMALL_OFFSETS.nodes))
+    spec = dataclasses.replace(SMALL, offsets=offsets)
+    changed = [(x, y) for _, _, x, y in SMALL.nodes()
+               if SMALL.node_programme(x, y, 1.0) != spec.node_programme(x, y, 1.0)]
+    assert moved in changed and len(changed) < len(SMALL.nodes())
+    seen = []
+    table = build_table(spec, workers=1, reuse=serial_table,
+                        progress=lambda done, total: seen.append((done, total)))
+    assert seen[0] == (len(SMALL.nodes()) - len(changed), len(SMALL.nodes()))
+    fresh = build_table(spec, workers=1)
+    np.testing.assert_array_equal(table.displacement, fresh.displacement)
+    i, j = next((i, j) for i, j, x, y in SMALL.nodes() if (x, y) == moved)
+    assert not np.array_equal(table.displacement[i, j], serial_table.displacement[i, j])
+
+
 def test_a_table_of_another_kick_is_not_reused(serial_table):
     from sphere_sim.kicks.table_build import ReuseError
 
     other = dataclasses.replace(SMALL, window_s=6e-3)
-    with pytest.raises(ReuseError, match='only its intensities may differ'):
+    with pytest.raises(ReuseError, match='only its intensities and voltage offsets may differ'):
         build_table(other, workers=1, reuse=serial_table)
     assert issubclass(ReuseError, TableError)  # one line in the CLI
 
