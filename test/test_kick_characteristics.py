@@ -6,6 +6,9 @@ import numpy as np
 import pytest
 
 from sphere_sim.kicks.characteristics import (
+    OFFSET_BISECTIONS,
+    OFFSET_REFINEMENTS,
+    OFFSET_STEP_V,
     KickEffect,
     find_offset,
     offset_grid,
@@ -26,6 +29,51 @@ def test_offset_search_finds_the_root_inside_the_bracket_of_a_non_monotone_error
     assert offset == pytest.approx(8.0, abs=0.05)
     assert abs(residual) <= 1e-3
     assert evaluations == len(calls) <= 6 + 6
+
+
+def test_offset_search_goes_on_by_bisection_where_regula_falsi_stalls():
+    """A steep, one-sided error (as far out in the cone, where V1 passes its own pull-in):
+    three regula falsi steps from the scan's bracket stay far off; the bisections that follow
+    reach the tolerance. A search regula falsi finishes is the same with or without them."""
+    calls = []
+
+    def error(v):  # root at 39.86 V, flat below it and steep above it
+        calls.append(v)
+        return ((max(v, 20.0) - 20.0) / 25.0) ** 10 - 0.1
+
+    scan = (-10.0, 5.0, 10.0, 20.0, 45.0)
+    tol = math.radians(1.0)
+    _, stalled, _ = find_offset(error, scan, tol_rad=tol, bisections=0)
+    assert abs(stalled) > 5.0 * tol
+    calls.clear()
+    offset, residual, evaluations = find_offset(error, scan, tol_rad=tol)
+    assert abs(residual) <= tol
+    assert offset == pytest.approx(20.0 + 25.0 * 0.1 ** 0.1, abs=0.1)
+    assert evaluations == len(calls) <= len(scan) + 1 + OFFSET_REFINEMENTS + OFFSET_BISECTIONS
+
+    def smooth(v):
+        return math.atan(0.05 * (v - 8.0))
+
+    assert find_offset(smooth, scan, tol_rad=tol) == find_offset(smooth, scan, tol_rad=tol,
+                                                                 bisections=0)
+
+
+def test_offset_search_locates_a_step_of_the_error_without_taking_it_for_a_root():
+    """A beam snapping down can turn the error's sign with no root between: the bisections
+    narrow the step to OFFSET_STEP_V and stop, the residual stays the step's."""
+    calls = []
+
+    def error(v):
+        calls.append(v)
+        return -0.2 if v < 30.0 else 0.2
+
+    scan = (-10.0, 5.0, 10.0, 20.0, 45.0)
+    _, residual, evaluations = find_offset(error, scan, tol_rad=math.radians(1.0))
+    assert abs(residual) == pytest.approx(0.2)
+    assert evaluations < len(scan) + 1 + OFFSET_REFINEMENTS + OFFSET_BISECTIONS
+    below = max(v for v in calls if v < 30.0)
+    above = min(v for v in calls if v >= 30.0)
+    assert above - below <= OFFSET_STEP_V
 
 
 def test_offset_search_without_a_sign_change_returns_the_best_scanned_offset():

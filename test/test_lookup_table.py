@@ -79,11 +79,33 @@ def test_a_table_at_more_intensities_reuses_the_kicks_it_shares(serial_table):
     np.testing.assert_array_equal(table.displacement[:, :, 0], fresh.displacement[:, :, 0])
 
 
+def test_a_table_with_other_offsets_reuses_only_the_nodes_whose_programme_is_unchanged(
+        serial_table):
+    """New offsets (a search that went on where it had stopped short) change the programme at
+    some nodes only: those are simulated again, the others are the old table's, and the result
+    is what a fresh build gives."""
+    moved = (0.06, 0.06)
+    offsets = OffsetLookup(SMALL_OFFSETS.grid_step, tuple(
+        (x, y, v + 2.0 if (x, y) == moved else v) for x, y, v in SMALL_OFFSETS.nodes))
+    spec = dataclasses.replace(SMALL, offsets=offsets)
+    changed = [(x, y) for _, _, x, y in SMALL.nodes()
+               if SMALL.node_programme(x, y, 1.0) != spec.node_programme(x, y, 1.0)]
+    assert moved in changed and len(changed) < len(SMALL.nodes())
+    seen = []
+    table = build_table(spec, workers=1, reuse=serial_table,
+                        progress=lambda done, total: seen.append((done, total)))
+    assert seen[0] == (len(SMALL.nodes()) - len(changed), len(SMALL.nodes()))
+    fresh = build_table(spec, workers=1)
+    np.testing.assert_array_equal(table.displacement, fresh.displacement)
+    i, j = next((i, j) for i, j, x, y in SMALL.nodes() if (x, y) == moved)
+    assert not np.array_equal(table.displacement[i, j], serial_table.displacement[i, j])
+
+
 def test_a_table_of_another_kick_is_not_reused(serial_table):
     from sphere_sim.kicks.table_build import ReuseError
 
     other = dataclasses.replace(SMALL, window_s=6e-3)
-    with pytest.raises(ReuseError, match='only its intensities may differ'):
+    with pytest.raises(ReuseError, match='only its intensities and voltage offsets may differ'):
         build_table(other, workers=1, reuse=serial_table)
     assert issubclass(ReuseError, TableError)  # one line in the CLI
 
@@ -189,12 +211,35 @@ def test_shipped_table_matches_the_committed_optimised_kick(shipped):
 def test_the_shipped_tables_offsets_keep_its_full_kicks_on_their_direction(shipped):
     """§4.1's purpose for the offsets: the same action gives the same direction from any state.
     Without them the full kick strays by a median of 19.6 deg over the cone (and 86 of its 99
-    states by more than 5 deg); the offsets were searched to within 1 deg."""
+    states by more than 5 deg); the offsets were searched to within 1 deg, and every node but
+    one reached it (0.44 deg median, 2.26 deg at (0.48, -0.24), whose kick is 0.04 deg)."""
     errors = np.degrees(shipped.direction_errors_rad(1.0))
     assert shipped.spec.offsets
     assert errors.size == 99
-    assert np.median(errors) < 2.0
-    assert np.count_nonzero(errors > 5.0) < 0.25 * errors.size
+    assert np.median(errors) <= 1.0
+    assert errors.max() <= 5.0
+
+
+def test_the_full_model_kicks_on_direction_from_the_state_the_offset_search_left_off():
+    """At (0.48, 0.24) the error against V1's offset is steep and not monotone (V1 is past its
+    own pull-in): the search's first three regula falsi steps stopped at 42.18 V, 10.7 deg off,
+    which was the table's worst direction. The offset the table now carries puts the full
+    model's kick within 1 deg of its nominal direction."""
+    table = LookupTable.load_current()
+    spec, params = table.spec, table.parameters()
+    normal = normal_from_xy(0.48, 0.24)
+
+    def error_deg(kick_spec):
+        moved = direct_kick(kick_spec, params, normal, 0, 1.0).normal
+        d = moved[:2] - normal[:2]
+        return math.degrees(math.remainder(math.atan2(d[1], d[0]) - table.directions_rad[0],
+                                           2.0 * math.pi))
+
+    assert abs(error_deg(spec)) <= 1.0
+    stalled = OffsetLookup(spec.offsets.grid_step, tuple(
+        (x, y, 42.181 if (x, y) == (0.48, 0.24) else v) for x, y, v in spec.offsets.nodes))
+    assert stalled.offset_v(spec.design.direction_rad, 0.48, 0.24) == pytest.approx(42.181)
+    assert error_deg(dataclasses.replace(spec, offsets=stalled)) > 5.0
 
 
 def test_an_unkicked_sphere_stays_where_it_rests_across_the_shipped_table(shipped):

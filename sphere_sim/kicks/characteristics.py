@@ -36,6 +36,15 @@ OFFSET_DIRECTION_TOL_RAD = math.radians(1.0)
 # threshold with the sphere on is near 42.6 V, so the scan is dense around +7.6 V.
 OFFSET_SCAN_V = (-20.0, -10.0, -5.0, 5.0, 7.5, 10.0, 20.0, 45.0)
 OFFSET_REFINEMENTS = 3
+# Where those regula falsi steps leave the kick more than the tolerance off, the search goes on
+# by bisection, for at most this many kicks more, in the bracket of all the offsets tried so far
+# whose end is nearest the nominal direction. Far out in the cone the error against the offset
+# is steep and not monotone once V1 passes its own pull-in (at (0.48, 0.24): -6.6 deg at 30 V,
+# +37 deg at 35 V, -0.1 deg at 40 V, +10.7 deg at 42.2 V), and three regula falsi steps from
+# the scan's 20-45 V bracket stopped 10.7 deg off (docs/motion_primitives.md).
+OFFSET_BISECTIONS = 12
+# A bracket narrower than this straddles a step of the error (a beam snapping down), not a root.
+OFFSET_STEP_V = 0.02
 
 
 @dataclasses.dataclass(frozen=True)
@@ -148,12 +157,18 @@ class OffsetSolution:
 
 def find_offset(error_of_offset: Callable[[float], float], candidates_v: Iterable[float],
                 tol_rad: float = OFFSET_DIRECTION_TOL_RAD,
-                refinements: int = OFFSET_REFINEMENTS) -> tuple[float, float, int]:
-    """Offset whose kick goes closest to the nominal direction: a scan, then regula falsi.
+                refinements: int = OFFSET_REFINEMENTS,
+                bisections: int = OFFSET_BISECTIONS) -> tuple[float, float, int]:
+    """Offset whose kick goes closest to the nominal direction: a scan, regula falsi, then
+    bisection where regula falsi stalls.
 
     The error is not monotone in the offset (an offset above the pull-in threshold turns the
     low beam into a kicking one), so a scan over ``candidates_v`` finds the sign changes first;
-    the bracket around the best scanned point is then refined.
+    the bracket around the best scanned point is then refined by regula falsi. If that ends
+    more than ``tol_rad`` off, up to ``bisections`` more offsets are tried, each the middle of
+    the sign change, among all the offsets tried so far, whose end is nearest zero (brackets
+    narrower than :data:`OFFSET_STEP_V` are steps, not roots, and are left alone). A search
+    that regula falsi finishes is the same with or without the bisections.
 
     Parameters
     ----------
@@ -185,6 +200,22 @@ def find_offset(error_of_offset: Callable[[float], float], candidates_v: Iterabl
             vb, eb = v, e
         else:
             va, ea = v, e
+        points.append((v, e))
+    for _ in range(bisections if abs(best[1]) > tol_rad else 0):
+        points.sort()
+        brackets = [(a, b) for a, b in itertools.pairwise(points)
+                    if a[1] * b[1] < 0.0 and abs(a[1] - b[1]) < math.pi
+                    and b[0] - a[0] > OFFSET_STEP_V]
+        if not brackets:
+            break
+        (va, ea), (vb, eb) = min(brackets, key=lambda ab: min(abs(ab[0][1]), abs(ab[1][1])))
+        v = 0.5 * (va + vb)
+        e = error_of_offset(v)
+        evaluations += 1
+        points.append((v, e))
+        best = min(best, (v, e), key=lambda p: abs(p[1]))
+        if abs(e) <= tol_rad:
+            break
     return best[0], best[1], evaluations
 
 
@@ -241,27 +272,38 @@ def upper_right_nodes(design: KickDesign, grid_step: float,
 def voltage_offsets(design: KickDesign | None = None, grid_step: float = TableSpec.grid_step,
                     cone_half_angle_rad: float = CONE_HALF_ANGLE_RAD, intensity: float = 1.0,
                     params: ParameterSet | None = None, workers: int = 1,
-                    progress: Callable[[], object] | None = None) -> list[OffsetSolution]:
+                    progress: Callable[[], object] | None = None,
+                    reuse: Iterable[OffsetSolution] = ()) -> list[OffsetSolution]:
     """Fig. 8: the offset on the upper-right half's compensating beam (§4.1's V1) for every
     grid state of that half.
+
+    ``reuse`` holds solutions of an earlier search of the same design, parameters, intensity
+    and grid: those that ended within :data:`OFFSET_DIRECTION_TOL_RAD` are taken, not searched
+    again (:func:`find_offset` takes the same path for them today), and only the others are
+    searched. The caller vouches that they were searched for the same kick.
 
     Returns
     -------
     list of OffsetSolution
     """
     design = KickDesign() if design is None else design
-    jobs = [(params, design, intensity, x, y)
-            for x, y in upper_right_nodes(design, grid_step, cone_half_angle_rad)]
-    out = []
+    nodes = upper_right_nodes(design, grid_step, cone_half_angle_rad)
+    kept = {(round(s.x_sn, 9), round(s.y_sn, 9)): s for s in reuse
+            if abs(s.direction_error_rad) <= OFFSET_DIRECTION_TOL_RAD}
+    jobs = [(params, design, intensity, x, y) for x, y in nodes
+            if (round(x, 9), round(y, 9)) not in kept]
+    searched = {}
     if workers > 1:
         with concurrent.futures.ProcessPoolExecutor(max_workers=workers) as pool:
             for solution in pool.map(_offset_job, jobs):
-                out.append(solution)
+                searched[(round(solution.x_sn, 9), round(solution.y_sn, 9))] = solution
                 if progress is not None:
                     progress()
     else:
         for job in jobs:
-            out.append(_offset_job(job))
+            solution = _offset_job(job)
+            searched[(round(solution.x_sn, 9), round(solution.y_sn, 9))] = solution
             if progress is not None:
                 progress()
-    return out
+    return [kept.get(key) or searched[key]
+            for key in ((round(x, 9), round(y, 9)) for x, y in nodes)]

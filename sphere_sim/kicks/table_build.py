@@ -195,19 +195,22 @@ def reusable_entries(spec: TableSpec, params_digest: str,
                      table: LookupTable) -> dict[EntryKey, Entry]:
     """The entries of ``table`` that ``spec`` asks for too, keyed as its jobs.
 
-    ``table`` must have been built for the same kick, grid, window, tolerance, offsets and
-    parameters as ``spec``, which may differ only in its intensities: an entry is one kick,
-    fixed by those and its node and intensity, so it is the same whichever table holds it.
+    ``table`` must have been built for the same kick, grid, window, tolerance and parameters
+    as ``spec``, which may differ in its intensities and its voltage offsets: an entry is one
+    kick, fixed by those, its node's rest state and the programme simulated there, so it is
+    the same whichever table holds it. An entry is taken only where both specs simulate the
+    very same programme at its node and intensity (new offsets leave the nodes whose offset
+    did not change to be reused).
 
     Raises
     ------
     ReuseError
         For a table built for something else.
     """
-    same = dataclasses.replace(table.spec, intensities=spec.intensities)
+    same = dataclasses.replace(table.spec, intensities=spec.intensities, offsets=spec.offsets)
     if same.digest(params_digest) != spec.digest(params_digest):
         raise ReuseError('the table to reuse was built for another kick, grid, window or '
-                         'offsets; only its intensities may differ')
+                         'tolerance; only its intensities and voltage offsets may differ')
     if table.meta['params_digest'] != params_digest:
         raise ReuseError('the table to reuse was built for other parameter values')
     old = {round(float(u), 12): k for k, u in enumerate(table.intensities)}
@@ -215,6 +218,9 @@ def reusable_entries(spec: TableSpec, params_digest: str,
     for job in jobs_of(spec):
         k = old.get(round(job.intensity, 12))
         if k is None or np.isnan(table.displacement[job.i, job.j, k, 0]):
+            continue
+        if (table.spec.node_programme(job.x_sn, job.y_sn, float(table.intensities[k]))
+                != spec.node_programme(job.x_sn, job.y_sn, job.intensity)):
             continue
         dx, dy = table.displacement[job.i, job.j, k]
         entries[job.key] = {'key': list(job.key), 'dx': float(dx), 'dy': float(dy),

@@ -12,6 +12,7 @@ from tqdm import tqdm
 
 from sphere_sim.kicks.characteristics import (
     OFFSET_DIRECTION_TOL_RAD,
+    OffsetSolution,
     rotation_width_curves,
     voltage_offsets,
 )
@@ -22,6 +23,7 @@ from sphere_twin.commands.optimize import DEFAULT_OUTPUT as DEFAULT_DESIGN
 from sphere_twin.commands.options import (
     DEFAULT_OUT_DIR,
     GRID_STEP,
+    CommandError,
     add_params_option,
     number_in_range,
     output_directory,
@@ -56,6 +58,10 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     offsets.add_argument('--grid-step', type=GRID_STEP, default=TableSpec.grid_step,
                          help="step in x_sn and y_sn, 0.01 to 1 (default the table's own)")
     offsets.add_argument('--workers', type=positive_int, default=2, help='local processes')
+    offsets.add_argument('--reuse', type=Path, default=None,
+                         help='an earlier offsets JSON of the same design, parameters and '
+                              'grid: its states that ended within the direction tolerance are '
+                              'taken, the others searched again')
     for p in (width, offsets):
         add_params_option(p)
         p.add_argument('--design', default=DEFAULT_DESIGN,
@@ -102,9 +108,11 @@ def run_offsets(args: argparse.Namespace) -> int:
     from sphere_twin.plots import plot_offsets
 
     design = KickDesign.load(args.design)
+    reuse = [] if args.reuse is None else reusable_offsets(args.reuse, design, args.params.name,
+                                                           args.grid_step)
     with tqdm(desc='states', unit='state') as bar:
         solutions = voltage_offsets(design, args.grid_step, params=args.params,
-                                    workers=args.workers, progress=bar.update)
+                                    workers=args.workers, progress=bar.update, reuse=reuse)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     png = plot_offsets(solutions, out / 'voltage_offsets.png')
@@ -120,4 +128,28 @@ def run_offsets(args: argparse.Namespace) -> int:
     print(f'wrote {png}')
     print(f'residual direction error: median {np.median(after):.2f} deg, '
           f'max {after.max():.2f} deg over {len(solutions)} states')
+    if args.reuse is not None:
+        kept = sum(s in reuse for s in solutions)
+        print(f'{kept} states taken from {args.reuse}, {len(solutions) - kept} searched')
     return 0
+
+
+def reusable_offsets(path: Path, design: KickDesign, parameter_set: str,
+                     grid_step: float) -> list[OffsetSolution]:
+    """The states of an earlier ``primitives offsets`` JSON, refused (SystemExit) unless it was
+    searched for the same design, parameter set, grid step and direction tolerance."""
+    try:
+        data = json.loads(path.read_text())
+        same = (data['design'] == json.loads(json.dumps(design.to_dict()))
+                and data['parameter_set'] == parameter_set
+                and math.isclose(data['grid_step'], grid_step)
+                and math.isclose(data['direction_tolerance_deg'],
+                                 math.degrees(OFFSET_DIRECTION_TOL_RAD)))
+        states = [OffsetSolution(**s) for s in data['states']]
+    except (OSError, json.JSONDecodeError, KeyError, TypeError) as exc:
+        raise CommandError(f'{path} holds no voltage offsets saved by `sphere-twin primitives '
+                         f'offsets`: {type(exc).__name__}: {exc}') from exc
+    if not same:
+        raise CommandError(f'{path} was searched for another design, parameter set, grid step '
+                         f'or tolerance; it cannot be reused')
+    return states

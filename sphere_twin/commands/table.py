@@ -56,8 +56,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                             "primitives offsets`, or 'none'")
     build.add_argument('--workers', type=positive_int, default=2, help='local processes')
     build.add_argument('--reuse', type=Path, default=None,
-                       help='a table of the same kick at other intensities: its kicks are '
-                            'taken instead of simulated again')
+                       help='a table of the same kick at other intensities or offsets: '
+                            'its kicks whose programme is unchanged are taken instead of '
+                            'simulated again')
     build.add_argument('--scheduler', default=None,
                        help='Dask scheduler address, e.g. tcp://host:8786')
     build.set_defaults(func=run_build)
