@@ -20,7 +20,8 @@ if TYPE_CHECKING:
     from sphere_sim.twin.fidelity_check import FidelityCheck
     from sphere_sim.twin.plants import ContinuousPlant, DiscretePlant, RestPose, TwinPlant
 
-# The first is the simulator's default: the physics, which publishes every topic.
+# The first is what the simulator runs unless told otherwise (plant_and_fidelity): the physics,
+# which publishes every topic.
 PLANT_KINDS = ('continuous', 'discrete')
 # The ladder of models (sphere_sim.model.fidelity.LADDER, written out: the node modules import
 # this one before numba loads; test_fidelity checks the two agree). The continuous plant
