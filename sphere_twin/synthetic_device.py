@@ -29,10 +29,14 @@ from msg_defs.device import SENSOR_RATE_HZ
 from sphere_sim.kicks.discrete import NOISE_STUDY_STD_RAD
 
 if TYPE_CHECKING:
+    from numpy.typing import NDArray
+
+    from sphere_sim.fitting.protocol import Protocol
     from sphere_sim.kicks.lookup_table import CombinedKickPlant, LookupTable
     from sphere_sim.model.parameters import ParameterSet
     from sphere_sim.model.programme import PulseProgramme
     from sphere_sim.twin.plants import PlantSnapshot
+    from sphere_twin.bag.writer import BagWriter
 
 INTENSITY_RANGE = (0.5, 1.0)
 # On the paper's device a kick below about 0.8 is no smooth function of the beams' parameters:
@@ -74,6 +78,82 @@ def kick_programme(kicks: LookupTable | CombinedKickPlant, action: int, intensit
     return Symmetry(int(action) % 4).apply_programme(design.programme(intensity))
 
 
+class _DeviceRecording:
+    """The continuous twin of ``params`` on the simulator's runner, writing what it publishes
+    into a bag: the measured normal, the truth, and the programmes it is sent."""
+
+    def __init__(self, bag: BagWriter, params: ParameterSet | None, noise_std_rad: float,
+                 seed: int, publish_rate_hz: float, tilt_deg: tuple[float, float]) -> None:
+        from msg_defs.topics import PULSE_PROGRAM, SPHERE_STATE, SURFACE_NORMAL
+        from sphere_sim.model.assembly import assemble
+        from sphere_sim.model.initial_state import rest_state
+        from sphere_sim.model.scene import load_scene
+        from sphere_sim.twin.plants import ContinuousPlant
+        from sphere_sim.twin.runner import TwinRunner
+
+        model = assemble(load_scene('rest'), params)
+        plant = ContinuousPlant(model, rest_state(model, (*tilt_deg, 0.0)))
+        self.period_s = 1.0 / publish_rate_hz
+        self.runner = TwinRunner(plant, self.period_s, noise_std_rad, seed)
+        self.bag = bag
+        self.samples = 0
+        for topic in (PULSE_PROGRAM, SURFACE_NORMAL, SPHERE_STATE):
+            bag.add_contract_topic(topic)
+
+    def sample(self) -> tuple[PlantSnapshot, NDArray[np.float64]]:
+        """One tick: the snapshot and the measured (noisy) normal, both written."""
+        from rclpy.serialization import serialize_message
+
+        from msg_defs.conversions import sphere_state_to_msg, surface_normal_to_msg, time_from_ns
+        from msg_defs.device import NS_PER_S
+        from msg_defs.topics import SPHERE_STATE, SURFACE_NORMAL
+
+        snap_sample, _ = self.runner.tick()
+        assert snap_sample is not None  # not lockstep: every tick takes a sample
+        snap = snap_sample.snapshot
+        ns = round(snap.time_s * NS_PER_S)
+        stamp = time_from_ns(ns)
+        self.bag.write(SURFACE_NORMAL.name, serialize_message(
+            surface_normal_to_msg(snap_sample.measured_normal, stamp)), ns)
+        assert snap.sphere is not None  # the continuous plant has the sphere
+        centre, quaternion, velocity, omega = snap.sphere
+        self.bag.write(SPHERE_STATE.name, serialize_message(
+            sphere_state_to_msg(centre, quaternion, velocity, omega, stamp=stamp)), ns)
+        self.samples += 1
+        return snap, np.asarray(snap_sample.measured_normal, dtype=float)
+
+    def send(self, programme: PulseProgramme) -> None:
+        """Start ``programme`` at the next sample, and record it (stamped with its start)."""
+        from rclpy.serialization import serialize_message
+
+        from msg_defs.conversions import programme_to_msg, time_from_ns
+        from msg_defs.device import NS_PER_S
+        from msg_defs.topics import PULSE_PROGRAM
+
+        times, volts = programme.segments()
+        start_ns = round((self.runner.time_s + self.period_s) * NS_PER_S)
+        self.runner.command_programme(times, volts, start_ns / NS_PER_S)
+        self.bag.write(PULSE_PROGRAM.name, serialize_message(
+            programme_to_msg(times, volts, time_from_ns(start_ns))), start_ns - 1)
+
+    def run(self, duration_s: float) -> tuple[PlantSnapshot, NDArray[np.float64]]:
+        """Samples for ``duration_s`` (at least one): the last snapshot and the measured
+        normals."""
+        measured = [self.sample() for _ in range(max(1, round(duration_s / self.period_s)))]
+        return measured[-1][0], np.array([m for _, m in measured])
+
+
+def _towards_centre(kicks: LookupTable | CombinedKickPlant, normal: NDArray[np.float64],
+                    action: int) -> int:
+    """``action``, or past ``MAX_TILT_RAD`` the kick whose direction is closest to -xy."""
+    xy = normal[:2]
+    if math.hypot(*xy) <= math.sin(MAX_TILT_RAD):
+        return action
+    back = math.atan2(-xy[1], -xy[0])
+    return int(np.argmin([abs(math.remainder(d - back, 2 * math.pi))
+                          for d in kicks.directions_rad]))
+
+
 def record_device(bag_dir: str | os.PathLike[str], params: ParameterSet | None,
                   n_kicks: int = 20, seed: int = 0,
                   noise_std_rad: float = NOISE_STUDY_STD_RAD,
@@ -88,75 +168,22 @@ def record_device(bag_dir: str | os.PathLike[str], params: ParameterSet | None,
     ``/sphere/surface_normal`` (measured, with noise) and the truth the twin also publishes,
     ``/sphere/state``, which identification must not read. Returns the number of samples.
     """
-    from rclpy.serialization import serialize_message
-
-    from msg_defs.conversions import (
-        programme_to_msg,
-        sphere_state_to_msg,
-        surface_normal_to_msg,
-        time_from_ns,
-    )
-    from msg_defs.device import NS_PER_S
-    from msg_defs.topics import PULSE_PROGRAM, SPHERE_STATE, SURFACE_NORMAL
     from sphere_sim.kicks.lookup_table import load_kick_model
-    from sphere_sim.model.assembly import assemble
-    from sphere_sim.model.initial_state import rest_state
-    from sphere_sim.model.scene import load_scene
-    from sphere_sim.twin.plants import ContinuousPlant
-    from sphere_sim.twin.runner import TwinRunner
     from sphere_twin.bag.writer import BagWriter
 
     kicks = load_kick_model()
-    model = assemble(load_scene('rest'), params)
-    plant = ContinuousPlant(model, rest_state(model, (*tilt_deg, 0.0)))
-    period = 1.0 / publish_rate_hz
-    runner = TwinRunner(plant, period, noise_std_rad, seed)
     sequence = kick_sequence(kicks, n_kicks, seed, intensity_range)
-    steps_per_kick = round(kick_period_s / period)
-    bag_dir = Path(bag_dir)
-    samples = 0
-    with BagWriter(bag_dir) as bag:
-        for topic in (PULSE_PROGRAM, SURFACE_NORMAL, SPHERE_STATE):
-            bag.add_contract_topic(topic)
-
-        def sample() -> PlantSnapshot:
-            snap_sample, _ = runner.tick()
-            assert snap_sample is not None  # not lockstep: every tick takes a sample
-            snap = snap_sample.snapshot
-            ns = round(snap.time_s * NS_PER_S)
-            stamp = time_from_ns(ns)
-            bag.write(SURFACE_NORMAL.name, serialize_message(
-                surface_normal_to_msg(snap_sample.measured_normal, stamp)), ns)
-            assert snap.sphere is not None  # the continuous plant has the sphere
-            centre, quaternion, velocity, omega = snap.sphere
-            bag.write(SPHERE_STATE.name, serialize_message(
-                sphere_state_to_msg(centre, quaternion, velocity, omega, stamp=stamp)), ns)
-            return snap
-
+    with BagWriter(Path(bag_dir)) as bag:
+        device = _DeviceRecording(bag, params, noise_std_rad, seed, publish_rate_hz, tilt_deg)
         # A settled stretch before the first kick, then kick, rest, kick ...
-        snap: PlantSnapshot | None = None
-        for _ in range(steps_per_kick):
-            snap = sample()
-            samples += 1
+        snap, _ = device.run(kick_period_s)
         for i, (action, intensity, width_s) in enumerate(sequence):
-            assert snap is not None  # steps_per_kick >= 1
-            xy = snap.normal[:2]
-            if math.hypot(*xy) > math.sin(MAX_TILT_RAD):
-                # Towards the centre: the kick whose direction is closest to -xy.
-                back = math.atan2(-xy[1], -xy[0])
-                action = int(np.argmin([abs(math.remainder(d - back, 2 * math.pi))
-                                        for d in kicks.directions_rad]))
-            times, volts = kick_programme(kicks, action, intensity, width_s).segments()
-            start_ns = round((runner.time_s + period) * NS_PER_S)
-            runner.command_programme(times, volts, start_ns / NS_PER_S)
-            bag.write(PULSE_PROGRAM.name, serialize_message(
-                programme_to_msg(times, volts, time_from_ns(start_ns))), start_ns - 1)
-            for _ in range(steps_per_kick):
-                snap = sample()
-                samples += 1
+            action = _towards_centre(kicks, snap.normal, action)
+            device.send(kick_programme(kicks, action, intensity, width_s))
+            snap, _ = device.run(kick_period_s)
             if progress is not None:
                 progress(i + 1, len(sequence))
-    return samples
+    return device.samples
 
 
 @dataclasses.dataclass(frozen=True)
@@ -242,3 +269,77 @@ PAPER_DEVICES = (
     SyntheticDevice('paper_e', 'calibrated', {K_Z: 1.2, GROUND_Z: 1.05},
                     (K_Z, GROUND_Z, K_PHI), 15, PAPER_INTENSITY_RANGE),
 )
+
+
+@dataclasses.dataclass(frozen=True)
+class ProtocolRecord:
+    """What recording a protocol did: the samples, each threshold search's bracket as the
+    recorder decided it while running, and the steps it could not run (with what they need)."""
+
+    samples: int
+    brackets: tuple[tuple[str, tuple[float | None, float | None]], ...]
+    not_run: tuple[tuple[str, str], ...]
+
+
+def record_protocol(bag_dir: str | os.PathLike[str], params: ParameterSet | None,
+                    protocol: Protocol, seed: int = 0,
+                    noise_std_rad: float = NOISE_STUDY_STD_RAD,
+                    publish_rate_hz: float = PUBLISH_RATE_HZ,
+                    tilt_deg: tuple[float, float] = (0, 0),
+                    progress: Callable[[str], object] | None = None) -> ProtocolRecord:
+    """Run ``protocol`` on the device ``params`` adaptively and record it into ``bag_dir``.
+
+    Each probe of a threshold search is sent as a programme; when the sphere has settled, the
+    resting samples after it are compared with those before it (:func:`pulled_in`) and the
+    search's next amplitude follows. Ramps and kicks are sent as they are; a step that needs a
+    measurement the device does not publish is skipped and reported. The protocol is checked
+    against the voltage limit before anything is sent (ProtocolVoltageError).
+    """
+    from sphere_sim.fitting.observations import SETTLE_S
+    from sphere_sim.fitting.protocol import (
+        REST_S,
+        FrictionKicks,
+        SlowRamp,
+        ThresholdSearch,
+        check_protocol,
+        on_wire,
+        pulled_in,
+    )
+    from sphere_sim.kicks.lookup_table import load_kick_model
+    from sphere_twin.bag.writer import BagWriter
+
+    check_protocol(protocol)
+    brackets: list[tuple[str, tuple[float | None, float | None]]] = []
+    not_run: list[tuple[str, str]] = []
+    with BagWriter(Path(bag_dir)) as bag:
+        device = _DeviceRecording(bag, params, noise_std_rad, seed, publish_rate_hz, tilt_deg)
+        # The first resting stretch: what the first probe is compared with.
+        snap, resting = device.run(REST_S)
+
+        def send_and_settle(programme: PulseProgramme) -> None:
+            nonlocal snap, resting
+            device.send(programme)
+            device.run(programme.duration_s + SETTLE_S)
+            snap, resting = device.run(REST_S)
+
+        for step in protocol.steps:
+            if progress is not None:
+                progress(step.label)
+            if not on_wire(step):
+                not_run.append((step.label, getattr(step, 'measurement', '')))
+            elif isinstance(step, ThresholdSearch):
+                search = step.bisection()
+                while (amplitude := search.next_amplitude()) is not None:
+                    before = resting
+                    send_and_settle(step.probe(amplitude))
+                    search.observe(pulled_in(before, resting))
+                brackets.append((step.label, search.bracket))
+            elif isinstance(step, SlowRamp):
+                send_and_settle(step.programme())
+            elif isinstance(step, FrictionKicks):
+                kicks = load_kick_model()
+                for action, intensity, width_s in kick_sequence(kicks, step.n_kicks, step.seed,
+                                                                step.intensity_range):
+                    action = _towards_centre(kicks, snap.normal, action)
+                    send_and_settle(kick_programme(kicks, action, intensity, width_s))
+    return ProtocolRecord(device.samples, tuple(brackets), tuple(not_run))

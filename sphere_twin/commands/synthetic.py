@@ -53,6 +53,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     record.add_argument('--kicks', type=positive_int, default=DEFAULT_KICKS)
     record.add_argument('--seed', type=seed, default=None,
                         help="seed of the kicks and the noise (default: the device's)")
+    record.add_argument('--protocol', action='store_true',
+                        help='record the experiment protocol (thresholds by bisection, slow '
+                             'ramps, then kicks; docs/identification.md) instead of the kicks')
     record.set_defaults(func=run_record)
     study = sub.add_parser('study', help='record every device of the study and identify it',
                            description='For each device of the study: record, identify, and '
@@ -98,8 +101,48 @@ def record(device: SyntheticDevice, out: str | os.PathLike[str], kicks: int,
     return samples
 
 
+def record_protocol(device: SyntheticDevice, out: str | os.PathLike[str],
+                    seed: int | None = None) -> None:
+    """Record the default protocol on ``device`` into ``out`` with its truth.yaml, and print
+    what it found and what it could not run."""
+    from sphere_sim.fitting.protocol import DEFAULT_PROTOCOL, check_protocol
+    from sphere_sim.model.parameters import load_parameter_set
+    from sphere_twin.protocol_bag import read_protocol
+    from sphere_twin.synthetic_device import record_protocol as record_steps
+
+    if Path(out).exists():
+        raise CommandError(f'{out} exists: give a new bag directory')
+    check_protocol(DEFAULT_PROTOCOL)
+    base = load_parameter_set(device.base)
+    with tqdm(total=len(DEFAULT_PROTOCOL.steps), desc=device.name, unit='step',
+              leave=False) as bar:
+        done = record_steps(out, device.truth(base), DEFAULT_PROTOCOL,
+                            device.seed if seed is None else seed,
+                            progress=lambda label: bar.update())
+    device.write_truth(Path(out) / 'truth.yaml', base)
+    results = read_protocol(out)
+    print(f'wrote {out}: the protocol on {device.name}, {done.samples} samples; sensor noise '
+          f'{results.noise_std_rad:.3g} rad per axis')
+    for b in results.brackets:
+        print(f'  threshold of {b.label}: {_volts(b.not_pulled_in_v)} (not pulled in) to '
+              f'{_volts(b.pulled_in_v)} (pulled in), {b.probes} probes')
+    for r in results.ramps:
+        print(f'  ramp of beams {"+".join(map(str, r.beams))} at {r.rate_v_per_s:g} V/s: '
+              + (f'pulled in between {r.below_v:.2f} and {r.above_v:.2f} V'
+                 if r.above_v is not None else 'no pull-in seen'))
+    for label, needs in done.not_run:
+        print(f'  not run: {label}: needs {needs}, which the device does not publish')
+
+
+def _volts(value: float | None) -> str:
+    return '-' if value is None else f'{value:.2f} V'
+
+
 def run_record(args: argparse.Namespace) -> int:
     device = _device(args.device)
+    if args.protocol:
+        record_protocol(device, args.out, args.seed)
+        return 0
     samples = record(device, args.out, args.kicks, args.seed)
     print(f'wrote {args.out}: {args.kicks} kicks of {device.name} '
           f'({", ".join(f"{p} x {f:g}" for p, f in device.factors.items())}), {samples} samples')

@@ -1,0 +1,31 @@
+"""Reading an experiment protocol back from a bag: each threshold search's bracket and each
+slow ramp's pull-in, from the device's topics alone (programmes and the measured normal), for
+a recording of a synthetic device or of hardware alike (``sphere_sim.fitting.protocol``)."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from sphere_sim.fitting.protocol import ProbeBracket, RampPullIn
+
+
+@dataclasses.dataclass(frozen=True)
+class ProtocolResults:
+    brackets: tuple[ProbeBracket, ...]
+    ramps: tuple[RampPullIn, ...]
+    noise_std_rad: float  # per axis, from the resting stretches
+
+
+def read_protocol(bag_dir: str | os.PathLike[str]) -> ProtocolResults:
+    from sphere_sim.fitting.protocol import probe_brackets, ramp_pull_in, resting_around
+    from sphere_twin.run_analysis import DEVICE_TOPICS, load_run
+
+    run = load_run(bag_dir, DEVICE_TOPICS)
+    observations, noise = resting_around(run.normal_t_s, run.normals, run.kicks)
+    ramps = [ramp_pull_in(run.normal_t_s, run.normals, start, times, volts)
+             for start, times, volts in run.kicks]
+    return ProtocolResults(tuple(probe_brackets(observations, noise)),
+                           tuple(r for r in ramps if r is not None), noise)
