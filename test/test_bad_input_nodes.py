@@ -30,7 +30,8 @@ BAD_INPUTS = [
     ('params-file-missing', 'simulator', ['--ros-args', '--params-file', '{tmp}/none.yaml'],
      'cannot read --params-file {tmp}/none.yaml: no such file'),
     ('unknown-parameter', 'simulator', _p(plant_kind='x'),
-     'unknown parameter plant_kind (did you mean plant?); the simulator takes: plant, scene'),
+     'unknown parameter plant_kind (did you mean plant?); the simulator takes: plant, fidelity, '
+     'scene'),
     ('negative-beam-mass', 'simulator',
      _p(plant='continuous', params='{tmp}/negative_mass.yaml'), 'mass_kg'),
     ('integer-not-a-number', 'simulator', _p(seed='abc'),

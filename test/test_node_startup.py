@@ -13,7 +13,12 @@ pytestmark = pytest.mark.ros
 EXIT_TIMEOUT_S = 60.0
 
 BAD_STARTS = [
-    ('simulator', dict(plant='foo'), "parameter plant = 'foo' is not one of: continuous, discrete"),
+    ('simulator', dict(plant='foo'),
+     'parameter plant = \'foo\' is not one of: "", continuous, discrete'),
+    ('simulator', dict(fidelity='fastest'),
+     'parameter fidelity = \'fastest\' is not one of: "", full, sliding, table'),
+    ('simulator', dict(plant='discrete', fidelity='sliding'),
+     "fidelity 'sliding' is served by the continuous plant, not the discrete one"),
     ('simulator', dict(scene='no_such_scene'), 'no_such_scene'),
     ('simulator', dict(tables=['/nonexistent/table.npz']), '/nonexistent/table.npz'),
     ('simulator', dict(publish_rate_hz=0.5),

@@ -40,6 +40,7 @@ KERNEL_MODULES = (
     'sphere_sim.integrate.kernel_replay',
     'sphere_sim.integrate.newton_system',
     'sphere_sim.integrate.radau_compiled',
+    'sphere_sim.integrate.rosenbrock_compiled',
 )
 
 

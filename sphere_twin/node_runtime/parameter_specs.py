@@ -263,7 +263,9 @@ def value_problem(spec: ParameterSpec, value: Any) -> str | None:
             and not spec.range[0] <= value <= spec.range[1]:
         return f'parameter {name} = {_number_text(value)} is outside{allowed}'
     if spec.choices is not None and value not in spec.choices:
-        return f'parameter {name} = {value!r} is not one of: {", ".join(spec.choices)}'
+        # The empty choice ("leave it to another parameter") is written as a YAML file has it.
+        choices = ', '.join(choice or '""' for choice in spec.choices)
+        return f'parameter {name} = {value!r} is not one of: {choices}'
     if spec.length is not None and len(value) != spec.length:
         return f'parameter {name} needs {spec.length} values, got {list(value)}'
     reason = spec.rule(value) if spec.rule is not None else None
