@@ -18,7 +18,12 @@ import pytest
 
 from msg_defs.topics import SURFACE_NORMAL
 from sphere_sim.twin import kernel_cache, precompile
-from sphere_sim.twin.kernel_cache import KERNEL_MODULES, cached_kernels, has_machine_code
+from sphere_sim.twin.kernel_cache import (
+    KERNEL_MODULES,
+    STUDY_KERNEL_MODULES,
+    cached_kernels,
+    has_machine_code,
+)
 from sphere_sim.twin.precompile import COMPILED_LINE, COMPILING_LINE, announce_compile
 from sphere_twin.commands.compile import NOT_COMPILED_STATUS
 from sphere_twin.processes import parameter_args
@@ -97,7 +102,8 @@ def test_every_module_with_a_cached_kernel_is_listed():
         for path in (ROOT / package).rglob('*.py'):
             if decorator.search(path.read_text()):
                 in_source.add('.'.join(path.relative_to(ROOT).with_suffix('').parts))
-    assert in_source == set(KERNEL_MODULES)
+    assert in_source == set(KERNEL_MODULES) | set(STUDY_KERNEL_MODULES)
+    assert not set(KERNEL_MODULES) & set(STUDY_KERNEL_MODULES)
 
 
 def test_the_kernels_are_those_numba_compiles_on_their_own():
