@@ -37,6 +37,7 @@ if TYPE_CHECKING:
     from sphere_sim.model.programme import PulseProgramme
     from sphere_sim.twin.plants import PlantSnapshot
     from sphere_twin.bag.writer import BagWriter
+    from sphere_twin.protocol_run import ProtocolRecord
 
 INTENSITY_RANGE = (0.5, 1.0)
 # On the paper's device a kick below about 0.8 is no smooth function of the beams' parameters:
@@ -143,7 +144,7 @@ class _DeviceRecording:
         return measured[-1][0], np.array([m for _, m in measured])
 
 
-def _towards_centre(kicks: LookupTable | CombinedKickPlant, normal: NDArray[np.float64],
+def towards_centre(kicks: LookupTable | CombinedKickPlant, normal: NDArray[np.float64],
                     action: int) -> int:
     """``action``, or past ``MAX_TILT_RAD`` the kick whose direction is closest to -xy."""
     xy = normal[:2]
@@ -178,7 +179,7 @@ def record_device(bag_dir: str | os.PathLike[str], params: ParameterSet | None,
         # A settled stretch before the first kick, then kick, rest, kick ...
         snap, _ = device.run(kick_period_s)
         for i, (action, intensity, width_s) in enumerate(sequence):
-            action = _towards_centre(kicks, snap.normal, action)
+            action = towards_centre(kicks, snap.normal, action)
             device.send(kick_programme(kicks, action, intensity, width_s))
             snap, _ = device.run(kick_period_s)
             if progress is not None:
@@ -271,14 +272,22 @@ PAPER_DEVICES = (
 )
 
 
-@dataclasses.dataclass(frozen=True)
-class ProtocolRecord:
-    """What recording a protocol did: the samples, each threshold search's bracket as the
-    recorder decided it while running, and the steps it could not run (with what they need)."""
+class _InProcessDevice:
+    """The synthetic device as the protocol's loop sees it (``ProtocolDevice``): programmes
+    start at the next sample, the measured normals come back."""
 
-    samples: int
-    brackets: tuple[tuple[str, tuple[float | None, float | None]], ...]
-    not_run: tuple[tuple[str, str], ...]
+    def __init__(self, recording: _DeviceRecording) -> None:
+        self.recording = recording
+
+    @property
+    def samples(self) -> int:
+        return self.recording.samples
+
+    def send(self, programme: PulseProgramme) -> None:
+        self.recording.send(programme)
+
+    def run(self, duration_s: float) -> NDArray[np.float64]:
+        return self.recording.run(duration_s)[1]
 
 
 def record_protocol(bag_dir: str | os.PathLike[str], params: ParameterSet | None,
@@ -291,55 +300,17 @@ def record_protocol(bag_dir: str | os.PathLike[str], params: ParameterSet | None
 
     Each probe of a threshold search is sent as a programme; when the sphere has settled, the
     resting samples after it are compared with those before it (:func:`pulled_in`) and the
-    search's next amplitude follows. Ramps and kicks are sent as they are; a step that needs a
-    measurement the device does not publish is skipped and reported. The protocol is checked
-    against the voltage limit before anything is sent (ProtocolVoltageError).
+    search's next amplitude follows (:func:`sphere_twin.protocol_run.run_protocol`, the loop
+    ``sphere-twin experiment`` runs over the topics). Ramps and kicks are sent as they are; a
+    step that needs a measurement the device does not publish is skipped and reported. The
+    protocol is checked against the voltage limit before anything is sent
+    (ProtocolVoltageError).
     """
-    from sphere_sim.fitting.observations import SETTLE_S
-    from sphere_sim.fitting.protocol import (
-        REST_S,
-        FrictionKicks,
-        SlowRamp,
-        ThresholdSearch,
-        check_protocol,
-        on_wire,
-        pulled_in,
-    )
-    from sphere_sim.kicks.lookup_table import load_kick_model
+    from sphere_sim.fitting.protocol import check_protocol
     from sphere_twin.bag.writer import BagWriter
+    from sphere_twin.protocol_run import run_protocol
 
     check_protocol(protocol)
-    brackets: list[tuple[str, tuple[float | None, float | None]]] = []
-    not_run: list[tuple[str, str]] = []
     with BagWriter(Path(bag_dir)) as bag:
         device = _DeviceRecording(bag, params, noise_std_rad, seed, publish_rate_hz, tilt_deg)
-        # The first resting stretch: what the first probe is compared with.
-        snap, resting = device.run(REST_S)
-
-        def send_and_settle(programme: PulseProgramme) -> None:
-            nonlocal snap, resting
-            device.send(programme)
-            device.run(programme.duration_s + SETTLE_S)
-            snap, resting = device.run(REST_S)
-
-        for step in protocol.steps:
-            if progress is not None:
-                progress(step.label)
-            if not on_wire(step):
-                not_run.append((step.label, getattr(step, 'measurement', '')))
-            elif isinstance(step, ThresholdSearch):
-                search = step.bisection()
-                while (amplitude := search.next_amplitude()) is not None:
-                    before = resting
-                    send_and_settle(step.probe(amplitude))
-                    search.observe(pulled_in(before, resting))
-                brackets.append((step.label, search.bracket))
-            elif isinstance(step, SlowRamp):
-                send_and_settle(step.programme())
-            elif isinstance(step, FrictionKicks):
-                kicks = load_kick_model()
-                for action, intensity, width_s in kick_sequence(kicks, step.n_kicks, step.seed,
-                                                                step.intensity_range):
-                    action = _towards_centre(kicks, snap.normal, action)
-                    send_and_settle(kick_programme(kicks, action, intensity, width_s))
-    return ProtocolRecord(device.samples, tuple(brackets), tuple(not_run))
+        return run_protocol(_InProcessDevice(device), protocol, progress)
