@@ -146,6 +146,10 @@ def bracket_line(label: str, bracket: Bracket, probes: int | None = None) -> str
             + ('' if probes is None else f', {probes} probes'))
 
 
+def not_run_line(label: str, needs: str) -> str:
+    return f'not run: {label}: needs {needs}, which the device does not publish'
+
+
 def result_lines(results: ProtocolResults, not_run: tuple[tuple[str, str], ...]) -> list[str]:
     """What a protocol's bag says (``sphere_twin.protocol_bag.read_protocol``) and the steps
     that were not run, one line each, indented under a heading."""
@@ -156,6 +160,5 @@ def result_lines(results: ProtocolResults, not_run: tuple[tuple[str, str], ...])
                      + (f'pulled in between {r.below_v:.2f} and {r.above_v:.2f} V'
                         if r.above_v is not None and r.below_v is not None
                         else 'no pull-in seen'))
-    lines += [f'  not run: {label}: needs {needs}, which the device does not publish'
-              for label, needs in not_run]
+    lines += [f'  {not_run_line(label, needs)}' for label, needs in not_run]
     return lines

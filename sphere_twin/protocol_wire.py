@@ -15,6 +15,7 @@ segments are over, so it never cuts one; hardware never repeats a stamp and is n
 from __future__ import annotations
 
 import bisect
+import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -38,6 +39,9 @@ START_LEAD_S = 0.05
 FIRST_SAMPLE_TIMEOUT_S = 60.0
 WALL_PER_SIMULATED_S = 30.0
 TIME_TOL_S = 1e-6
+# A hold not answered by a sample within this wall time is sent again (one lost on the way
+# would leave a lockstep simulator waiting for good).
+HOLD_RETRY_S = 2.0
 
 
 class DeviceError(RuntimeError):
@@ -71,6 +75,7 @@ class TopicDevice:
         self._busy_until_s = -np.inf  # the last programme's segments end here
         self._repeated = False  # the newest sample came again: a lockstep simulator is idle
         self._hold_pending = False
+        self._hold_sent_s = 0.0
         self._from_hold = False  # the newest sample answered a hold: idle again
         self._sent_stamps: set[int] = set()
 
@@ -160,7 +165,8 @@ class TopicDevice:
                 if (event.state is ProgrammeState.REFUSED
                         and round(event.asked_s * NS_PER_S) in self._sent_stamps):
                     raise DeviceError(f'the device refused the programme for t = '
-                                      f'{event.asked_s:.4f} s: {event.text}')
+                                      f'{event.asked_s:.4f} s'
+                                      + (f': {event.text}' if event.text else ''))
 
     def _advance_if_idle(self) -> None:
         """Ask an idle lockstep simulator for one more sample: a 0 V hold, once the last
@@ -169,6 +175,8 @@ class TopicDevice:
         from msg_defs.conversions import voltages_to_msg
         from msg_defs.topics import VOLTAGE_COMMAND
 
+        if self._hold_pending and time.monotonic() - self._hold_sent_s > HOLD_RETRY_S:
+            self._hold_pending, self._from_hold = False, True
         if (self._hold_pending or not self.stamps
                 or self.stamps[-1] < self._busy_until_s - TIME_TOL_S
                 or not (self._repeated or self._from_hold)):
@@ -176,3 +184,4 @@ class TopicDevice:
         self.probe.publisher(VOLTAGE_COMMAND).publish(voltages_to_msg([0.0] * len(BEAM_IDS)))
         self.holds += 1
         self._hold_pending, self._repeated, self._from_hold = True, False, False
+        self._hold_sent_s = time.monotonic()
