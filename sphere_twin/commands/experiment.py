@@ -86,7 +86,8 @@ def twin_node(real_time_factor: float, params: str, noise_std_rad: float,
     from sphere_twin.processes import NodeSpec, parameter_args
 
     return NodeSpec('simulator', tuple(parameter_args(
-        plant='continuous', params=params, seed=seed, noise_std_rad=float(noise_std_rad),
+        plant='continuous', **({'params': params} if params else {}), seed=seed,
+        noise_std_rad=float(noise_std_rad),
         lockstep=real_time_factor == 0.0, real_time_factor=float(real_time_factor or 1.0),
         wait_for_subscribers=TWIN_NORMAL_SUBSCRIBERS)))
 
@@ -172,10 +173,20 @@ def _run_live(nodes: Sequence[NodeSpec], domain_id: int, protocol: Protocol,
             say(f'experiment: started {process.name} (pid {process.pid})')
         probe = TopicProbe(domain_id, (SURFACE_NORMAL, PROGRAMME_STATUS))
         stop.install()  # over the handlers rclpy installed with the probe's context
-        device = TopicDevice(probe, lambda: stop.requested)
+
+        def stopped() -> bool:
+            """A stop signal; DeviceError if a node it started has exited."""
+            for process in group.processes:
+                if not process.running():
+                    last = (process.stderr_text().strip().splitlines() or [''])[-1]
+                    raise DeviceError(f'{process.name} exited with {process.returncode}'
+                                      + (f': {last}' if last else ''))
+            return stop.requested
+
+        device = TopicDevice(probe, stopped)
         started = time.monotonic()
         try:
-            _connect(probe, stop)
+            _connect(probe, stopped)
             say('experiment: the recorder and the device listen; running the protocol')
 
             def on_bracket(label: str, bracket: tuple[float | None, float | None]) -> None:
@@ -198,7 +209,7 @@ def _run_live(nodes: Sequence[NodeSpec], domain_id: int, protocol: Protocol,
     return brackets, problems, group.processes, samples
 
 
-def _connect(probe: TopicProbe, stop: StopSignals) -> None:
+def _connect(probe: TopicProbe, stopped: Callable[[], bool]) -> None:
     """Until the recorder records the normal and the programmes and the device takes both
     commands from this process: a programme sent before would be lost to one of them."""
     from msg_defs.topics import PULSE_PROGRAM, SURFACE_NORMAL, VOLTAGE_COMMAND
@@ -212,7 +223,7 @@ def _connect(probe: TopicProbe, stop: StopSignals) -> None:
                    for info in node.get_subscriptions_info_by_topic(topic_name))
 
     def ready() -> bool:
-        if stop.requested:
+        if stopped():
             raise StoppedError
         return (recorder_listens(SURFACE_NORMAL.name) and recorder_listens(PULSE_PROGRAM.name)
                 and programmes.get_subscription_count() >= 2
