@@ -3,7 +3,7 @@
 
 A device is anything that can start a pulse programme at its next sample and hand back the
 measured normals of the samples that follow (:class:`ProtocolDevice`): the synthetic device's
-runner in this process (``sphere_twin.synthetic_device.record_protocol``) or a device on the ROS
+runner in this process, recorded into a bag (:func:`record_protocol`), or a device on the ROS
 topics (``sphere_twin.protocol_wire.TopicDevice``, ``sphere-twin experiment``). The loop sends
 each probe of a threshold search, lets the sphere settle, compares the resting normals after it
 with those before it (:func:`~sphere_sim.fitting.protocol.pulled_in`) and feeds the bisection;
@@ -14,18 +14,25 @@ device does not publish.
 from __future__ import annotations
 
 import dataclasses
+import os
 from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING
 from typing import Protocol as TypingProtocol
 
 import numpy as np
 
+from sphere_sim.kicks.discrete import NOISE_STUDY_STD_RAD
+from sphere_twin.synthetic_device import PUBLISH_RATE_HZ
+
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
     from sphere_sim.fitting.protocol import FrictionKicks, Protocol, ThresholdSearch
+    from sphere_sim.model.parameters import ParameterSet
     from sphere_sim.model.programme import PulseProgramme
     from sphere_twin.protocol_bag import ProtocolResults
+    from sphere_twin.synthetic_device import DeviceRecording
 
 Bracket = tuple[float | None, float | None]
 
@@ -133,6 +140,50 @@ def run_protocol(device: ProtocolDevice, protocol: Protocol,
         elif isinstance(step, FrictionKicks):
             loop.kicks(step)
     return ProtocolRecord(device.samples, tuple(brackets), tuple(not_run))
+
+
+class _InProcessDevice:
+    """The synthetic device as the protocol's loop sees it (``ProtocolDevice``): programmes
+    start at the next sample, the measured normals come back."""
+
+    def __init__(self, recording: DeviceRecording) -> None:
+        self.recording = recording
+
+    @property
+    def samples(self) -> int:
+        return self.recording.samples
+
+    def send(self, programme: PulseProgramme) -> None:
+        self.recording.send(programme)
+
+    def run(self, duration_s: float) -> NDArray[np.float64]:
+        return self.recording.run(duration_s)[1]
+
+
+def record_protocol(bag_dir: str | os.PathLike[str], params: ParameterSet | None,
+                    protocol: Protocol, seed: int = 0,
+                    noise_std_rad: float = NOISE_STUDY_STD_RAD,
+                    publish_rate_hz: float = PUBLISH_RATE_HZ,
+                    tilt_deg: tuple[float, float] = (0, 0),
+                    progress: Callable[[str], object] | None = None) -> ProtocolRecord:
+    """Run ``protocol`` on the device ``params`` adaptively and record it into ``bag_dir``.
+
+    Each probe of a threshold search is sent as a programme; when the sphere has settled, the
+    resting samples after it are compared with those before it
+    (:func:`~sphere_sim.fitting.protocol.pulled_in`) and the search's next amplitude follows
+    (:func:`run_protocol`, the loop ``sphere-twin experiment`` runs over the topics). Ramps and
+    kicks are sent as they are; a step that needs a measurement the device does not publish is
+    skipped and reported. The protocol is checked against the voltage limit before anything is
+    sent (ProtocolVoltageError).
+    """
+    from sphere_sim.fitting.protocol import check_protocol
+    from sphere_twin.bag.writer import BagWriter
+    from sphere_twin.synthetic_device import DeviceRecording
+
+    check_protocol(protocol)
+    with BagWriter(Path(bag_dir)) as bag:
+        device = DeviceRecording(bag, params, noise_std_rad, seed, publish_rate_hz, tilt_deg)
+        return run_protocol(_InProcessDevice(device), protocol, progress)
 
 
 def volts_text(value: float | None) -> str:

@@ -31,13 +31,11 @@ from sphere_sim.kicks.discrete import NOISE_STUDY_STD_RAD
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
-    from sphere_sim.fitting.protocol import Protocol
     from sphere_sim.kicks.lookup_table import CombinedKickPlant, LookupTable
     from sphere_sim.model.parameters import ParameterSet
     from sphere_sim.model.programme import PulseProgramme
     from sphere_sim.twin.plants import PlantSnapshot
     from sphere_twin.bag.writer import BagWriter
-    from sphere_twin.protocol_run import ProtocolRecord
 
 INTENSITY_RANGE = (0.5, 1.0)
 # On the paper's device a kick below about 0.8 is no smooth function of the beams' parameters:
@@ -79,7 +77,7 @@ def kick_programme(kicks: LookupTable | CombinedKickPlant, action: int, intensit
     return Symmetry(int(action) % 4).apply_programme(design.programme(intensity))
 
 
-class _DeviceRecording:
+class DeviceRecording:
     """The continuous twin of ``params`` on the simulator's runner, writing what it publishes
     into a bag: the measured normal, the truth, and the programmes it is sent."""
 
@@ -175,7 +173,7 @@ def record_device(bag_dir: str | os.PathLike[str], params: ParameterSet | None,
     kicks = load_kick_model()
     sequence = kick_sequence(kicks, n_kicks, seed, intensity_range)
     with BagWriter(Path(bag_dir)) as bag:
-        device = _DeviceRecording(bag, params, noise_std_rad, seed, publish_rate_hz, tilt_deg)
+        device = DeviceRecording(bag, params, noise_std_rad, seed, publish_rate_hz, tilt_deg)
         # A settled stretch before the first kick, then kick, rest, kick ...
         snap, _ = device.run(kick_period_s)
         for i, (action, intensity, width_s) in enumerate(sequence):
@@ -270,47 +268,3 @@ PAPER_DEVICES = (
     SyntheticDevice('paper_e', 'calibrated', {K_Z: 1.2, GROUND_Z: 1.05},
                     (K_Z, GROUND_Z, K_PHI), 15, PAPER_INTENSITY_RANGE),
 )
-
-
-class _InProcessDevice:
-    """The synthetic device as the protocol's loop sees it (``ProtocolDevice``): programmes
-    start at the next sample, the measured normals come back."""
-
-    def __init__(self, recording: _DeviceRecording) -> None:
-        self.recording = recording
-
-    @property
-    def samples(self) -> int:
-        return self.recording.samples
-
-    def send(self, programme: PulseProgramme) -> None:
-        self.recording.send(programme)
-
-    def run(self, duration_s: float) -> NDArray[np.float64]:
-        return self.recording.run(duration_s)[1]
-
-
-def record_protocol(bag_dir: str | os.PathLike[str], params: ParameterSet | None,
-                    protocol: Protocol, seed: int = 0,
-                    noise_std_rad: float = NOISE_STUDY_STD_RAD,
-                    publish_rate_hz: float = PUBLISH_RATE_HZ,
-                    tilt_deg: tuple[float, float] = (0, 0),
-                    progress: Callable[[str], object] | None = None) -> ProtocolRecord:
-    """Run ``protocol`` on the device ``params`` adaptively and record it into ``bag_dir``.
-
-    Each probe of a threshold search is sent as a programme; when the sphere has settled, the
-    resting samples after it are compared with those before it (:func:`pulled_in`) and the
-    search's next amplitude follows (:func:`sphere_twin.protocol_run.run_protocol`, the loop
-    ``sphere-twin experiment`` runs over the topics). Ramps and kicks are sent as they are; a
-    step that needs a measurement the device does not publish is skipped and reported. The
-    protocol is checked against the voltage limit before anything is sent
-    (ProtocolVoltageError).
-    """
-    from sphere_sim.fitting.protocol import check_protocol
-    from sphere_twin.bag.writer import BagWriter
-    from sphere_twin.protocol_run import run_protocol
-
-    check_protocol(protocol)
-    with BagWriter(Path(bag_dir)) as bag:
-        device = _DeviceRecording(bag, params, noise_std_rad, seed, publish_rate_hz, tilt_deg)
-        return run_protocol(_InProcessDevice(device), protocol, progress)

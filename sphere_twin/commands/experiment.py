@@ -27,10 +27,16 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TextIO
 
 from sphere_sim.kicks.discrete import NOISE_STUDY_STD_RAD
-from sphere_twin.commands.options import CommandError, number_in_range, output_directory
+from sphere_twin.commands.options import (
+    CommandError,
+    add_params_option,
+    number_in_range,
+    output_directory,
+)
 
 if TYPE_CHECKING:
     from sphere_sim.fitting.protocol import Protocol
+    from sphere_sim.model.parameters import ParameterSet
     from sphere_twin.commands.demo import StopSignals
     from sphere_twin.processes import NodeProcess, NodeSpec
     from sphere_twin.testing import TopicProbe
@@ -286,9 +292,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         default=0.0,
                         help='with --twin: run it paced at this factor (default 0: lockstep, '
                              'time advances only with the commands)')
-    parser.add_argument('--params', default='',
-                        help='with --twin: its parameter set (default: the scene\'s, '
-                             'calibrated)')
+    add_params_option(parser, default=None,
+                      help='with --twin: its parameter set, a shipped name or a YAML file '
+                           '(default: the scene\'s, calibrated)')
     parser.add_argument('--noise-std-rad', type=number_in_range(0.0, 0.1, 'rad per axis'),
                         default=NOISE_STUDY_STD_RAD,
                         help='with --twin: its sensor noise per axis (default: the noise '
@@ -301,10 +307,28 @@ def run(args: argparse.Namespace) -> int:
     """Entry point of the subcommand; returns the exit code."""
     from sphere_sim.fitting.protocol import DEFAULT_PROTOCOL
 
-    if not args.twin and (args.params or args.real_time_factor):
+    if not args.twin and (args.params is not None or args.real_time_factor):
         raise CommandError('--params and --real-time-factor describe the twin: give --twin')
     protocol = quick_protocol() if args.quick else DEFAULT_PROTOCOL
     if args.bracket is not None:
         protocol = with_bracket(protocol, tuple(args.bracket))
+    params = '' if args.params is None else twin_params_arg(args.params, args.bag_dir)
     return run_experiment(args.bag_dir, protocol, args.twin, args.real_time_factor,
-                          args.params, args.noise_std_rad, args.seed)
+                          params, args.noise_std_rad, args.seed)
+
+
+def twin_params_arg(params: ParameterSet, bag_dir: Path) -> str:
+    """What the simulator's ``params`` takes for ``params``: a shipped set's name, or else a
+    file beside the bag holding the set whole (``<BAG_DIR>_params.yaml``)."""
+    import yaml
+
+    from sphere_sim.model.parameters import available_parameter_sets, load_parameter_set
+    from sphere_twin.commands.identify import json_safe
+
+    if params.name in available_parameter_sets() and \
+            load_parameter_set(params.name).digest() == params.digest():
+        return params.name
+    path = bag_dir.with_name(f'{bag_dir.name}_params.yaml')
+    whole = {k: v for k, v in params.to_dict().items() if k != 'base'}
+    path.write_text(yaml.safe_dump(json_safe(whole), sort_keys=False, width=96))
+    return str(path.resolve())

@@ -108,8 +108,8 @@ def record_protocol(device: SyntheticDevice, out: str | os.PathLike[str],
     from sphere_sim.fitting.protocol import DEFAULT_PROTOCOL, check_protocol
     from sphere_sim.model.parameters import load_parameter_set
     from sphere_twin.protocol_bag import read_protocol
+    from sphere_twin.protocol_run import record_protocol as record_steps
     from sphere_twin.protocol_run import result_lines
-    from sphere_twin.synthetic_device import record_protocol as record_steps
 
     if Path(out).exists():
         raise CommandError(f'{out} exists: give a new bag directory')
