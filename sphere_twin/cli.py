@@ -24,6 +24,7 @@ COMMAND_MODULES = (
     'doctor',
     'compile',
     'demo',
+    'experiment',
     'kick',
     'pullin',
     'calibrate',

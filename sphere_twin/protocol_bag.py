@@ -8,6 +8,8 @@ import dataclasses
 import os
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 if TYPE_CHECKING:
     from sphere_sim.fitting.protocol import ProbeBracket, RampPullIn
 
@@ -24,8 +26,12 @@ def read_protocol(bag_dir: str | os.PathLike[str]) -> ProtocolResults:
     from sphere_twin.run_analysis import DEVICE_TOPICS, load_run
 
     run = load_run(bag_dir, DEVICE_TOPICS)
-    observations, noise = resting_around(run.normal_t_s, run.normals, run.kicks)
-    ramps = [ramp_pull_in(run.normal_t_s, run.normals, start, times, volts)
+    # A sample published again with its stamp (a lockstep simulator repeats its last one while
+    # it waits for a command) is one sample.
+    _, first = np.unique(run.normal_t_s, return_index=True)
+    t_s, normals = run.normal_t_s[first], run.normals[first]
+    observations, noise = resting_around(t_s, normals, run.kicks)
+    ramps = [ramp_pull_in(t_s, normals, start, times, volts)
              for start, times, volts in run.kicks]
     return ProtocolResults(tuple(probe_brackets(observations, noise)),
                            tuple(r for r in ramps if r is not None), noise)

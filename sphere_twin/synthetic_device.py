@@ -31,7 +31,6 @@ from sphere_sim.kicks.discrete import NOISE_STUDY_STD_RAD
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
-    from sphere_sim.fitting.protocol import Protocol
     from sphere_sim.kicks.lookup_table import CombinedKickPlant, LookupTable
     from sphere_sim.model.parameters import ParameterSet
     from sphere_sim.model.programme import PulseProgramme
@@ -78,7 +77,7 @@ def kick_programme(kicks: LookupTable | CombinedKickPlant, action: int, intensit
     return Symmetry(int(action) % 4).apply_programme(design.programme(intensity))
 
 
-class _DeviceRecording:
+class DeviceRecording:
     """The continuous twin of ``params`` on the simulator's runner, writing what it publishes
     into a bag: the measured normal, the truth, and the programmes it is sent."""
 
@@ -143,7 +142,7 @@ class _DeviceRecording:
         return measured[-1][0], np.array([m for _, m in measured])
 
 
-def _towards_centre(kicks: LookupTable | CombinedKickPlant, normal: NDArray[np.float64],
+def towards_centre(kicks: LookupTable | CombinedKickPlant, normal: NDArray[np.float64],
                     action: int) -> int:
     """``action``, or past ``MAX_TILT_RAD`` the kick whose direction is closest to -xy."""
     xy = normal[:2]
@@ -174,11 +173,11 @@ def record_device(bag_dir: str | os.PathLike[str], params: ParameterSet | None,
     kicks = load_kick_model()
     sequence = kick_sequence(kicks, n_kicks, seed, intensity_range)
     with BagWriter(Path(bag_dir)) as bag:
-        device = _DeviceRecording(bag, params, noise_std_rad, seed, publish_rate_hz, tilt_deg)
+        device = DeviceRecording(bag, params, noise_std_rad, seed, publish_rate_hz, tilt_deg)
         # A settled stretch before the first kick, then kick, rest, kick ...
         snap, _ = device.run(kick_period_s)
         for i, (action, intensity, width_s) in enumerate(sequence):
-            action = _towards_centre(kicks, snap.normal, action)
+            action = towards_centre(kicks, snap.normal, action)
             device.send(kick_programme(kicks, action, intensity, width_s))
             snap, _ = device.run(kick_period_s)
             if progress is not None:
@@ -269,77 +268,3 @@ PAPER_DEVICES = (
     SyntheticDevice('paper_e', 'calibrated', {K_Z: 1.2, GROUND_Z: 1.05},
                     (K_Z, GROUND_Z, K_PHI), 15, PAPER_INTENSITY_RANGE),
 )
-
-
-@dataclasses.dataclass(frozen=True)
-class ProtocolRecord:
-    """What recording a protocol did: the samples, each threshold search's bracket as the
-    recorder decided it while running, and the steps it could not run (with what they need)."""
-
-    samples: int
-    brackets: tuple[tuple[str, tuple[float | None, float | None]], ...]
-    not_run: tuple[tuple[str, str], ...]
-
-
-def record_protocol(bag_dir: str | os.PathLike[str], params: ParameterSet | None,
-                    protocol: Protocol, seed: int = 0,
-                    noise_std_rad: float = NOISE_STUDY_STD_RAD,
-                    publish_rate_hz: float = PUBLISH_RATE_HZ,
-                    tilt_deg: tuple[float, float] = (0, 0),
-                    progress: Callable[[str], object] | None = None) -> ProtocolRecord:
-    """Run ``protocol`` on the device ``params`` adaptively and record it into ``bag_dir``.
-
-    Each probe of a threshold search is sent as a programme; when the sphere has settled, the
-    resting samples after it are compared with those before it (:func:`pulled_in`) and the
-    search's next amplitude follows. Ramps and kicks are sent as they are; a step that needs a
-    measurement the device does not publish is skipped and reported. The protocol is checked
-    against the voltage limit before anything is sent (ProtocolVoltageError).
-    """
-    from sphere_sim.fitting.observations import SETTLE_S
-    from sphere_sim.fitting.protocol import (
-        REST_S,
-        FrictionKicks,
-        SlowRamp,
-        ThresholdSearch,
-        check_protocol,
-        on_wire,
-        pulled_in,
-    )
-    from sphere_sim.kicks.lookup_table import load_kick_model
-    from sphere_twin.bag.writer import BagWriter
-
-    check_protocol(protocol)
-    brackets: list[tuple[str, tuple[float | None, float | None]]] = []
-    not_run: list[tuple[str, str]] = []
-    with BagWriter(Path(bag_dir)) as bag:
-        device = _DeviceRecording(bag, params, noise_std_rad, seed, publish_rate_hz, tilt_deg)
-        # The first resting stretch: what the first probe is compared with.
-        snap, resting = device.run(REST_S)
-
-        def send_and_settle(programme: PulseProgramme) -> None:
-            nonlocal snap, resting
-            device.send(programme)
-            device.run(programme.duration_s + SETTLE_S)
-            snap, resting = device.run(REST_S)
-
-        for step in protocol.steps:
-            if progress is not None:
-                progress(step.label)
-            if not on_wire(step):
-                not_run.append((step.label, getattr(step, 'measurement', '')))
-            elif isinstance(step, ThresholdSearch):
-                search = step.bisection()
-                while (amplitude := search.next_amplitude()) is not None:
-                    before = resting
-                    send_and_settle(step.probe(amplitude))
-                    search.observe(pulled_in(before, resting))
-                brackets.append((step.label, search.bracket))
-            elif isinstance(step, SlowRamp):
-                send_and_settle(step.programme())
-            elif isinstance(step, FrictionKicks):
-                kicks = load_kick_model()
-                for action, intensity, width_s in kick_sequence(kicks, step.n_kicks, step.seed,
-                                                                step.intensity_range):
-                    action = _towards_centre(kicks, snap.normal, action)
-                    send_and_settle(kick_programme(kicks, action, intensity, width_s))
-    return ProtocolRecord(device.samples, tuple(brackets), tuple(not_run))

@@ -140,7 +140,8 @@ def recorded(tmp_path_factory):
     step that needs the capacitance goes along to be reported."""
     from sphere_sim.model.parameters import load_parameter_set
     from sphere_twin.protocol_bag import read_protocol
-    from sphere_twin.synthetic_device import PAPER_DEVICES, record_protocol
+    from sphere_twin.protocol_run import record_protocol
+    from sphere_twin.synthetic_device import PAPER_DEVICES
 
     calibrated = load_parameter_set('calibrated')
     paper_b = next(d for d in PAPER_DEVICES if d.name == 'paper_b').truth(calibrated)

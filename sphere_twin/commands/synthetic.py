@@ -108,7 +108,8 @@ def record_protocol(device: SyntheticDevice, out: str | os.PathLike[str],
     from sphere_sim.fitting.protocol import DEFAULT_PROTOCOL, check_protocol
     from sphere_sim.model.parameters import load_parameter_set
     from sphere_twin.protocol_bag import read_protocol
-    from sphere_twin.synthetic_device import record_protocol as record_steps
+    from sphere_twin.protocol_run import record_protocol as record_steps
+    from sphere_twin.protocol_run import result_lines
 
     if Path(out).exists():
         raise CommandError(f'{out} exists: give a new bag directory')
@@ -123,19 +124,8 @@ def record_protocol(device: SyntheticDevice, out: str | os.PathLike[str],
     results = read_protocol(out)
     print(f'wrote {out}: the protocol on {device.name}, {done.samples} samples; sensor noise '
           f'{results.noise_std_rad:.3g} rad per axis')
-    for b in results.brackets:
-        print(f'  threshold of {b.label}: {_volts(b.not_pulled_in_v)} (not pulled in) to '
-              f'{_volts(b.pulled_in_v)} (pulled in), {b.probes} probes')
-    for r in results.ramps:
-        print(f'  ramp of beams {"+".join(map(str, r.beams))} at {r.rate_v_per_s:g} V/s: '
-              + (f'pulled in between {r.below_v:.2f} and {r.above_v:.2f} V'
-                 if r.above_v is not None else 'no pull-in seen'))
-    for label, needs in done.not_run:
-        print(f'  not run: {label}: needs {needs}, which the device does not publish')
-
-
-def _volts(value: float | None) -> str:
-    return '-' if value is None else f'{value:.2f} V'
+    for line in result_lines(results, done.not_run):
+        print(line)
 
 
 def run_record(args: argparse.Namespace) -> int:
