@@ -30,6 +30,7 @@ from sphere_sim.kicks.discrete import NOISE_STUDY_STD_RAD
 from sphere_twin.commands.options import (
     CommandError,
     add_params_option,
+    non_negative_float,
     number_in_range,
     output_directory,
 )
@@ -281,7 +282,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         help=f'one threshold search only: beam {QUICK_BEAM}, '
                              f'{QUICK_WIDTH_S * 1e3:g} ms pulses, {QUICK_BRACKET_V[0]:g} to '
                              f'{QUICK_BRACKET_V[1]:g} V at {QUICK_RESOLUTION_V:g} V')
-    parser.add_argument('--bracket', type=float, nargs=2, metavar=('LOW_V', 'HIGH_V'),
+    parser.add_argument('--bracket', type=non_negative_float, nargs=2, metavar=('LOW_V', 'HIGH_V'),
                         help='the threshold searches\' bracket (V) instead of the protocol\'s')
     parser.add_argument('--twin', action='store_true',
                         help='start the simulator (continuous model) and drive it, instead of '
