@@ -321,15 +321,6 @@ def run(args: argparse.Namespace) -> int:
 def twin_params_arg(params: ParameterSet, bag_dir: Path) -> str:
     """What the simulator's ``params`` takes for ``params``: a shipped set's name, or else a
     file beside the bag holding the set whole (``<BAG_DIR>_params.yaml``)."""
-    import yaml
+    from sphere_twin.commands.identify import set_reference
 
-    from sphere_sim.model.parameters import available_parameter_sets, load_parameter_set
-    from sphere_twin.commands.identify import json_safe
-
-    if params.name in available_parameter_sets() and \
-            load_parameter_set(params.name).digest() == params.digest():
-        return params.name
-    path = bag_dir.with_name(f'{bag_dir.name}_params.yaml')
-    whole = {k: v for k, v in params.to_dict().items() if k != 'base'}
-    path.write_text(yaml.safe_dump(json_safe(whole), sort_keys=False, width=96))
-    return str(path.resolve())
+    return set_reference(params, bag_dir.with_name(f'{bag_dir.name}_params.yaml'))

@@ -219,16 +219,21 @@ def _rms(values: Sequence[float] | NDArray[np.float64]) -> float:
 def base_reference(params: ParameterSet, path: Path) -> str:
     """What a fitted file's ``base:`` names: the shipped set ``params`` is, or else a file
     beside ``path`` holding ``params`` whole (a start given as a file of its own)."""
+    return set_reference(params, path.with_name(f'{path.stem}_start.yaml'))
+
+
+def set_reference(params: ParameterSet, whole_file: Path) -> str:
+    """How another set's ``base:`` or a node's ``params`` names ``params``: its shipped name
+    where it is that set unchanged, or else ``whole_file``, written here with it whole."""
     from sphere_sim.model.parameters import available_parameter_sets, load_parameter_set
 
     if params.name in available_parameter_sets() and \
             load_parameter_set(params.name).digest() == params.digest():
         return params.name
-    start = path.with_name(f'{path.stem}_start.yaml')
     # Whole, so without the base it was derived from (a base would make its sections unread).
     whole = {k: v for k, v in params.to_dict().items() if k != 'base'}
-    start.write_text(yaml.safe_dump(json_safe(whole), sort_keys=False, width=96))
-    return str(start.resolve())
+    whole_file.write_text(yaml.safe_dump(json_safe(whole), sort_keys=False, width=96))
+    return str(whole_file.resolve())
 
 
 def json_safe(data: Any) -> Any:
