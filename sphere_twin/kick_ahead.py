@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 from sphere_sim.model.rotations import angle_between
 from sphere_sim.twin.plants import TIME_TOL_S
 from sphere_twin.run_analysis import (
+    UNSTATED_INTEGRATION_METHOD,
     Hold,
     RecordedRun,
     RecordedTruth,
@@ -246,6 +247,7 @@ class ReplayPlantSpec:
     kind: str
     params: ParameterSet
     tables: tuple[str, ...] = ()
+    method: str = UNSTATED_INTEGRATION_METHOD
 
 
 def run_case(spec: ReplayPlantSpec, case: KickCase) -> NDArray[np.float64] | str:
@@ -262,7 +264,7 @@ def run_case(spec: ReplayPlantSpec, case: KickCase) -> NDArray[np.float64] | str
         try:
             plant = build_replay_plant(spec.kind, case.normal0, case.start_s, spec.params,
                                        spec.tables, relaxation=KICK_RELAXATION,
-                                       truth=case.truth0)
+                                       truth=case.truth0, method=spec.method)
         except RestError as error:
             return f'no rest of the model at its recorded normal ({error})'
         # Sampled at every recorded time, as the live plant advanced; the last ones are the

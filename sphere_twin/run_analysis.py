@@ -37,6 +37,7 @@ from msg_defs.device import NS_PER_S
 from msg_defs.programme_events import ProgrammeState
 from msg_defs.topics import (
     CONTROLLER_STATUS,
+    DIAGNOSTICS,
     PROGRAMME_STATUS,
     PULSE_PROGRAM,
     SPHERE_REFERENCE,
@@ -448,10 +449,32 @@ class ReplayResult:
         return float(np.sqrt(np.mean(self.error_rad ** 2))) if self.error_rad.size else 0.0
 
 
+# How a bag's physics was integrated where its simulator did not say (its status carries
+# ``integration_method`` since the live twin's method could be other than the studies'): the
+# compiled Radau, which every earlier twin ran.
+UNSTATED_INTEGRATION_METHOD = 'fast'
+
+
+def recorded_integration_method(bag_dir: str | os.PathLike[str]) -> str:
+    """The integration method the simulator that recorded ``bag_dir`` said it ran (its status
+    on ``/diagnostics``), or ``UNSTATED_INTEGRATION_METHOD``."""
+    for raw in read_messages(bag_dir, [DIAGNOSTICS.name]):
+        try:
+            msg = deserialize(raw)
+        except ValueError:
+            continue
+        for status in msg.status:
+            method = status_values(status).get('integration_method')
+            if status.name.startswith('simulator') and method:
+                return method
+    return UNSTATED_INTEGRATION_METHOD
+
+
 def build_replay_plant(kind: str, normal0: NDArray[np.float64], time0_s: float,
                        params: ParameterSet, tables: Iterable[str | Path] = (),
                        relaxation: str = 'radau',
-                       truth: TruthSample | None = None) -> TwinPlant:
+                       truth: TruthSample | None = None,
+                       method: str = UNSTATED_INTEGRATION_METHOD) -> TwinPlant:
     """A plant of parameter set ``params`` resting at ``normal0`` at ``time0_s``: the kick
     table's (``kind`` 'discrete') or the physics at the live tolerance, from the rest state
     at the normal's cardan angles (relaxed by ``relaxation``, see
@@ -459,7 +482,8 @@ def build_replay_plant(kind: str, normal0: NDArray[np.float64], time0_s: float,
 
     Given ``truth`` (a twin's bag records it), the physics starts from the recorded sphere and
     beams instead, their positions and rates; only the bristles' strain, which no topic
-    carries, is the rest's at the recorded sphere's normal."""
+    carries, is the rest's at the recorded sphere's normal. The physics is integrated by
+    ``method`` (:func:`recorded_integration_method`)."""
     from sphere_sim.kicks.design import cardan_of_normal
     from sphere_sim.kicks.process_models import process_model
     from sphere_sim.model.initial_state import rest_state
@@ -475,7 +499,7 @@ def build_replay_plant(kind: str, normal0: NDArray[np.float64], time0_s: float,
         rest_normal = normal0 if truth is None else truth.normal
         x0 = rest_state(model, cardan_of_normal(rest_normal), relaxation=relaxation)
         plant = ContinuousPlant(model, x0 if truth is None else truth.state_of(model, x0),
-                                kick_period_s=replay_kick_period_s(paths))
+                                kick_period_s=replay_kick_period_s(paths), method=method)
     plant.time_s = time0_s
     return plant
 

@@ -84,6 +84,7 @@ class DeviceRecording:
     def __init__(self, bag: BagWriter, params: ParameterSet | None, noise_std_rad: float,
                  seed: int, publish_rate_hz: float, tilt_deg: tuple[float, float]) -> None:
         from msg_defs.topics import PULSE_PROGRAM, SPHERE_STATE, SURFACE_NORMAL
+        from sphere_sim.integrate.solve import DEFAULT_METHOD
         from sphere_sim.model.assembly import assemble
         from sphere_sim.model.initial_state import rest_state
         from sphere_sim.model.scene import load_scene
@@ -91,7 +92,10 @@ class DeviceRecording:
         from sphere_sim.twin.runner import TwinRunner
 
         model = assemble(load_scene('rest'), params)
-        plant = ContinuousPlant(model, rest_state(model, (*tilt_deg, 0.0)))
+        # The device stands in for hardware: integrated by the studies' method, which the fit
+        # also uses, not the live twin's cheaper one.
+        plant = ContinuousPlant(model, rest_state(model, (*tilt_deg, 0.0)),
+                                method=DEFAULT_METHOD)
         self.period_s = 1.0 / publish_rate_hz
         self.runner = TwinRunner(plant, self.period_s, noise_std_rad, seed)
         self.bag = bag

@@ -8,6 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sphere_sim.integrate.solve import DEFAULT_METHOD
+from sphere_sim.integrate.tolerances import LIVE_METHOD
 from sphere_sim.model.assembly import assemble
 from sphere_sim.model.fidelity import (
     FULL,
@@ -103,7 +105,8 @@ def test_the_table_rung_is_the_full_model_where_the_table_was_simulated():
     intensity = float(table.intensities[-1])
     kick = ladder.LadderKick('diagonal', intensity, tilt_deg, azimuth_deg)
     looked_up, _ = ladder.landing(TABLE_RUNG, kick, params)
-    simulated, _ = ladder.landing('full', kick, params, rtol=table.spec.rtol)
+    simulated, _ = ladder.landing('full', kick, params, rtol=table.spec.rtol,
+                                  method=DEFAULT_METHOD)  # as the table was built
     assert angle_between(kick.normal, simulated) > 1e-3  # a kick, not a rest
     assert angle_between(looked_up, simulated) < 1e-8
 
@@ -132,10 +135,10 @@ def test_bench_fidelity_quick_writes_its_table_and_ends_with_the_live_rung(tmp_p
     assert cli.main(['bench', 'fidelity', '--quick', '--workers', '1',
                      '--out', str(tmp_path)]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
-    assert re.fullmatch(r'live rung (full \(rtol [0-9.e-]+\): p95 [0-9.e+-]+ rad, max '
+    assert re.fullmatch(r'live rung (full \([a-z]+, rtol [0-9.e-]+\): p95 [0-9.e+-]+ rad, max '
                         r'[0-9.e+-]+ rad, [0-9.]+ ms per kick \(full model at the live '
                         r'tolerance [0-9.]+ ms\)|none: .*)', lines[-1])
-    assert lines[-2].startswith('the twin runs: full (rtol 0.0003), ')
+    assert lines[-2].startswith(f'the twin runs: full ({LIVE_METHOD}, rtol 0.0003), ')
     assert sorted(p.name for p in tmp_path.iterdir()) == ['fidelity_quick.json',
                                                            'fidelity_quick.md']
     data = json.loads((tmp_path / 'fidelity_quick.json').read_text())

@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from sphere_sim.integrate.solve import DEFAULT_METHOD
 from sphere_sim.integrate.tolerances import CHECK_RTOL
 from sphere_sim.kicks.design import KICK_RELAXATION, cardan_of_normal
 from sphere_sim.kicks.lookup_table import LookupTable
@@ -68,8 +69,8 @@ def _advanced(model, x0, until_s):
 
 def _reference_at(model, x_start, programme, after_s):
     """The normal ``after_s`` into ``programme`` from ``x_start``: the twin's own plant at the
-    check's tolerance."""
-    plant = ContinuousPlant(model, x_start, rtol=CHECK_RTOL)
+    check's tolerance and by the check's method (the studies')."""
+    plant = ContinuousPlant(model, x_start, rtol=CHECK_RTOL, method=DEFAULT_METHOD)
     plant.run_programme(programme)
     for k in range(1, round(after_s / PERIOD_S) + 1):
         plant.advance(k * PERIOD_S)

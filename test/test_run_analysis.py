@@ -2,6 +2,7 @@
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,7 +11,7 @@ from msg_defs.conversions import status_values
 from msg_defs.topics import CONTROLLER_STATUS, PULSE_PROGRAM
 from sphere_sim.kicks.discrete import normal_from_xy
 from sphere_sim.model.scene import SCENES_DIR
-from sphere_sim.twin.plants import LIVE_ERROR_BOUND_RAD
+from sphere_sim.twin.plants import LIVE_ERROR_BOUND_RAD, LIVE_METHOD
 from sphere_twin.cli import build_parser
 from sphere_twin.processes import parameter_args
 from sphere_twin.run_analysis import (
@@ -21,6 +22,8 @@ from sphere_twin.run_analysis import (
     statistics,
 )
 from sphere_twin.testing import TopicProbe
+
+EXAMPLE_BAG = Path(__file__).resolve().parents[1] / 'bags' / 'example'
 
 
 def _write_bag(bag_dir, messages):
@@ -187,6 +190,17 @@ def test_continuous_plant_replays_a_recording_to_the_integrator_tolerance(ros_no
     # recording runs on until the nodes are stopped, so its kick count varies.
     assert replayed['kicks'] >= 2
     assert replayed['max_error_rad'] < replayed['kicks'] * LIVE_ERROR_BOUND_RAD
+    # The simulator said how it integrated, and the replay integrated alike.
+    assert replayed['integration_method'] == LIVE_METHOD
+
+
+def test_a_bag_whose_simulator_did_not_say_how_it_integrated_is_replayed_by_radau():
+    """bags/example was recorded before the simulator's status named its method, when every
+    twin ran the compiled Radau."""
+    from sphere_twin.run_analysis import UNSTATED_INTEGRATION_METHOD, recorded_integration_method
+
+    assert UNSTATED_INTEGRATION_METHOD == 'fast' != LIVE_METHOD
+    assert recorded_integration_method(EXAMPLE_BAG) == 'fast'
 
 
 def test_recorded_commands_that_break_the_rules_are_dropped_as_the_twin_dropped_them(tmp_path):

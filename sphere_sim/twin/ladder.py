@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sphere_sim.integrate.solve import simulate
-from sphere_sim.integrate.tolerances import LIVE_RTOL
+from sphere_sim.integrate.tolerances import LIVE_METHOD, LIVE_RTOL
 from sphere_sim.kicks.design import KICK_RELAXATION, cardan_of_normal
 from sphere_sim.kicks.discrete import NOISE_STUDY_STD_RAD
 from sphere_sim.kicks.engine import SerialEngine
@@ -45,6 +45,7 @@ from sphere_sim.twin.plants import LIVE_ERROR_BOUND_RAD
 # the converged landing, bench/results/work_precision.md).
 REFERENCE_RTOL = 1e-9
 QUICK_REFERENCE_RTOL = 1e-7
+REFERENCE_METHOD = 'fast'  # the studies' method (bench/results/work_precision.md)
 # The live budget: a rung serves the live twin only within both (the sensor noise of the noise
 # study, 9.4e-4 rad, and a tenth of it).
 LIVE_P95_BUDGET_RAD = 0.1 * NOISE_STUDY_STD_RAD
@@ -61,15 +62,17 @@ TIMING_REPEATS = 2
 # method. The full model at tighter tolerances shows what the live tolerance itself costs in
 # landing error; the Rosenbrock W-method (docs/numerics.md) what a cheaper step buys on each
 # model rung.
-LIVE_METHOD = 'fast'
 ROWS: tuple[tuple[str, float | None, str], ...] = (
-    ('full', LIVE_RTOL, LIVE_METHOD), ('full', 1e-5, LIVE_METHOD), ('full', 3e-6, LIVE_METHOD),
-    ('full', 1e-6, LIVE_METHOD), ('full', LIVE_RTOL, 'rosenbrock'),
-    ('full', 1e-5, 'rosenbrock'), ('sliding', LIVE_RTOL, LIVE_METHOD),
+    ('full', LIVE_RTOL, 'fast'), ('full', 1e-5, 'fast'), ('full', 3e-6, 'fast'),
+    ('full', 1e-6, 'fast'), ('full', LIVE_RTOL, 'rosenbrock'),
+    ('full', 1e-5, 'rosenbrock'), ('sliding', LIVE_RTOL, 'fast'),
     ('sliding', LIVE_RTOL, 'rosenbrock'), (TABLE_RUNG, None, LIVE_METHOD))
 QUICK_ROWS: tuple[tuple[str, float | None, str], ...] = (
     ('full', LIVE_RTOL, LIVE_METHOD), ('sliding', LIVE_RTOL, LIVE_METHOD),
     (TABLE_RUNG, None, LIVE_METHOD))
+assert all(method == 'fast' or (rung, rtol, method) in ROWS
+           for rung, rtol, method in QUICK_ROWS if rtol is not None)
+assert ('full', LIVE_RTOL, LIVE_METHOD) in ROWS  # the row the twin runs
 
 
 def tilted_normal(tilt_deg: float, azimuth_deg: float) -> NDArray[np.float64]:
@@ -155,7 +158,7 @@ def landing(rung: str, kick: LadderKick, params: ParameterSet, rtol: float = LIV
 def reference_landing(job: tuple[LadderKick, ParameterSet, float]) -> NDArray[np.float64]:
     """The full model's landing of one kick at the reference tolerance (a pool's task)."""
     kick, params, rtol = job
-    return landing('full', kick, params, rtol)[0]
+    return landing('full', kick, params, rtol, REFERENCE_METHOD)[0]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -174,8 +177,7 @@ class RungResult:
     def label(self) -> str:
         if self.rtol is None:
             return self.name
-        method = '' if self.method == LIVE_METHOD else f'{self.method}, '
-        return f'{self.name} ({method}rtol {self.rtol:g})'
+        return f'{self.name} ({self.method}, rtol {self.rtol:g})'
 
     @property
     def median_rad(self) -> float:

@@ -69,14 +69,15 @@ if TYPE_CHECKING:
 
 DEFAULT_SETPOINT_S = 8.0  # simulated seconds on the setpoint before the trajectory starts
 DEFAULT_TRAJECTORY_S = 25.0  # half a period of eq. (64): out to A_max and back to the centre
-# The continuous plant runs at a quarter of the device's pace: the paper's friction costs about
-# 1.7 times the compute of a dry kick, and half real time no longer keeps every programme on time
-# here. The kick table costs nothing to integrate, but publishing every sample takes a quarter
-# of the wall time at the device's pace on a quiet machine and over half on a loaded one
-# (measured: at 2x, 46 of 63 programmes late; at 1x, 0-1 late alone but 54 of 61 within the
-# test suite), so it runs at half the device's pace until the node publishes off its
-# integrating thread.
-DEFAULT_REAL_TIME_FACTOR = {'continuous': 0.25, 'discrete': 0.5}
+# Both plants run at half the device's pace. The continuous plant's kicks cost about 55 ms of
+# compute each by the live twin's W-method (LIVE_METHOD), half of Radau's: at 0.5 the simulator
+# held 0.48 with 15 of 506 programmes late, on a machine busy with two other jobs (by Radau at
+# 0.25 it had held 0.19, 56 late). The kick table costs nothing to integrate, but publishing
+# every sample takes a quarter of the wall time at the device's pace on a quiet machine and over
+# half on a loaded one (measured: at 2x, 46 of 63 programmes late; at 1x, 0-1 late alone but 54
+# of 61 within the test suite), so it runs at half the device's pace until the node publishes
+# off its integrating thread.
+DEFAULT_REAL_TIME_FACTOR = {'continuous': 0.5, 'discrete': 0.5}
 DEFAULT_PLANT = 'continuous'
 START_TIMEOUT_S = 60.0
 WALL_MARGIN = 3.0  # the run may take this many times its paced duration before it is cut

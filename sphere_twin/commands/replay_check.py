@@ -92,6 +92,7 @@ def run(args: argparse.Namespace) -> int:
     from sphere_twin.run_analysis import (
         load_run,
         load_truth,
+        recorded_integration_method,
         replay_kick_period_s,
         replay_start_index,
         unclosed_bag_warning,
@@ -115,8 +116,9 @@ def run(args: argparse.Namespace) -> int:
         # A fitted file is compared with the set it was fitted from.
         before = load_parameter_set(args.params.base) if args.params.base else shipped
     runs = ([('before', before)] if before is not None else []) + [('after', args.params)]
+    method = recorded_integration_method(bag.directory)
     results = {label: _replay(recorded, start, plant, params, args.tables,
-                              f'{label} ({params.name})' if before else '')
+                              f'{label} ({params.name})' if before else '', method)
                for label, params in runs}
     window_s = replay_kick_period_s(args.tables)
     noisy = noisy_sensor(recorded, start)
@@ -124,7 +126,8 @@ def run(args: argparse.Namespace) -> int:
     truth = load_truth(bag.directory) if plant == 'continuous' else None
     with engine_of(args.workers) as engine:
         ahead = {label: _kick_ahead(recorded, plant, params, args.tables, window_s, noisy,
-                                    engine, f'{label} ({params.name})' if before else '', truth)
+                                    engine, f'{label} ({params.name})' if before else '', truth,
+                                    method)
                  for label, params in runs}
     for line in dict.fromkeys(s.warning() for a in ahead.values() for s in a.skipped):
         print(f'sphere-twin replay-check: warning: {line}', file=sys.stderr, flush=True)
@@ -137,10 +140,13 @@ def run(args: argparse.Namespace) -> int:
     _plot(results, stem.with_suffix('.png'), bag.name, plant, args.params.name,
           before.name if before else None, improvement)
     data = _json_data(args, plant, recorded, results, ahead, before, warning)
+    if plant == 'continuous':
+        data['integration_method'] = method
     stem.with_suffix('.json').write_text(json.dumps(data, indent=2) + '\n')
+    integrated = f' (integrated by {method}, as recorded)' if plant == 'continuous' else ''
     print(f'replayed {len(recorded.kicks)} programmes and {len(recorded.holds)} voltage '
-          f'commands through the {plant} plant against {results["after"].times_s.size} '
-          'samples')
+          f'commands through the {plant} plant{integrated} against '
+          f'{results["after"].times_s.size} samples')
     print(f'wrote {stem.with_suffix(".png")} and {stem.with_suffix(".json")}')
     _print_errors(results, ahead, args.params.name, before.name if before else None,
                   improvement)
@@ -213,12 +219,12 @@ def improvement_text(before_rms_rad: float, after_rms_rad: float) -> str:
 
 
 def _replay(recorded: RecordedRun, start: int, plant: str, params: ParameterSet,
-            tables: Iterable[str | Path], label: str) -> ReplayResult:
+            tables: Iterable[str | Path], label: str, method: str) -> ReplayResult:
     from sphere_twin.run_analysis import build_replay_plant, replay
 
     start_s = float(recorded.normal_t_s[start])
     replay_plant = build_replay_plant(plant, resting_start(recorded, start), start_s, params,
-                                      tables)
+                                      tables, method=method)
     progress = _progress_line(label, start_s, float(recorded.normal_t_s[-1]))
     return replay(recorded, replay_plant, start, progress)
 
@@ -226,7 +232,7 @@ def _replay(recorded: RecordedRun, start: int, plant: str, params: ParameterSet,
 def _kick_ahead(recorded: RecordedRun, plant: str, params: ParameterSet,
                 tables: Iterable[str | Path], window_s: float, noisy: bool,
                 engine: SerialEngine, label: str,
-                truth: RecordedTruth | None) -> KickAheadResult:
+                truth: RecordedTruth | None, method: str) -> KickAheadResult:
     from sphere_twin.kick_ahead import ReplayPlantSpec, one_kick_ahead
     from sphere_twin.run_analysis import ProgressClock
 
@@ -240,7 +246,7 @@ def _kick_ahead(recorded: RecordedRun, plant: str, params: ParameterSet,
             print(f'replay-check: {what}: {done} of {total} kicks ({100.0 * done / total:.0f}%)',
                   file=sys.stderr, flush=True)
 
-    spec = ReplayPlantSpec(plant, params, tuple(str(t) for t in tables))
+    spec = ReplayPlantSpec(plant, params, tuple(str(t) for t in tables), method)
     return one_kick_ahead(recorded, spec, window_s, engine, average=noisy, progress=report,
                           truth=truth)
 

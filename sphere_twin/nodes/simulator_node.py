@@ -354,7 +354,17 @@ class SimulatorNode(Node):
             # The rung of the ladder of models that served every kick (all the run's
             # programmes: one rung a run), and, with check_fidelity, how far its landings
             # were from the full model's.
-            ('fidelity', self.rung), *self._fidelity_values())
+            ('fidelity', self.rung), *self._integration_values(), *self._fidelity_values())
+
+    def _integration_values(self) -> tuple[tuple[str, str], ...]:
+        # How the physics is integrated, so that a replay of the bag integrates it alike
+        # (run_analysis.recorded_integration); the kick table integrates nothing.
+        from sphere_sim.twin.plants import ContinuousPlant
+
+        plant = self.runner.plant
+        if not isinstance(plant, ContinuousPlant):
+            return ()
+        return (('integration_method', plant.method), ('integration_rtol', f'{plant.rtol:g}'))
 
     def _fidelity_values(self) -> tuple[tuple[str, int | str], ...]:
         check = self.runner.check
@@ -395,6 +405,9 @@ class SimulatorNode(Node):
             self._wall_start_s = time.perf_counter()  # simulated time 0 is now
             self._pace_anchor = (self._wall_start_s, 0.0)
             self._outbox_at_start = (self._outbox.busy_s, self._outbox.waiting_s)
+            # At once, not a status period later: a recording from the start then says how the
+            # physics is integrated (a replay integrates alike), however short the run.
+            self._publish_diagnostics(DiagnosticStatus.OK, 'running')
         elif self.paced and self.runner.time_s - self._pace_anchor[1] >= (
                 time.perf_counter() - self._pace_anchor[0]) * self.real_time_factor:
             return  # ahead of the wall clock
