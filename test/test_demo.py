@@ -11,7 +11,7 @@ import time
 import pytest
 
 from msg_defs.topics import ALL_TOPICS, CLOCK
-from sphere_sim.integrate.tolerances import LIVE_RTOL
+from sphere_sim.integrate.tolerances import LIVE_METHOD, LIVE_RTOL
 from sphere_sim.model.fidelity import FULL, TABLE_RUNG
 from sphere_twin.cli import build_parser
 from sphere_twin.commands.demo import (
@@ -73,9 +73,10 @@ def test_short_demo_runs_the_loop_records_a_bag_and_reports(tmp_path, plant):
 
 @pytest.mark.parametrize(('plant', 'rung', 'model'), [
     ('continuous', FULL.name, f'the full model of the paper at the live tolerance (rtol '
-                              f'{LIVE_RTOL:g})'),
+                              f'{LIVE_RTOL:g}, {LIVE_METHOD})'),
     ('discrete', TABLE_RUNG, "each kick's landing looked up in the kick tables"),
-    ('continuous', 'sliding', f"the paper's model at the live tolerance (rtol {LIVE_RTOL:g}), "
+    ('continuous', 'sliding', f"the paper's model at the live tolerance (rtol {LIVE_RTOL:g}, "
+                              f"{LIVE_METHOD}), "
                               'leaving out stiction and presliding')])
 def test_the_demo_says_first_the_plant_its_rung_the_pace_and_the_wall_time(plant, rung, model):
     plant_line, pace_line, scenario_line = demo_start_lines(plant, 0.25, 8.0, 25.0, rung)

@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 import numpy as np
 from numpy.typing import ArrayLike
 
-from sphere_sim.integrate.tolerances import CHECK_RTOL, LIVE_RTOL
+from sphere_sim.integrate.tolerances import CHECK_RTOL, LIVE_METHOD, LIVE_RTOL
 from sphere_sim.twin.plant_setup import (
     FIDELITIES,
     LIVE_FIDELITY,
@@ -79,6 +79,7 @@ DEFAULT_TRAJECTORY_S = 25.0  # half a period of eq. (64): out to A_max and back 
 # off its integrating thread.
 DEFAULT_REAL_TIME_FACTOR = {'continuous': 0.5, 'discrete': 0.5}
 DEFAULT_PLANT = 'continuous'
+LIVE_INTEGRATION = f'rtol {LIVE_RTOL:g}, {LIVE_METHOD}'  # how the continuous plant integrates
 START_TIMEOUT_S = 60.0
 WALL_MARGIN = 3.0  # the run may take this many times its paced duration before it is cut
 # Subscribers of /sphere/surface_normal the simulator waits for: recorder, controller, and the
@@ -113,8 +114,8 @@ def model_fidelity(fidelity: str) -> str:
         return ("each kick's landing looked up in the kick tables, nothing integrated (the "
                 "ladder's last rung)")
     if fidelity == FULL.name:
-        return f'the full model of the paper at the live tolerance (rtol {LIVE_RTOL:g})'
-    return (f'the paper\'s model at the live tolerance (rtol {LIVE_RTOL:g}), leaving out '
+        return f'the full model of the paper at the live tolerance ({LIVE_INTEGRATION})'
+    return (f'the paper\'s model at the live tolerance ({LIVE_INTEGRATION}), leaving out '
             f'{rung_named(fidelity).leaves_out}')
 
 
