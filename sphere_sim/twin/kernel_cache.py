@@ -26,7 +26,9 @@ from pathlib import Path
 from typing import Any
 
 # Every module of the package with a cached numba kernel that the twin runs (test_first_start
-# reads the sources and checks that each is here or in STUDY_KERNEL_MODULES).
+# reads the sources and checks that each is here or in STUDY_KERNEL_MODULES). The live plant
+# integrates by the Rosenbrock W-method; check_fidelity's reference, a replay of a bag recorded
+# by Radau, and every study integrate by the compiled Radau.
 KERNEL_MODULES = (
     'sphere_sim.model.capacitance',
     'sphere_sim.model.capacitance_rbf',
@@ -40,13 +42,11 @@ KERNEL_MODULES = (
     'sphere_sim.integrate.kernel_replay',
     'sphere_sim.integrate.newton_system',
     'sphere_sim.integrate.radau_compiled',
-)
-# Modules whose cached kernels only a benchmark calls (the Rosenbrock W-method of `bench
-# work-precision` and `bench fidelity`): compiled on their first use there, not ahead of a
-# node's start, which never runs them.
-STUDY_KERNEL_MODULES = (
     'sphere_sim.integrate.rosenbrock_compiled',
 )
+# Modules whose cached kernels only a benchmark calls: compiled on their first use there, not
+# ahead of a node's start, which never runs them (none at present).
+STUDY_KERNEL_MODULES: tuple[str, ...] = ()
 
 
 def kernel_name(dispatcher: Any) -> str:

@@ -5,7 +5,8 @@ numba compiles each kernel on its first call and caches the machine code on disk
 runs the smallest real workloads through every kernel, so that no later start compiles:
 
 * a few milliseconds of the continuous plant from the rest scene with a kick of the shipped
-  table, as the simulator runs it (the integrator, the dynamics, the Newton system);
+  table, as the simulator runs it (the integrator, the dynamics, the Newton system), by the
+  live twin's method and by the studies';
 * the discrete plant executing the same kick (a table lookup; its rest pose runs the dynamics);
 * what the commands call beyond that: the closed form and the RBF net on arrays, the
   mechanical energy, the library methods' contact-onset checks, the kernel replay.
@@ -141,13 +142,18 @@ def _kick_programme() -> Any:
     return load_kick_model(()).programme(0, 1.0, np.array([0.0, 0.0, 1.0]))
 
 
-def _run_plant(kind: str) -> None:
+def _run_plant(kind: str, method: str | None = None) -> None:
     """A few samples of the plant ``kind`` from the rest scene into a kick, through the
-    simulator's own runner (so the kernels see the simulator's argument types)."""
+    simulator's own runner (so the kernels see the simulator's argument types); the continuous
+    plant integrated by ``method`` where given, else as the live twin does."""
     from sphere_sim.twin.plant_setup import build_plant
+    from sphere_sim.twin.plants import ContinuousPlant
     from sphere_sim.twin.runner import TwinRunner
 
-    runner = TwinRunner(build_plant(kind, 'rest'), WORKLOAD_PERIOD_S)
+    plant = build_plant(kind, 'rest')
+    if method is not None and isinstance(plant, ContinuousPlant):
+        plant.method = method
+    runner = TwinRunner(plant, WORKLOAD_PERIOD_S)
     runner.tick()
     times_s, volts_v = _kick_programme().segments()
     runner.command_programme(times_s, volts_v)
@@ -156,8 +162,13 @@ def _run_plant(kind: str) -> None:
 
 
 def compile_continuous_plant() -> None:
-    """The simulator's continuous plant: every kernel of a kick from rest."""
+    """The simulator's continuous plant: every kernel of a kick from rest, by the live
+    twin's method and by the studies' (check_fidelity's reference, a replay of a bag recorded
+    by Radau)."""
+    from sphere_sim.integrate.solve import DEFAULT_METHOD
+
     _run_plant('continuous')
+    _run_plant('continuous', DEFAULT_METHOD)
 
 
 def load_discrete_plant() -> None:
