@@ -45,17 +45,19 @@ OFFSET_REFINEMENTS = 3
 OFFSET_BISECTIONS = 12
 # A bracket narrower than this straddles a step of the error (a beam snapping down), not a root.
 OFFSET_STEP_V = 0.02
-# The lowest zero crossing: where the search ends on a root more than this above the scanned
-# offset below it, the error is sampled at this step from that offset up to one step short of
-# the root, and the first sign change found there is refined instead. Near the cone's edge the
-# scan's 20-45 V bracket holds up to three roots: a low branch (V1 pulled in, the kick 0.5-0.8
-# deg wide) at 31-33 V and a high one (0.17-0.30 deg wide) at 40-42 V, with the kick collapsing
+# The lowest zero crossing: where the search ends on a root at least two of these above the
+# scanned offset below it, the error is sampled at this step from that offset up to one step
+# short of the root, and the first sign change found there is refined and taken instead, unless
+# the error keeps its sign from there up to the root (the root's own crossing). Near the cone's
+# edge the scan's 20-45 V bracket holds up to three roots: a low branch (V1 pulled in, the kick
+# 0.4-0.85 deg wide) at 31-34 V and a high one (0.17-0.30 deg wide) at 40-42 V, the kick collapsing
 # between them (at (0.48, 0.24): -6.6 deg at 30 V, +2.9 at 32, +37 at 35, -9.9 at 39, -0.1 at
 # 40). The search had put (0.48, 0.24), (0.48, 0.32), (0.48, 0.40), (0.40, 0.48) and
 # (0.56, 0.24) on the high branch (40.0-41.9 V) and their neighbours on the low one (31.0-33.3
 # V), and the table's bilinear offset between them (38.35 V at (0.589, 0.216)) sent the full
-# kick 40 deg off. The positive lobe between the branches is 5-6 V wide (at (0.56, 0.24):
-# -1.4 deg at 32.5 V, +35 at 35, +14.6 at 37.5), so a 1 V step sees it.
+# kick 40 deg off. The lobe between the branches is several volts wide (at (0.56, 0.24):
+# -1.4 deg at 32.5 V, +35 at 35, +14.6 at 37.5), so a 1 V step sees it. With the rule those
+# five moved to 31.5-34.1 V and every other node kept its offset.
 OFFSET_LOWEST_ROOT_STEP_V = 1.0
 
 
