@@ -1,5 +1,6 @@
 """Voltage-offset search, the compensating-beam rule and the kick effect."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -155,3 +156,31 @@ def test_design_round_trips_through_the_optimisation_json(tmp_path):
     path = tmp_path / 'kick.json'
     path.write_text(json.dumps({'design': {**design.to_dict(), 'direction_deg': -45.0}}))
     assert KickDesign.load(path) == design
+
+
+def test_reused_offsets_are_only_checked_for_a_lower_crossing(monkeypatch):
+    """`primitives offsets --reuse`: a state on the high branch moves to the low one, where a
+    new search puts it too (by another path, so not to the same last bits); a state already on
+    the lowest root is taken as it was, object and all."""
+    from sphere_sim.kicks import characteristics
+
+    volts = [-20, 0, 20, 30, 32, 33, 34, 35, 37, 39, 40, 41, 42.18, 45]
+    degrees = [-50, -42.9, -31.0, -6.6, 2.9, 0.4, 8.4, 37.0, 17.7, -9.9, -0.1, 6.1, 10.7, 16.6]
+
+    class Bench:  # the kick's direction error against V1's offset, as at (0.48, 0.24)
+        def effect(self, normal, design, intensity, offset_v=0.0, offset_beam=None):
+            angle = design.direction_rad + math.radians(float(np.interp(offset_v, volts,
+                                                                        degrees)))
+            return KickEffect(1e-3 * np.array([math.cos(angle), math.sin(angle)]))
+
+    monkeypatch.setattr(characteristics, '_bench', lambda params: Bench())
+    design = KickDesign()
+    fresh = characteristics.voltage_offsets(design, 0.16, math.radians(12.0))
+    assert all(30.0 < s.offset_v < 33.0 for s in fresh)
+    high = [dataclasses.replace(s, offset_v=40.016, direction_error_rad=math.radians(0.1))
+            for s in fresh]
+    moved = characteristics.voltage_offsets(design, 0.16, math.radians(12.0), reuse=high)
+    assert all(30.0 < s.offset_v < 33.0 and abs(s.direction_error_rad) <= math.radians(1.0)
+               and s.evaluations > h.evaluations for s, h in zip(moved, high, strict=True))
+    kept = characteristics.voltage_offsets(design, 0.16, math.radians(12.0), reuse=fresh)
+    assert all(a is b for a, b in zip(kept, fresh, strict=True))
