@@ -1,5 +1,6 @@
 """Voltage-offset search, the compensating-beam rule and the kick effect."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -7,10 +8,12 @@ import pytest
 
 from sphere_sim.kicks.characteristics import (
     OFFSET_BISECTIONS,
+    OFFSET_LOWEST_ROOT_STEP_V,
     OFFSET_REFINEMENTS,
     OFFSET_STEP_V,
     KickEffect,
     find_offset,
+    lowest_crossing,
     offset_grid,
     upper_right_nodes,
 )
@@ -49,13 +52,51 @@ def test_offset_search_goes_on_by_bisection_where_regula_falsi_stalls():
     offset, residual, evaluations = find_offset(error, scan, tol_rad=tol)
     assert abs(residual) <= tol
     assert offset == pytest.approx(20.0 + 25.0 * 0.1 ** 0.1, abs=0.1)
-    assert evaluations == len(calls) <= len(scan) + 1 + OFFSET_REFINEMENTS + OFFSET_BISECTIONS
+    # ... and the lowest-crossing check samples 21-38 V below the root, finding none.
+    sampled = math.floor((offset - 20.0) / OFFSET_LOWEST_ROOT_STEP_V) - 1
+    assert evaluations == len(calls) <= (len(scan) + 1 + OFFSET_REFINEMENTS + OFFSET_BISECTIONS
+                                         + sampled)
 
     def smooth(v):
         return math.atan(0.05 * (v - 8.0))
 
     assert find_offset(smooth, scan, tol_rad=tol) == find_offset(smooth, scan, tol_rad=tol,
                                                                  bisections=0)
+
+
+def test_offset_search_takes_the_lowest_zero_crossing_of_the_bracket():
+    """Near the cone's edge the scan's 20-45 V bracket holds three roots: the full kick's
+    error at (0.48, 0.24) against V1's offset (docs/motion_primitives.md, degrees), a low
+    branch near 31.4 V and a high one near 40 V with the collapsed kick between them. The
+    search keeps to the low branch, as its neighbours do."""
+    volts = [0, 20, 30, 32, 33, 34, 35, 37, 39, 40, 41, 42.18, 45]
+    degrees = [-42.9, -31.0, -6.6, 2.9, 0.4, 8.4, 37.0, 17.7, -9.9, -0.1, 6.1, 10.7, 16.6]
+
+    def error(v):
+        return math.radians(float(np.interp(v, volts, degrees)))
+
+    scan = (-20.0, -10.0, -5.0, 5.0, 7.5, 10.0, 20.0, 45.0)
+    tol = math.radians(1.0)
+    offset, residual, _ = find_offset(error, scan, tol_rad=tol)
+    assert abs(residual) <= tol
+    assert 30.0 < offset < 33.0
+    # From the high root alone, the check finds the low one; from the low one, nothing lower.
+    lower, _ = lowest_crossing(error, (20.0, error(20.0)), (40.016, error(40.016)), tol)
+    assert lower is not None and 30.0 < lower[0] < 33.0
+    assert lowest_crossing(error, (20.0, error(20.0)), lower, tol) == (None, 10)
+
+
+def test_a_root_within_the_tolerance_keeps_its_own_crossing_below_it():
+    """Where the error is shallow, a root within 1 deg can lie more than a sampling step
+    above its zero: the sign change below it is its own (the error does not turn back
+    between them), and the search keeps the root it found."""
+    def error(v):  # one root, at 24.6 V, 0.5 deg per V
+        return math.radians(0.5 * (v - 24.6))
+
+    assert lowest_crossing(error, (20.0, error(20.0)), (26.3, error(26.3))) == (None, 5)
+    scan = (-20.0, -10.0, -5.0, 5.0, 7.5, 10.0, 20.0, 45.0)
+    offset, _, _ = find_offset(error, scan)
+    assert offset == pytest.approx(24.6, abs=2.0)
 
 
 def test_offset_search_locates_a_step_of_the_error_without_taking_it_for_a_root():
@@ -115,3 +156,31 @@ def test_design_round_trips_through_the_optimisation_json(tmp_path):
     path = tmp_path / 'kick.json'
     path.write_text(json.dumps({'design': {**design.to_dict(), 'direction_deg': -45.0}}))
     assert KickDesign.load(path) == design
+
+
+def test_reused_offsets_are_only_checked_for_a_lower_crossing(monkeypatch):
+    """`primitives offsets --reuse`: a state on the high branch moves to the low one, where a
+    new search puts it too (by another path, so not to the same last bits); a state already on
+    the lowest root is taken as it was, object and all."""
+    from sphere_sim.kicks import characteristics
+
+    volts = [-20, 0, 20, 30, 32, 33, 34, 35, 37, 39, 40, 41, 42.18, 45]
+    degrees = [-50, -42.9, -31.0, -6.6, 2.9, 0.4, 8.4, 37.0, 17.7, -9.9, -0.1, 6.1, 10.7, 16.6]
+
+    class Bench:  # the kick's direction error against V1's offset, as at (0.48, 0.24)
+        def effect(self, normal, design, intensity, offset_v=0.0, offset_beam=None):
+            angle = design.direction_rad + math.radians(float(np.interp(offset_v, volts,
+                                                                        degrees)))
+            return KickEffect(1e-3 * np.array([math.cos(angle), math.sin(angle)]))
+
+    monkeypatch.setattr(characteristics, '_bench', lambda params: Bench())
+    design = KickDesign()
+    fresh = characteristics.voltage_offsets(design, 0.16, math.radians(12.0))
+    assert all(30.0 < s.offset_v < 33.0 for s in fresh)
+    high = [dataclasses.replace(s, offset_v=40.016, direction_error_rad=math.radians(0.1))
+            for s in fresh]
+    moved = characteristics.voltage_offsets(design, 0.16, math.radians(12.0), reuse=high)
+    assert all(30.0 < s.offset_v < 33.0 and abs(s.direction_error_rad) <= math.radians(1.0)
+               and s.evaluations > h.evaluations for s, h in zip(moved, high, strict=True))
+    kept = characteristics.voltage_offsets(design, 0.16, math.radians(12.0), reuse=fresh)
+    assert all(a is b for a, b in zip(kept, fresh, strict=True))

@@ -242,6 +242,38 @@ def test_the_full_model_kicks_on_direction_from_the_state_the_offset_search_left
     assert error_deg(dataclasses.replace(spec, offsets=stalled)) > 5.0
 
 
+# The offsets the search had found on the high branch (V1 past its own pull-in, the kick
+# 0.17-0.30 deg wide) at five nodes of the cone's edge whose neighbours are on the low one.
+HIGH_BRANCH_OFFSETS_V = {(0.48, 0.24): 39.965, (0.48, 0.32): 40.815, (0.48, 0.4): 41.877,
+                         (0.4, 0.48): 41.336, (0.56, 0.24): 41.193}
+
+
+@pytest.mark.parametrize('x_sn, y_sn, action', [(0.589, 0.216, 0), (0.428, 0.369, 2)])
+def test_the_full_model_kicks_on_direction_between_the_offsets_nodes_at_the_cones_edge(
+        x_sn, y_sn, action):
+    """Between nodes of the two branches the bilinear offset fell into the gap where the kick
+    collapses: at (0.589, 0.216) 38.35 V, and the full kick went 40.3 deg off, 0.10 deg wide;
+    at (0.428, 0.369), action 2, 7.9 deg off (`table check --points 48`'s worst states). With
+    every node on the low branch (the search's lowest zero crossing) the kick between them
+    stays within 5 deg of its nominal direction (docs/motion_primitives.md)."""
+    table = LookupTable.load_current()
+    spec, params = table.spec, table.parameters()
+    normal = normal_from_xy(x_sn, y_sn)
+
+    def error_deg(kick_spec):
+        moved = direct_kick(kick_spec, params, normal, action, 1.0).normal
+        d = moved[:2] - normal[:2]
+        return math.degrees(math.remainder(
+            math.atan2(d[1], d[0]) - table.directions_rad[action], 2.0 * math.pi))
+
+    assert all(v < 36.0 for _, _, v in spec.offsets.nodes)
+    assert abs(error_deg(spec)) <= 5.0
+    both = OffsetLookup(spec.offsets.grid_step, tuple(
+        (x, y, HIGH_BRANCH_OFFSETS_V.get((round(x, 2), round(y, 2)), v))
+        for x, y, v in spec.offsets.nodes))
+    assert abs(error_deg(dataclasses.replace(spec, offsets=both))) > 5.0
+
+
 def test_an_unkicked_sphere_stays_where_it_rests_across_the_shipped_table(shipped):
     """The u_K = 0 entries (every beam at the low voltage, below pull-in) are the model's own
     drift over a kick window: with friction that holds there is none to subtract."""

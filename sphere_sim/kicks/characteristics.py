@@ -45,6 +45,20 @@ OFFSET_REFINEMENTS = 3
 OFFSET_BISECTIONS = 12
 # A bracket narrower than this straddles a step of the error (a beam snapping down), not a root.
 OFFSET_STEP_V = 0.02
+# The lowest zero crossing: where the search ends on a root at least two of these above the
+# scanned offset below it, the error is sampled at this step from that offset up to one step
+# short of the root, and the first sign change found there is refined and taken instead, unless
+# the error keeps its sign from there up to the root (the root's own crossing). Near the cone's
+# edge the scan's 20-45 V bracket holds up to three roots: a low branch (V1 pulled in, the kick
+# 0.4-0.85 deg wide) at 31-34 V and a high one (0.17-0.30 deg wide) at 40-42 V, the kick collapsing
+# between them (at (0.48, 0.24): -6.6 deg at 30 V, +2.9 at 32, +37 at 35, -9.9 at 39, -0.1 at
+# 40). The search had put (0.48, 0.24), (0.48, 0.32), (0.48, 0.40), (0.40, 0.48) and
+# (0.56, 0.24) on the high branch (40.0-41.9 V) and their neighbours on the low one (31.0-33.3
+# V), and the table's bilinear offset between them (38.35 V at (0.589, 0.216)) sent the full
+# kick 40 deg off. The lobe between the branches is several volts wide (at (0.56, 0.24):
+# -1.4 deg at 32.5 V, +35 at 35, +14.6 at 37.5), so a 1 V step sees it. With the rule those
+# five moved to 31.5-34.1 V and every other node kept its offset.
+OFFSET_LOWEST_ROOT_STEP_V = 1.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -160,7 +174,7 @@ def find_offset(error_of_offset: Callable[[float], float], candidates_v: Iterabl
                 refinements: int = OFFSET_REFINEMENTS,
                 bisections: int = OFFSET_BISECTIONS) -> tuple[float, float, int]:
     """Offset whose kick goes closest to the nominal direction: a scan, regula falsi, then
-    bisection where regula falsi stalls.
+    bisection where regula falsi stalls, then the lowest zero crossing of the bracket.
 
     The error is not monotone in the offset (an offset above the pull-in threshold turns the
     low beam into a kicking one), so a scan over ``candidates_v`` finds the sign changes first;
@@ -168,7 +182,9 @@ def find_offset(error_of_offset: Callable[[float], float], candidates_v: Iterabl
     more than ``tol_rad`` off, up to ``bisections`` more offsets are tried, each the middle of
     the sign change, among all the offsets tried so far, whose end is nearest zero (brackets
     narrower than :data:`OFFSET_STEP_V` are steps, not roots, and are left alone). A search
-    that regula falsi finishes is the same with or without the bisections.
+    that regula falsi finishes is the same with or without the bisections. A root found
+    within ``tol_rad`` is then checked for a lower one in its scanned bracket
+    (:func:`lowest_crossing`); where there is none, the result is the same as without the check.
 
     Parameters
     ----------
@@ -182,6 +198,7 @@ def find_offset(error_of_offset: Callable[[float], float], candidates_v: Iterabl
     (offset_v, error_rad, evaluations)
     """
     points = [(v, error_of_offset(v)) for v in sorted({0.0, *map(float, candidates_v)})]
+    scanned = list(points)
     evaluations = len(points)
     best = min(points, key=lambda p: abs(p[1]))
     brackets = [(a, b) for a, b in itertools.pairwise(points)
@@ -189,6 +206,22 @@ def find_offset(error_of_offset: Callable[[float], float], candidates_v: Iterabl
     if abs(best[1]) <= tol_rad or not brackets:
         return best[0], best[1], evaluations
     (va, ea), (vb, eb) = min(brackets, key=lambda ab: min(abs(ab[0][1]), abs(ab[1][1])))
+    best, evaluations = _refine(error_of_offset, points, (va, ea), (vb, eb), best, evaluations,
+                                tol_rad, refinements, bisections)
+    below = [p for p in scanned if p[0] < best[0]]
+    if abs(best[1]) > tol_rad or not below:
+        return best[0], best[1], evaluations
+    lower, extra = lowest_crossing(error_of_offset, below[-1], best, tol_rad, refinements,
+                                   bisections)
+    return (*(best if lower is None else lower), evaluations + extra)
+
+
+def _refine(error_of_offset: Callable[[float], float], points: list[tuple[float, float]],
+            a: tuple[float, float], b: tuple[float, float], best: tuple[float, float],
+            evaluations: int, tol_rad: float, refinements: int,
+            bisections: int) -> tuple[tuple[float, float], int]:
+    """Regula falsi in the bracket (a, b), then bisections among ``points`` (appended to)."""
+    (va, ea), (vb, eb) = a, b
     for _ in range(refinements):
         v = vb - eb * (vb - va) / (eb - ea)
         e = error_of_offset(v)
@@ -203,9 +236,9 @@ def find_offset(error_of_offset: Callable[[float], float], candidates_v: Iterabl
         points.append((v, e))
     for _ in range(bisections if abs(best[1]) > tol_rad else 0):
         points.sort()
-        brackets = [(a, b) for a, b in itertools.pairwise(points)
-                    if a[1] * b[1] < 0.0 and abs(a[1] - b[1]) < math.pi
-                    and b[0] - a[0] > OFFSET_STEP_V]
+        brackets = [(p, q) for p, q in itertools.pairwise(points)
+                    if p[1] * q[1] < 0.0 and abs(p[1] - q[1]) < math.pi
+                    and q[0] - p[0] > OFFSET_STEP_V]
         if not brackets:
             break
         (va, ea), (vb, eb) = min(brackets, key=lambda ab: min(abs(ab[0][1]), abs(ab[1][1])))
@@ -216,17 +249,72 @@ def find_offset(error_of_offset: Callable[[float], float], candidates_v: Iterabl
         best = min(best, (v, e), key=lambda p: abs(p[1]))
         if abs(e) <= tol_rad:
             break
-    return best[0], best[1], evaluations
+    return best, evaluations
 
 
-def _offset_job(
-        args: tuple[ParameterSet | None, KickDesign, float, float, float]) -> OffsetSolution:
-    params, design, intensity, x_sn, y_sn = args
+def lowest_crossing(error_of_offset: Callable[[float], float], scanned: tuple[float, float],
+                    root: tuple[float, float], tol_rad: float = OFFSET_DIRECTION_TOL_RAD,
+                    refinements: int = OFFSET_REFINEMENTS, bisections: int = OFFSET_BISECTIONS
+                    ) -> tuple[tuple[float, float] | None, int]:
+    """A root of the error below ``root`` = (offset, error) and above ``scanned``, the scanned
+    (offset, error) next below it: the lowest zero crossing a
+    :data:`OFFSET_LOWEST_ROOT_STEP_V` sampling sees, refined as :func:`find_offset` refines,
+    or None where there is none.
+
+    The sampling stops one step short of ``root``. Its first sign change is ``root``'s own
+    crossing (the error within the tolerance but not yet at zero) unless the error turns back
+    between them: at ``root`` itself or at a sampled offset above the sign change. A sign
+    change that refines to no root within ``tol_rad`` is a step of the error (a beam
+    snapping down), and None. The rule keeps neighbouring nodes of the cone's edge on one
+    branch of the offsets (the low one, where the kick is widest; see
+    :data:`OFFSET_LOWEST_ROOT_STEP_V`).
+
+    Returns
+    -------
+    ((offset_v, error_rad) or None, evaluations)
+    """
+    step = OFFSET_LOWEST_ROOT_STEP_V
+    grid: list[float] = []
+    while scanned[0] + (len(grid) + 1) * step <= root[0] - step:
+        grid.append(scanned[0] + (len(grid) + 1) * step)
+    previous = scanned
+    evaluations = 0
+    for n, v in enumerate(grid):
+        e = error_of_offset(v)
+        evaluations += 1
+        if previous[1] * e < 0.0 and abs(previous[1] - e) < math.pi:
+            turned = e * root[1] < 0.0
+            for w in grid[n + 1:] if not turned else ():
+                evaluations += 1
+                if e * error_of_offset(w) < 0.0:
+                    turned = True
+                    break
+            if not turned:
+                return None, evaluations
+            points = [previous, (v, e)]
+            best = min(points, key=lambda p: abs(p[1]))
+            best, evaluations = _refine(error_of_offset, points, previous, (v, e), best,
+                                        evaluations, tol_rad, refinements, bisections)
+            return (best if abs(best[1]) <= tol_rad else None), evaluations
+        previous = (v, e)
+    return None, evaluations
+
+
+def _scan_candidates(design: KickDesign) -> list[float]:
+    high = design.voltage_limit_v - design.low_v
+    return [v for v in OFFSET_SCAN_V if -design.low_v <= v <= high]
+
+
+def _offset_job(args: tuple[ParameterSet | None, KickDesign, float, float, float,
+                            OffsetSolution | None]) -> OffsetSolution:
+    """Search the offset of one state, or, given an earlier ``solution`` that ended within the
+    tolerance, check it for a lower zero crossing only: that is the path a new search takes
+    after reaching the same root, so the solution is kept as it is where there is none."""
+    params, design, intensity, x_sn, y_sn, solution = args
     bench = _bench(params)
     normal = normal_from_xy(x_sn, y_sn)
     beam = compensating_beam(design, upper_right=True)
-    high = design.voltage_limit_v - design.low_v
-    candidates = [v for v in OFFSET_SCAN_V if -design.low_v <= v <= high]
+    candidates = _scan_candidates(design)
 
     effects: dict[float, KickEffect] = {}
 
@@ -238,6 +326,19 @@ def _offset_job(
     def error(offset_v: float) -> float:
         return direction_error(effect(offset_v), design)
 
+    if solution is not None:
+        scanned = sorted({0.0, *candidates})
+        below = [v for v in scanned if v < solution.offset_v]
+        if (solution.offset_v in scanned or not below
+                or solution.offset_v - below[-1] < 2.0 * OFFSET_LOWEST_ROOT_STEP_V):
+            return solution  # a scanned offset, or a root with no step of room below it
+        lower, extra = lowest_crossing(error, (below[-1], error(below[-1])),
+                                       (solution.offset_v, solution.direction_error_rad))
+        if lower is None:
+            return solution
+        return dataclasses.replace(solution, offset_v=lower[0], direction_error_rad=lower[1],
+                                   width_rad=effect(lower[0]).width_rad,
+                                   evaluations=solution.evaluations + extra)
     error_at_zero = error(0.0)
     offset_v, residual, evaluations = find_offset(error, candidates)
     return OffsetSolution(x_sn, y_sn, beam, offset_v, residual, error_at_zero,
@@ -278,9 +379,10 @@ def voltage_offsets(design: KickDesign | None = None, grid_step: float = TableSp
     grid state of that half.
 
     ``reuse`` holds solutions of an earlier search of the same design, parameters, intensity
-    and grid: those that ended within :data:`OFFSET_DIRECTION_TOL_RAD` are taken, not searched
-    again (:func:`find_offset` takes the same path for them today), and only the others are
-    searched. The caller vouches that they were searched for the same kick.
+    and grid: those that ended within :data:`OFFSET_DIRECTION_TOL_RAD` are not searched again
+    (:func:`find_offset` takes the same path for them today) but only checked for a lower zero
+    crossing (:func:`lowest_crossing`), and taken as they are where there is none; only the
+    others are searched. The caller vouches that they were searched for the same kick.
 
     Returns
     -------
@@ -290,8 +392,8 @@ def voltage_offsets(design: KickDesign | None = None, grid_step: float = TableSp
     nodes = upper_right_nodes(design, grid_step, cone_half_angle_rad)
     kept = {(round(s.x_sn, 9), round(s.y_sn, 9)): s for s in reuse
             if abs(s.direction_error_rad) <= OFFSET_DIRECTION_TOL_RAD}
-    jobs = [(params, design, intensity, x, y) for x, y in nodes
-            if (round(x, 9), round(y, 9)) not in kept]
+    jobs = [(params, design, intensity, x, y, kept.get((round(x, 9), round(y, 9))))
+            for x, y in nodes]
     searched = {}
     if workers > 1:
         with concurrent.futures.ProcessPoolExecutor(max_workers=workers) as pool:
@@ -305,5 +407,4 @@ def voltage_offsets(design: KickDesign | None = None, grid_step: float = TableSp
             searched[(round(solution.x_sn, 9), round(solution.y_sn, 9))] = solution
             if progress is not None:
                 progress()
-    return [kept.get(key) or searched[key]
-            for key in ((round(x, 9), round(y, 9)) for x, y in nodes)]
+    return [searched[(round(x, 9), round(y, 9))] for x, y in nodes]

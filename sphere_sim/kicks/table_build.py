@@ -353,3 +353,44 @@ def check_table(table: LookupTable, n_points: int = 8, seed: int = 0,
         if progress is not None:
             progress(len(errors), n_points)
     return max(errors), errors
+
+
+@dataclasses.dataclass(frozen=True)
+class OffGridDirection:
+    """The full kick (u_K = 1) from one off-grid check state: how far the continuous model's
+    kick strays from its action's nominal direction, and how far the table's from it (rad)."""
+
+    x_sn: float
+    y_sn: float
+    action: int
+    simulated_error_rad: float
+    table_error_rad: float
+    simulated_width_rad: float
+
+    @property
+    def between_rad(self) -> float:
+        return abs(math.remainder(self.simulated_error_rad - self.table_error_rad,
+                                  2.0 * math.pi))
+
+
+def check_directions(table: LookupTable, n_points: int = 8, seed: int = 0,
+                     progress: Callable[[int, int], object] | None = None
+                     ) -> list[OffGridDirection]:
+    """The full kick's direction at the states and actions of :func:`check_table` (the same
+    seed gives the same states), each with the offset the table's spec interpolates there:
+    between the nodes, where the offsets' nodes do not reach (docs/motion_primitives.md)."""
+    spec = spec_from_dict(table.meta['spec'])
+    params = table.parameters()
+    out: list[OffGridDirection] = []
+    for normal, action, _ in random_check_points(n_points, seed, spec.cone_half_angle_rad):
+        nominal = table.directions_rad[action]
+        predicted = table.kick(normal, action, 1.0).normal[:2] - normal[:2]
+        simulated = direct_kick(spec, params, normal, action, 1.0).normal[:2] - normal[:2]
+        out.append(OffGridDirection(
+            float(normal[0]), float(normal[1]), action,
+            math.remainder(math.atan2(simulated[1], simulated[0]) - nominal, 2.0 * math.pi),
+            math.remainder(math.atan2(predicted[1], predicted[0]) - nominal, 2.0 * math.pi),
+            float(np.hypot(*simulated))))
+        if progress is not None:
+            progress(len(out), n_points)
+    return out

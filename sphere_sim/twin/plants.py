@@ -34,8 +34,8 @@ LIVE_ERROR_BOUND_RAD = 0.1 * NOISE_STUDY_STD_RAD
 # A decoded programme matches a kick of the design if its edges agree to this (a message
 # carries times in whole nanoseconds) and its voltages to this. A sender's voltage offset
 # (§4.1) follows the normal it measured, the plant's the normal it holds: where the shipped
-# offsets are steepest (118 V per unit of x_sn between neighbouring nodes) the tolerance admits
-# senders 2.1 mrad apart, and more elsewhere.
+# offsets are steepest (99.5 V per unit of x_sn between neighbouring nodes) the tolerance admits
+# senders 2.5 mrad apart, and more elsewhere.
 DECODE_TIME_TOL_S = 1e-8
 DECODE_VOLTAGE_TOL_V = 0.25
 # Times built from sums of periods differ from products in the last bits; events this close

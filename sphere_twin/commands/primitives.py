@@ -61,7 +61,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     offsets.add_argument('--reuse', type=Path, default=None,
                          help='an earlier offsets JSON of the same design, parameters and '
                               'grid: its states that ended within the direction tolerance are '
-                              'taken, the others searched again')
+                              'taken unless a lower zero crossing lies below them, the others '
+                              'searched again')
     for p in (width, offsets):
         add_params_option(p)
         p.add_argument('--design', default=DEFAULT_DESIGN,
@@ -130,7 +131,8 @@ def run_offsets(args: argparse.Namespace) -> int:
           f'max {after.max():.2f} deg over {len(solutions)} states')
     if args.reuse is not None:
         kept = sum(s in reuse for s in solutions)
-        print(f'{kept} states taken from {args.reuse}, {len(solutions) - kept} searched')
+        print(f'{kept} states taken from {args.reuse}, {len(solutions) - kept} searched '
+              f'(or moved to a lower zero crossing)')
     return 0
 
 

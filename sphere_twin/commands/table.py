@@ -14,7 +14,7 @@ from tqdm import tqdm
 from sphere_sim.kicks.design import KickDesign
 from sphere_sim.kicks.lookup_table import DEFAULT_TABLE_PATH, LookupTable, TableSpec
 from sphere_sim.kicks.offset_lookup import OffsetLookup
-from sphere_sim.kicks.table_build import build_table, check_table
+from sphere_sim.kicks.table_build import build_table, check_directions, check_table
 from sphere_twin.commands.optimize import DEFAULT_OUTPUT as DEFAULT_DESIGN
 from sphere_twin.commands.options import (
     GRID_STEP,
@@ -127,4 +127,14 @@ def run_check(args: argparse.Namespace) -> int:
           f'95th percentile {math.degrees(float(np.percentile(errors, 95))):.4f} deg')
     print(f'max interpolation error: {math.degrees(worst):.4f} deg over {args.points} points')
     print_direction_errors(table)
+    with tqdm(total=args.points, desc='full kicks', unit='kick') as bar:
+        full = check_directions(table, args.points, args.seed,
+                                progress=lambda done, total: bar.update())
+    strays = np.degrees([abs(d.simulated_error_rad) for d in full])
+    worst_state = full[int(np.argmax(strays))]
+    print(f'full kick direction error at the {len(full)} off-grid states: median '
+          f'{np.median(strays):.2f} deg, max {strays.max():.2f} deg (at ({worst_state.x_sn:.3f}, '
+          f'{worst_state.y_sn:.3f}), action {worst_state.action}, '
+          f'{math.degrees(worst_state.simulated_width_rad):.3f} deg wide); the table against '
+          f'it: max {math.degrees(max(d.between_rad for d in full)):.2f} deg')
     return 0
