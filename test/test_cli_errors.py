@@ -164,3 +164,20 @@ def test_the_case_table_covers_every_subcommand_that_reads_input():
             'validate', 'pullin', 'capacitance', 'optimize-kick', 'calibrate'} <= covered
     assert len(CASES) >= 25
     json.dumps([case.values[0] for case in CASES])  # plain argv lists, as a user types them
+
+
+def test_the_evaluation_note_names_a_shipped_table_by_its_path_in_the_checkout(tmp_path,
+                                                                              monkeypatch):
+    """bench/results/evaluation.json's note names the tables it ran on; from a checkout that
+    is the path in it, not the machine's absolute one."""
+    from pathlib import Path
+
+    from sphere_sim.kicks.lookup_table import DEFAULT_TABLE_PATH
+    from sphere_twin.commands.evaluate import shown_path
+
+    root = Path(__file__).resolve().parents[1]
+    monkeypatch.chdir(root)
+    assert shown_path(DEFAULT_TABLE_PATH) == DEFAULT_TABLE_PATH.resolve().relative_to(root)
+    assert not shown_path(DEFAULT_TABLE_PATH).is_absolute()
+    monkeypatch.chdir(tmp_path)  # outside the checkout: as given
+    assert shown_path(DEFAULT_TABLE_PATH) == DEFAULT_TABLE_PATH

@@ -90,7 +90,7 @@ def load_table(path: Path | None) -> tuple[LookupTable, str]:
     from sphere_sim.kicks.lookup_table import DEFAULT_TABLE_PATH, LookupTable
 
     path = DEFAULT_TABLE_PATH if path is None else path
-    return LookupTable.load_current(path), f'table {path}'
+    return LookupTable.load_current(path), f'table {shown_path(path)}'
 
 
 def load_eight_directions(table: LookupTable, axis_path: Path) -> tuple[CombinedKickPlant, str]:
@@ -98,7 +98,16 @@ def load_eight_directions(table: LookupTable, axis_path: Path) -> tuple[Combined
     from sphere_sim.kicks.lookup_table import CombinedKickPlant, LookupTable
 
     axis = LookupTable.load_current(axis_path)
-    return CombinedKickPlant([table, axis]), f'eight directions: {axis_path} added'
+    return CombinedKickPlant([table, axis]), f'eight directions: {shown_path(axis_path)} added'
+
+
+def shown_path(path: Path) -> Path:
+    """``path`` as the note shows it: relative to the working directory where it lies below
+    it (a shipped table, from a checkout), else as given."""
+    try:
+        return path.resolve().relative_to(Path.cwd().resolve())
+    except ValueError:
+        return path
 
 
 def run(args: argparse.Namespace) -> int:
