@@ -131,3 +131,45 @@ def test_the_fit_of_one_threshold_recovers_the_stiffness_that_made_it(calibrated
     assert estimate.contains(device.get(K_Z))
     assert not estimate.contains(calibrated.get(K_Z))
     assert abs(result.residuals[0]) < 1.0
+
+
+def test_identify_thresholds_prints_each_parameters_status_and_what_it_left_out(
+        tmp_path, monkeypatch, capsys):
+    """The command's wiring, the fit replaced by a known answer: the brackets of the bag are
+    read, a one-sided one is said to be left out, and each parameter is printed with its
+    interval and status, an undetermined one with its range."""
+    from pathlib import Path
+
+    import sphere_sim.fitting.threshold_fit as threshold_fit
+    import sphere_twin.protocol_bag as protocol_bag
+    from sphere_sim.fitting.profile_fit import ProfileFit
+    from sphere_twin import cli
+
+    brackets = (ProbeBracket(BEAM, WIDTH_S, 44.0, 44.2, 8, LEVEL),
+                ProbeBracket((1, 2), WIDTH_S, None, 70.0, 8, LEVEL))
+    monkeypatch.setattr(protocol_bag, 'read_protocol',
+                        lambda bag: protocol_bag.ProtocolResults(brackets, (), 9.4e-4))
+    seen = {}
+
+    def known_answer(params, fits, observations, max_evaluations, **kwargs):
+        seen['observations'], seen['limit'] = observations, max_evaluations
+        estimates = (threshold_fit.ThresholdEstimate(fits[0].path, 34.3, 34.1, 34.6, fits[0].low,
+                                                     fits[0].high, True, 'narrow'),
+                     threshold_fit.ThresholdEstimate(fits[1].path, 5e-9, 2.5e-9, 1e-8,
+                                                     fits[1].low, fits[1].high, False,
+                                                     'its profile reaches a bound of the range'))
+        profile = ProfileFit(np.zeros(2), 0.5, (), 12, False, False)
+        return threshold_fit.ThresholdFitResult(estimates, 0.5, np.array([0.7]),
+                                                np.array([44.14]), 12, profile)
+
+    monkeypatch.setattr(threshold_fit, 'fit_thresholds', known_answer)
+    bag = Path(__file__).resolve().parents[1] / 'bags' / 'synthetic_device'
+    status = cli.main(['identify', str(bag), '--thresholds', '--params', 'calibrated',
+                       '--fit', K_Z, DAMPING, '--max-evaluations', '7'])
+    out = capsys.readouterr().out
+    assert status == 0
+    assert seen['limit'] == 7 and [o.beams for o in seen['observations']] == [BEAM]
+    assert 'left out beams 1+2, 5 ms' in out
+    assert 'beam 3, 5 ms: recorded 44.00-44.20 V, model 44.14 V (+0.70 sd)' in out
+    assert f'{K_Z}: 34.3, 95 % profile interval [34.1, 34.6]' in out and ': determined' in out
+    assert f'{DAMPING}: 5e-09' in out and 'undetermined (its profile reaches a bound' in out
