@@ -13,9 +13,10 @@ Unlike a kick's landing, which moves in steps as the beams' parameters change, a
 smoothly with them (docs/identification.md, "An experiment protocol"); its misfit has only the
 bisection's own resolution as steps (:data:`MODEL_RESOLUTION_V`).
 
-Cost, measured on one core (`calibrated` and paper_b, beam 3 at 5 ms from its recorded rest):
-the rest state 0.2 s, one pulse 0.05 s (not pulled in) to 0.1 s (pulled in); a threshold,
-searched from the recorded bracket to :data:`MODEL_RESOLUTION_V`, 7 to 9 pulses: 0.6 to 1.0 s.
+Cost, measured on one core (`calibrated` and paper_b's twelve brackets, each from its recorded
+rest): the rest state 0.2 s, one pulse 0.05 s (not pulled in) to 0.1 s (pulled in); a threshold
+searched from its recorded bracket to :data:`MODEL_RESOLUTION_V`, 0.5 to 0.8 s at the device's
+parameters and 1.0 to 1.3 s where the model's threshold lies one to three volts off.
 """
 
 from __future__ import annotations
