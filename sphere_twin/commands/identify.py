@@ -190,6 +190,9 @@ def run_thresholds(args: argparse.Namespace, bags: Sequence[Path]) -> int:
     print(f'{result.evaluations} evaluations in {wall_s:.0f} s; sum of squares {result.chi2:.2f} '
           f'over {len(observations)} thresholds'
           f'{" (stopped by the cost limit)" if result.profile.cost_limited else ""}')
+    if result.profile.lower_found:
+        print('a profile went lower than the optimum the search found: the intervals are read '
+              'about a point that is not the lowest (raise --max-evaluations)')
     for obs, model_v, r in zip(observations, result.model_thresholds_v, result.residuals,
                                strict=True):
         print(f'  {obs.label}: recorded {obs.low_v:.2f}-{obs.high_v:.2f} V, model '
