@@ -381,6 +381,10 @@ class ProbeBracket:
     not_pulled_in_v: float | None  # highest amplitude that did not pull in
     pulled_in_v: float | None  # lowest that did
     probes: int
+    # Where the sphere rested before the bracket's end probes (the unit mean of the resting
+    # normals before each, one if only one side was seen): a pulled-in probe moves it by some
+    # 2e-3 rad, so a search drifts and a model of the threshold must start from here.
+    normal_before: tuple[float, float, float] | None = None
 
     @property
     def label(self) -> str:
@@ -397,7 +401,8 @@ def probe_brackets(kicks: Iterable[KickObservation],
     """Group the recorded probes by step (beams and width) and read each step's bracket from
     the resting normals around its probes (:func:`detection_threshold_rad` with the recording's
     noise). Kicks and ramps are not probes and are passed over."""
-    seen: dict[tuple[tuple[int, ...], float], list[tuple[float, bool]]] = {}
+    seen: dict[tuple[tuple[int, ...], float],
+               list[tuple[float, bool, NDArray[np.float64]]]] = {}
     for kick in kicks:
         probe = probe_of(kick.times_s, kick.voltages_v)
         if probe is None:
@@ -406,13 +411,18 @@ def probe_brackets(kicks: Iterable[KickObservation],
                                             kick.samples_after, probe.pulses)
         moved = moved_rad(kick.normal_before, kick.normal_after)
         seen.setdefault((probe.beams, probe.width_s), []).append(
-            (probe.amplitude_v, moved > threshold))
+            (probe.amplitude_v, moved > threshold, np.asarray(kick.normal_before, dtype=float)))
     out = []
     for (beams, width), looks in seen.items():
-        below = [v for v, pulled in looks if not pulled]
-        above = [v for v, pulled in looks if pulled]
-        out.append(ProbeBracket(beams, width, max(below) if below else None,
-                                min(above) if above else None, len(looks)))
+        below = max((look for look in looks if not look[1]), key=lambda look: look[0],
+                    default=None)
+        above = min((look for look in looks if look[1]), key=lambda look: look[0],
+                    default=None)
+        ends = [look[2] for look in (below, above) if look is not None]
+        normal = _unit_mean(np.array(ends))
+        out.append(ProbeBracket(beams, width, below[0] if below else None,
+                                above[0] if above else None, len(looks),
+                                (float(normal[0]), float(normal[1]), float(normal[2]))))
     return out
 
 

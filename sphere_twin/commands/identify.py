@@ -41,6 +41,10 @@ if TYPE_CHECKING:
     from sphere_sim.model.parameters import ParameterSet
 
 TRUTH_FILE = 'truth.yaml'
+# --max-evaluations' defaults: per optimiser run of the kicks' fit; the threshold fit's cost
+# limit (sphere_sim.fitting.threshold_fit.MAX_EVALUATIONS, not imported at parse time).
+KICK_EVALUATIONS = 30
+THRESHOLD_EVALUATIONS = 300
 # Wall seconds between two redraws of the progress bar while a batch of kicks runs: the first
 # batch (the start and a step per fitted parameter) takes minutes before the count first moves.
 BAR_REDRAW_S = 5.0
@@ -69,9 +73,17 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser.add_argument('--workers', type=positive_int, default=2, help='local processes')
     parser.add_argument('--scheduler', default=None,
                         help='Dask scheduler address, e.g. tcp://host:8786')
-    parser.add_argument('--max-evaluations', type=positive_int, default=30,
+    parser.add_argument('--max-evaluations', type=positive_int, default=None,
                         help="most evaluations of the residuals by the optimiser (each one "
-                             "simulates every kick; a Jacobian's columns come on top)")
+                             "simulates every kick; a Jacobian's columns come on top; default "
+                             f"{KICK_EVALUATIONS}); with --thresholds the cost limit of the "
+                             "whole fit, starts and profiles together (default "
+                             f"{THRESHOLD_EVALUATIONS})")
+    parser.add_argument('--thresholds', action='store_true',
+                        help='fit the recorded thresholds of the experiment protocol (sphere-twin '
+                             'experiment) instead of the kicks: a multi-start over the declared '
+                             'ranges and profile-likelihood intervals, on one process; prints '
+                             'the fit and writes nothing')
     parser.set_defaults(func=run)
 
 
@@ -93,6 +105,8 @@ def run(args: argparse.Namespace) -> int:
 
     bags = [locate_bag(b) for b in args.bags]
     base = args.params
+    if args.thresholds:
+        return run_thresholds(args, [b.directory for b in bags])
     try:
         # The request first: a parameter that cannot be fitted is refused before any reading.
         fits = fit_parameters(base, args.fit)
@@ -121,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             result = identify(base, obs, fits, args.workers, args.scheduler,
                               checkpoint=checkpoint, progress=progress,
-                              max_nfev=args.max_evaluations)
+                              max_nfev=args.max_evaluations or KICK_EVALUATIONS)
         except IdentificationError as exc:
             raise CommandError(str(exc)) from None
     wall_s = time.perf_counter() - started
@@ -140,6 +154,59 @@ def run(args: argparse.Namespace) -> int:
     truth_path = bags[0].directory / TRUTH_FILE
     if truth_path.exists():
         report_truth(result, load_parameter_set(str(truth_path.resolve())), fitted)
+    return 0
+
+
+def run_thresholds(args: argparse.Namespace, bags: Sequence[Path]) -> int:
+    """``--thresholds``: the protocol's brackets of every bag, fitted with profile intervals."""
+    from sphere_sim.fitting.identification import fit_parameters
+    from sphere_sim.fitting.observations import IdentificationError
+    from sphere_sim.fitting.threshold_fit import fit_thresholds
+    from sphere_sim.fitting.thresholds import ThresholdError, observations_of
+    from sphere_sim.model.parameters import load_parameter_set
+    from sphere_twin.protocol_bag import read_protocol
+
+    base = args.params
+    try:
+        fits = fit_parameters(base, args.fit)
+    except IdentificationError as exc:
+        raise CommandError(str(exc)) from None
+    observations = []
+    for bag in bags:
+        say(f'reading the protocol of {bag} ...')
+        used, left = observations_of(read_protocol(bag).brackets)
+        observations += used
+        for bracket in left:
+            print(f'left out {bracket.label}: the bracket has a side never seen')
+    limit = args.max_evaluations or THRESHOLD_EVALUATIONS
+    print(f'{len(observations)} thresholds; fitting {", ".join(f.path for f in fits)} '
+          f'(cost limit {limit} evaluations, each every threshold, some 0.6-1 s apiece)')
+    started = time.perf_counter()
+    try:
+        result = fit_thresholds(base, fits, observations, max_evaluations=limit)
+    except ThresholdError as exc:
+        raise CommandError(str(exc)) from None
+    wall_s = time.perf_counter() - started
+    print(f'{result.evaluations} evaluations in {wall_s:.0f} s; sum of squares {result.chi2:.2f} '
+          f'over {len(observations)} thresholds'
+          f'{" (stopped by the cost limit)" if result.profile.cost_limited else ""}')
+    if result.profile.lower_found:
+        print('a profile went lower than the optimum the search found: the intervals are read '
+              'about a point that is not the lowest (raise --max-evaluations)')
+    for obs, model_v, r in zip(observations, result.model_thresholds_v, result.residuals,
+                               strict=True):
+        print(f'  {obs.label}: recorded {obs.low_v:.2f}-{obs.high_v:.2f} V, model '
+              f'{model_v:.2f} V ({r:+.2f} sd)')
+    truth_path = bags[0] / TRUTH_FILE
+    truth = load_parameter_set(str(truth_path.resolve())) if truth_path.exists() else None
+    for e in result.estimates:
+        status = 'determined' if e.determined else 'undetermined'
+        line = (f'{e.path}: {e.value:.4g}, 95 % profile interval [{e.low:.4g}, {e.high:.4g}] '
+                f'in the range [{e.range_low:.4g}, {e.range_high:.4g}]: {status} ({e.note})')
+        if truth is not None:
+            true = truth.get(e.path)
+            line += f'; truth {true:.4g}, {"inside" if e.contains(true) else "OUTSIDE"}'
+        print(line)
     return 0
 
 

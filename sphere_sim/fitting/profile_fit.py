@@ -1,0 +1,287 @@
+"""A global search and profile-likelihood intervals for a misfit given as residuals on the unit
+cube (each parameter's scaled coordinate, [0, 1] over its declared range).
+
+The global search is a multi-start: a Latin hypercube over the whole cube, local least squares
+from its lowest points, the lowest end kept. A descent by differences stops on whatever side of
+a step it starts on; starts spread over the declared ranges see the basins a single start
+misses (docs/identification.md, "On the paper's device").
+
+The interval of each parameter is read from its profile: the parameter is stepped away from
+the optimum, the others re-minimised at each step (from the neighbouring step's optimum), and
+the 95 % interval ends where the profile's sum of squares has risen by :data:`CHI2_95` over the
+minimum. Unlike the local slope's interval, a profile follows a curved or flattening valley and
+reports where the misfit actually rises. A parameter whose interval reaches a bound of its range,
+or spans more than :data:`DETERMINED_SHARE` of it, is *undetermined*: the experiments do not
+pin it, and the range is what is known.
+
+Pure numerics, no model: the caller's residual function does the simulating and bears the cost,
+which :class:`CostLimitError` bounds (``max_evaluations`` distinct points).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+Residuals = Callable[[NDArray[np.float64]], NDArray[np.float64]]
+
+# The 95 % point of chi-square with one degree of freedom: a profile's sum of squares rises by
+# this much at the ends of a 95 % interval (Wilks).
+CHI2_95 = 3.841458820694124
+# A parameter is determined when its 95 % interval spans at most this share of its scaled range
+# (and reaches neither bound): issue 48's criterion.
+DETERMINED_SHARE = 0.1
+# Forward-difference step of the local least squares (scaled coordinates): large enough that a
+# misfit quantised by its own simulations (a threshold bisected to 0.01 V, say) reads a slope
+# rather than a step, small enough to stay inside a valley a few hundredths wide.
+FD_STEP_UNIT = 0.01
+# The local least squares stops when a step moves the parameters by less than XTOL (below the
+# narrowest interval of interest) or the cost by less than FTOL of itself.
+XTOL = 1e-4
+FTOL = 1e-6
+MAX_DESCENT_EVALUATIONS = 40
+# The profile's first step is this share of the 95 % half-width the local curvature predicts
+# (so that a quadratic misfit is bracketed by the second step), kept within [MIN_STEP, MAX_STEP];
+# each further step is PROFILE_GROWTH times the last, at most MAX_PROFILE_STEPS per side.
+FIRST_STEP_SHARE = 0.7
+MIN_STEP = 1e-3
+MAX_STEP = 0.25
+PROFILE_GROWTH = 2.0
+MAX_PROFILE_STEPS = 12
+# Ridge added to J^T J before inverting it for the first step: a direction the residuals do not
+# see gets a large step (clipped to MAX_STEP) instead of none.
+RIDGE = 1e-6
+# A profile point lower than the optimum by this much means the optimum was not the global one.
+LOWER_BY = 0.5
+
+
+class CostLimitError(RuntimeError):
+    """The residual function was asked for more distinct points than allowed."""
+
+
+class _Counted:
+    """The caller's residuals, each distinct point evaluated once, at most ``limit`` points."""
+
+    def __init__(self, fun: Residuals, limit: int) -> None:
+        self.fun, self.limit = fun, limit
+        self.cache: dict[tuple[float, ...], NDArray[np.float64]] = {}
+
+    @property
+    def evaluations(self) -> int:
+        return len(self.cache)
+
+    def __call__(self, u: ArrayLike) -> NDArray[np.float64]:
+        key = tuple(float(v) for v in np.asarray(u, dtype=float))
+        if key not in self.cache:
+            if len(self.cache) >= self.limit:
+                raise CostLimitError(f'the cost limit of {self.limit} evaluations is reached')
+            self.cache[key] = np.asarray(self.fun(np.array(key)), dtype=float)
+        return self.cache[key]
+
+    def chi2(self, u: ArrayLike) -> float:
+        return float(np.sum(self(u) ** 2))
+
+
+@dataclasses.dataclass(frozen=True)
+class ProfileInterval:
+    """The 95 % profile interval of one parameter (scaled coordinates)."""
+
+    index: int
+    low_u: float
+    high_u: float
+    low_at_bound: bool  # the profile reached the range's bottom without rising by CHI2_95
+    high_at_bound: bool
+    complete: bool  # False when the cost limit stopped the profile
+    points: tuple[tuple[float, float], ...]  # (u, profile sum of squares), as walked
+
+    @property
+    def width_u(self) -> float:
+        return self.high_u - self.low_u
+
+    @property
+    def determined(self) -> bool:
+        return (self.complete and not self.low_at_bound and not self.high_at_bound
+                and self.width_u <= DETERMINED_SHARE)
+
+
+@dataclasses.dataclass(frozen=True)
+class ProfileFit:
+    u: NDArray[np.float64]  # the lowest point found
+    chi2: float
+    intervals: tuple[ProfileInterval, ...]
+    evaluations: int
+    cost_limited: bool  # the limit stopped the search or a profile
+    lower_found: bool  # a profile went lower than the optimum (the search missed a basin)
+
+
+def local_minimum(fun: Callable[[NDArray[np.float64]], NDArray[np.float64]], u0: ArrayLike,
+                  free: Sequence[int]) -> tuple[NDArray[np.float64], float,
+                                                NDArray[np.float64]]:
+    """Bounded least squares (trust-region reflective) over the ``free`` coordinates from
+    ``u0``, the others held. Returns (u, sum of squares, Jacobian of the free columns)."""
+    from scipy.optimize import least_squares
+
+    base = np.asarray(u0, dtype=float).copy()
+    free = list(free)
+
+    def full(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        v = base.copy()
+        v[free] = x
+        return v
+
+    if not free:
+        r = fun(base)
+        return base, float(np.sum(r ** 2)), np.zeros((r.size, 0))
+    x0 = np.clip(base[free], 1e-6, 1.0 - 1e-6)
+    sol = least_squares(lambda x: fun(full(x)), x0, jac='2-point', diff_step=FD_STEP_UNIT,
+                        bounds=(0.0, 1.0), method='trf', x_scale=1.0, xtol=XTOL, ftol=FTOL,
+                        max_nfev=MAX_DESCENT_EVALUATIONS)
+    u = full(sol.x)
+    return u, float(np.sum(fun(u) ** 2)), np.asarray(sol.jac, dtype=float)
+
+
+def latin_starts(dim: int, starts: int, seed: int) -> list[NDArray[np.float64]]:
+    from scipy.stats import qmc
+
+    return list(qmc.LatinHypercube(d=dim, seed=seed).random(starts))
+
+
+def multistart(fun: _Counted, dim: int, starts: int, descents: int, seed: int,
+               extra: Sequence[ArrayLike] = ()) -> tuple[NDArray[np.float64], float]:
+    """The lowest of local descents from the ``descents`` lowest of ``starts`` Latin-hypercube
+    points over the cube (and ``extra`` points, say the start values)."""
+    points = [np.asarray(p, dtype=float) for p in extra] + latin_starts(dim, starts, seed)
+    chis = [fun.chi2(p) for p in points]
+    best_u, best_chi = points[int(np.argmin(chis))], float(min(chis))
+    for i in np.argsort(chis)[:descents]:
+        u, chi, _ = local_minimum(fun, points[int(i)], range(dim))
+        if chi < best_chi:
+            best_u, best_chi = u, chi
+    return best_u, best_chi
+
+
+def first_steps(jac: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Each parameter's first profile step from the local curvature (J^T J, ridged)."""
+    p = jac.shape[1]
+    cov = np.linalg.inv(jac.T @ jac + RIDGE * np.eye(p))
+    half = math.sqrt(CHI2_95) * np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    return np.clip(FIRST_STEP_SHARE * half, MIN_STEP, MAX_STEP)
+
+
+def _crossing(t0: float, rise0: float, t1: float, rise1: float) -> float:
+    """Where the rise reaches CHI2_95 between two profile steps, by linear interpolation of
+    its square root (exact for a quadratic misfit, whose root rise is linear in the step)."""
+    s0, s1, target = math.sqrt(max(rise0, 0.0)), math.sqrt(max(rise1, 0.0)), math.sqrt(CHI2_95)
+    if s1 <= s0:
+        return t1
+    return t0 + (target - s0) * (t1 - t0) / (s1 - s0)
+
+
+def profile(fun: _Counted, u_opt: NDArray[np.float64], chi_opt: float, j: int,
+            first_step: float) -> ProfileInterval:
+    """The 95 % interval of parameter ``j``: step it away from ``u_opt`` either way, the others
+    re-minimised from the last step's optimum, until the sum of squares rises by
+    :data:`CHI2_95` (interpolated, then one step taken there and interpolated again) or the
+    range ends."""
+    dim = u_opt.size
+    others = [k for k in range(dim) if k != j]
+    ends, bounded, points, complete = [], [], [], True
+    for side in (-1.0, 1.0):
+        t_prev, rise_prev, u_prev = 0.0, 0.0, u_opt.copy()
+        t, end, at_bound = first_step, None, False
+        try:
+            for _ in range(MAX_PROFILE_STEPS):
+                target = min(max(u_opt[j] + side * t, 0.0), 1.0)
+                t = abs(target - u_opt[j])
+                start = u_prev.copy()
+                start[j] = target
+                u, chi, _ = local_minimum(fun, start, others)
+                points.append((target, chi))
+                rise = chi - chi_opt
+                if rise >= CHI2_95:
+                    t_cross = _crossing(t_prev, rise_prev, t, rise)
+                    # One more step where the interpolation puts the crossing, and the bracket
+                    # it falls in interpolated again: exact for a quadratic, close for a valley
+                    # that bends.
+                    at = u_prev.copy()
+                    at[j] = u_opt[j] + side * t_cross
+                    _, chi_c, _ = local_minimum(fun, at, others)
+                    points.append((float(at[j]), chi_c))
+                    rise_c = chi_c - chi_opt
+                    if rise_c >= CHI2_95:
+                        t_cross = _crossing(t_prev, rise_prev, t_cross, rise_c)
+                    else:
+                        t_cross = _crossing(t_cross, rise_c, t, rise)
+                    end = u_opt[j] + side * t_cross
+                    break
+                if target in (0.0, 1.0):
+                    end, at_bound = target, True
+                    break
+                t_prev, rise_prev, u_prev = t, rise, u
+                t *= PROFILE_GROWTH
+        except CostLimitError:
+            complete = False
+        if end is None:  # out of steps or of budget: as far as it got, and not determined
+            end = min(max(u_opt[j] + side * t_prev, 0.0), 1.0)
+            complete = False
+        ends.append(float(end))
+        bounded.append(at_bound)
+    return ProfileInterval(j, ends[0], ends[1], bounded[0], bounded[1], complete,
+                           tuple(sorted(points)))
+
+
+def fit_profiles(residuals: Residuals, dim: int, start: ArrayLike | None = None,
+                 starts: int = 8, descents: int = 2, seed: int = 0,
+                 max_evaluations: int = 400) -> ProfileFit:
+    """Global minimum of ``sum(residuals(u)**2)`` over the unit cube by multi-start, then each
+    coordinate's 95 % profile interval.
+
+    Parameters
+    ----------
+    residuals : callable
+        u (shape (dim,), in [0, 1]) -> residual vector, each in units of its standard deviation.
+    start : array, optional
+        A point the search also starts from (the start values).
+    starts, descents, seed
+        Latin-hypercube points over the cube, and descents from the lowest of them.
+    max_evaluations : int
+        The cost limit: distinct points evaluated, search and profiles together. A profile the
+        limit stops is reported incomplete (so undetermined), the search's best point so far
+        is kept.
+    """
+    fun = _Counted(residuals, max_evaluations)
+    extra = [] if start is None else [np.asarray(start, dtype=float)]
+    try:
+        u_opt, chi_opt = multistart(fun, dim, starts, descents, seed, extra)
+    except CostLimitError:
+        best = min(fun.cache, key=lambda k: float(np.sum(fun.cache[k] ** 2)))
+        u_opt, chi_opt = np.array(best), float(np.sum(fun.cache[best] ** 2))
+        return ProfileFit(u_opt, chi_opt, tuple(
+            ProfileInterval(j, 0.0, 1.0, True, True, False, ()) for j in range(dim)),
+            fun.evaluations, True, False)
+    try:
+        jac = _jacobian(fun, u_opt)
+    except CostLimitError:
+        jac = np.zeros((fun(u_opt).size, dim))
+    steps = first_steps(jac)
+    intervals = tuple(profile(fun, u_opt, chi_opt, j, float(steps[j])) for j in range(dim))
+    lowest = min(c for i in intervals for _, c in i.points) if any(
+        i.points for i in intervals) else chi_opt
+    return ProfileFit(u_opt, chi_opt, intervals, fun.evaluations,
+                      not all(i.complete for i in intervals), lowest < chi_opt - LOWER_BY)
+
+
+def _jacobian(fun: _Counted, u: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Forward differences of :data:`FD_STEP_UNIT` (backward at the range's top)."""
+    r0 = fun(u)
+    cols = []
+    for j in range(u.size):
+        h = FD_STEP_UNIT if u[j] + FD_STEP_UNIT <= 1.0 else -FD_STEP_UNIT
+        shifted = u.copy()
+        shifted[j] += h
+        cols.append((fun(shifted) - r0) / h)
+    return np.column_stack(cols)

@@ -1,0 +1,76 @@
+"""Profile-likelihood intervals and the multi-start (sphere_sim.fitting.profile_fit) on misfits
+whose answers are known in closed form."""
+
+import math
+
+import numpy as np
+import pytest
+
+from sphere_sim.fitting.profile_fit import (
+    CHI2_95,
+    DETERMINED_SHARE,
+    ProfileInterval,
+    fit_profiles,
+)
+
+
+def linear_residuals(matrix, centre):
+    matrix, centre = np.asarray(matrix, float), np.asarray(centre, float)
+    return lambda u: matrix @ (np.asarray(u, float) - centre)
+
+
+def test_the_profile_interval_of_a_quadratic_misfit_is_its_closed_form():
+    # Two correlated parameters: the profile's interval is sqrt(3.84 (H^-1)_jj) either side,
+    # wider than the conditional one, sqrt(3.84 / H_jj), that holding the other would give.
+    matrix = np.array([[40.0, 0.0], [25.0, 30.0], [3.0, -2.0]])
+    centre = np.array([0.4, 0.55])
+    fit = fit_profiles(linear_residuals(matrix, centre), 2, max_evaluations=400)
+    cov = np.linalg.inv(matrix.T @ matrix)
+    for j, interval in enumerate(fit.intervals):
+        half = math.sqrt(CHI2_95 * cov[j, j])
+        assert interval.low_u == pytest.approx(centre[j] - half, abs=1e-4)
+        assert interval.high_u == pytest.approx(centre[j] + half, abs=1e-4)
+        assert half > math.sqrt(CHI2_95 / (matrix.T @ matrix)[j, j])  # not the conditional one
+        assert interval.complete and not (interval.low_at_bound or interval.high_at_bound)
+    assert not fit.cost_limited and not fit.lower_found
+
+
+def test_a_direction_the_residuals_do_not_see_is_undetermined_with_its_whole_range():
+    matrix = np.array([[80.0, 0.0, 0.0], [50.0, 60.0, 0.0], [6.0, -4.0, 0.0]])
+    fit = fit_profiles(linear_residuals(matrix, [0.4, 0.55, 0.3]), 3, max_evaluations=600)
+    flat = fit.intervals[2]
+    assert (flat.low_u, flat.high_u) == (0.0, 1.0)
+    assert flat.low_at_bound and flat.high_at_bound and not flat.determined
+    # The two the residuals see stay determined: their intervals are a few hundredths wide.
+    assert all(i.determined for i in fit.intervals[:2])
+
+
+def test_a_wide_interval_is_undetermined_though_it_reaches_no_bound():
+    # A standard error such that the 95 % interval spans 1.5 times the determined share.
+    sd = 1.5 * DETERMINED_SHARE / (2 * math.sqrt(CHI2_95))
+    fit = fit_profiles(linear_residuals([[1.0 / sd]], [0.5]), 1, max_evaluations=200)
+    (interval,) = fit.intervals
+    assert interval.width_u == pytest.approx(1.5 * DETERMINED_SHARE, rel=1e-3)
+    assert not interval.determined and not interval.low_at_bound
+
+
+def test_the_multistart_finds_the_deeper_of_two_basins_a_descent_from_the_start_misses():
+    # A double well along u: the start sits in the shallow basin at 0.2, the deep one at 0.8.
+    def residuals(u):
+        x = float(u[0])
+        return np.array([30.0 * (x - 0.2) * (x - 0.8), 0.5 * (x - 0.8) / 0.1])
+
+    fit = fit_profiles(residuals, 1, start=[0.2], max_evaluations=300)
+    assert fit.u[0] == pytest.approx(0.8, abs=1e-3)
+
+
+def test_the_cost_limit_stops_a_profile_and_marks_it_undetermined():
+    matrix = np.array([[40.0, 0.0], [25.0, 30.0]])
+    fit = fit_profiles(linear_residuals(matrix, [0.4, 0.55]), 2, max_evaluations=40)
+    assert fit.evaluations <= 40 and fit.cost_limited
+    assert not all(i.determined for i in fit.intervals)
+
+
+def test_an_interval_at_a_bound_is_undetermined_however_narrow():
+    assert not ProfileInterval(0, 0.0, 0.02, True, False, True, ()).determined
+    assert ProfileInterval(0, 0.4, 0.42, False, False, True, ()).determined
