@@ -18,9 +18,9 @@ DEFAULT_RTOL = 1e-6
 LIVE_RTOL = 3e-4
 # The live twin's method, at LIVE_RTOL. The Rosenbrock W-method against the compiled Radau
 # (`fast`), over the ladder's 30 kicks against rtol 1e-9 (bench/results/fidelity.md): median
-# 2.0e-5 against 4.9e-6 rad, 95th percentile 2.1e-4 against 1.9e-4, max 2.3e-4 against 1.1e-3,
-# at 54 against 103 ms a kick; advanced sample by sample as the plant does, 55 against 105 ms.
-# Neither meets the live budget (p95 <= 1e-4 rad); the W-method meets its maximum (the sensor
+# 2.6e-5 against 4.9e-6 rad, 95th percentile 2.2e-4 against 1.7e-4, max 7.1e-4 against 1.1e-3,
+# at 54 against 104 ms a kick; advanced sample by sample as the plant does, 55 against 105 ms.
+# Neither meets the live budget (p95 <= 9.4e-5 rad); the W-method meets its maximum (the sensor
 # noise) where Radau does not, at half the cost. Its typical kick is less exact (4e-5 against
 # 2.5e-6 rad for the full kick from 5 deg, 1.1e-5 against 3e-6 from 35 deg), within a tenth of
 # the sensor noise. Studies, tables and fits keep `fast` (solve.DEFAULT_METHOD).
