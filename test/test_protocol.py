@@ -4,6 +4,7 @@ own pull-in threshold and tells two devices apart."""
 
 import numpy as np
 import pytest
+from physics_helpers import ground_contact_threshold_v
 
 from msg_defs.device import VOLTAGE_LIMIT_V
 from sphere_sim.fitting.protocol import (
@@ -111,27 +112,7 @@ COARSE_V = 1.0
 def direct_threshold_v(params, beam=BEAM, width_s=WIDTH_S, resolution_v=0.05):
     """The model's own single-beam threshold from level: a rear end on the ground during one
     pulse, bisected."""
-    from sphere_sim.integrate.solve import simulate
-    from sphere_sim.model.assembly import assemble
-    from sphere_sim.model.initial_state import rest_state
-    from sphere_sim.model.programme import Pulse, PulseProgramme
-    from sphere_sim.model.scene import load_scene
-
-    model = assemble(load_scene('rest'), params)
-    x0 = rest_state(model, (0.0, 0.0, 0.0))
-
-    def pulls_in(amplitude):
-        traj = simulate(model, x0, width_s, PulseProgramme((Pulse(beam, amplitude, 0.0,
-                                                                  width_s),)),
-                        sample_period_s=width_s / 200)
-        return min(model.ground_gaps(traj.x[:, i])[0][beam - 1]
-                   for i in range(traj.t.size)) <= 0.0
-
-    low, high = BRACKET_V
-    while high - low > resolution_v:
-        mid = 0.5 * (low + high)
-        low, high = (low, mid) if pulls_in(mid) else (mid, high)
-    return 0.5 * (low + high)
+    return ground_contact_threshold_v(params, beam, width_s, *BRACKET_V, resolution_v)
 
 
 @pytest.fixture(scope='module')

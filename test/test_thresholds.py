@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from physics_helpers import ground_contact_threshold_v
 
 from sphere_sim.fitting.observations import KickObservation
 from sphere_sim.fitting.protocol import ProbeBracket, probe_brackets, probe_programme
@@ -32,31 +33,6 @@ def calibrated():
     from sphere_sim.model.parameters import load_parameter_set
 
     return load_parameter_set('calibrated')
-
-
-def ground_contact_threshold_v(params, beam, width_s, low_v, high_v, resolution_v=0.02):
-    """Another rule for the same threshold: the beam's rear end reaches the ground plate
-    during the pulse (test_protocol's direct rule), bisected."""
-    from sphere_sim.integrate.solve import simulate
-    from sphere_sim.model.assembly import assemble
-    from sphere_sim.model.initial_state import rest_state
-    from sphere_sim.model.programme import Pulse, PulseProgramme
-    from sphere_sim.model.scene import load_scene
-
-    model = assemble(load_scene('rest'), params)
-    x0 = rest_state(model, (0.0, 0.0, 0.0))
-
-    def pulls_in(amplitude):
-        traj = simulate(model, x0, width_s, PulseProgramme((Pulse(beam, amplitude, 0.0,
-                                                                  width_s),)),
-                        sample_period_s=width_s / 200)
-        return min(model.ground_gaps(traj.x[:, i])[0][beam - 1]
-                   for i in range(traj.t.size)) <= 0.0
-
-    while high_v - low_v > resolution_v:
-        middle = 0.5 * (low_v + high_v)
-        low_v, high_v = (low_v, middle) if pulls_in(middle) else (middle, high_v)
-    return 0.5 * (low_v + high_v)
 
 
 def test_the_protocols_rule_finds_the_threshold_the_beam_touching_down_finds(calibrated):

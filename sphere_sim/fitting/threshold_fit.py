@@ -35,6 +35,9 @@ MAX_EVALUATIONS = 300
 
 @dataclasses.dataclass(frozen=True)
 class ThresholdEstimate:
+    """One fitted parameter: its value, its 95 % profile interval, its declared range, and
+    whether the thresholds determine it (``note`` says why not)."""
+
     path: str
     value: float
     low: float  # the 95 % profile interval (values, not scaled)
