@@ -235,3 +235,16 @@ def test_a_study_writes_into_the_new_directory_it_was_given(tmp_path, monkeypatc
     written = bench.run_regularisation_study(quick=True, out_dir=out, stream=io.StringIO())
     assert (out / 'regularisation.csv').read_text().count('\n') == len(written) + 1
     assert '| rtol 1e-07 | steps |' in (out / 'regularisation.md').read_text()
+
+
+def test_identify_thresholds_of_a_bag_without_the_protocol_says_so(tmp_path, monkeypatch,
+                                                                  capsys):
+    """A bag without a threshold search (the demo's) has nothing to fit: one error line naming
+    the bag and what would record one, status 2, after the line that says it read the bag."""
+    bag = REPO / 'bags' / 'example'
+    status, lines = _run(['identify', str(bag), '--thresholds'], tmp_path, monkeypatch, capsys)
+    assert status == 2
+    assert lines[-1] == (f'sphere-twin identify: error: {bag}: no threshold search of the '
+                         'experiment protocol with both sides seen (record one with sphere-twin '
+                         'experiment or sphere-twin synthetic record --protocol)')
+    assert all('error' not in line for line in lines[:-1])

@@ -178,6 +178,10 @@ def run_thresholds(args: argparse.Namespace, bags: Sequence[Path]) -> int:
         observations += used
         for bracket in left:
             print(f'left out {bracket.label}: the bracket has a side never seen')
+    if not observations:
+        raise CommandError(f'{", ".join(map(str, bags))}: no threshold search of the experiment '
+                           'protocol with both sides seen (record one with sphere-twin experiment '
+                           'or sphere-twin synthetic record --protocol)')
     limit = args.max_evaluations or THRESHOLD_EVALUATIONS
     print(f'{len(observations)} thresholds; fitting {", ".join(f.path for f in fits)} '
           f'(cost limit {limit} evaluations, each every threshold, some 0.6-1 s apiece)')
