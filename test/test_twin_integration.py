@@ -63,7 +63,9 @@ def test_lockstep_runs_with_the_same_seed_are_identical():
 
 def test_a_healthy_twin_reports_its_status_every_second(twin):
     twin.wait_for_normal()
-    twin.spin_until(lambda: len(twin.diagnostics) >= 2, timeout_s=5.0, what='two statuses')
+    # One at its first sample (a recording from the start then holds it), then one a second.
+    twin.spin_until(lambda: len(twin.diagnostics) >= 3, timeout_s=6.0,
+                    what='the first status and two more')
     assert twin.rejections == []
     status = twin.status()
     assert int(status['samples']) >= 1 and int(status['rejected']) == 0
