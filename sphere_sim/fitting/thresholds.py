@@ -35,6 +35,7 @@ from sphere_sim.fitting.identification import FitParameter, params_at
 from sphere_sim.fitting.protocol import (
     PROBE_SPACING_S,
     PULL_IN_STEP_RAD,
+    Bisection,
     ProbeBracket,
     moved_rad,
     probe_programme,
@@ -185,9 +186,13 @@ def _search(probe: _Probe, guess_v: tuple[float, float], resolution_v: float) ->
     while low > 0.0 and probe.pulls_in(low):  # it lies below: widen downwards
         low, high = max(low - step, 0.0), low
         step *= 2.0
-    while high - low > resolution_v:
-        middle = 0.5 * (low + high)
-        low, high = (low, middle) if probe.pulls_in(middle) else (middle, high)
+    # Then the protocol's own bisection, as the device's search runs it.
+    bisection = Bisection(low, high, resolution_v)
+    while (amplitude_v := bisection.next_amplitude()) is not None:
+        bisection.observe(probe.pulls_in(amplitude_v))
+    not_pulled_in_v, pulled_in_v = bisection.bracket
+    low = low if not_pulled_in_v is None else not_pulled_in_v
+    high = high if pulled_in_v is None else pulled_in_v
     return 0.5 * (low + high)
 
 

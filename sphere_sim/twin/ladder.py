@@ -25,7 +25,7 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import NDArray
 
-from sphere_sim.integrate.solve import simulate
+from sphere_sim.integrate.solve import DEFAULT_METHOD, simulate
 from sphere_sim.integrate.tolerances import LIVE_METHOD, LIVE_RTOL
 from sphere_sim.kicks.design import KICK_RELAXATION, cardan_of_normal
 from sphere_sim.kicks.discrete import NOISE_STUDY_STD_RAD
@@ -45,7 +45,7 @@ from sphere_sim.twin.plants import LIVE_ERROR_BOUND_RAD
 # the converged landing, bench/results/work_precision.md).
 REFERENCE_RTOL = 1e-9
 QUICK_REFERENCE_RTOL = 1e-7
-REFERENCE_METHOD = 'fast'  # the studies' method (bench/results/work_precision.md)
+REFERENCE_METHOD = DEFAULT_METHOD  # the studies' (bench/results/work_precision.md)
 # The live budget: a rung serves the live twin only within both (the sensor noise of the noise
 # study, 9.4e-4 rad, and a tenth of it).
 LIVE_P95_BUDGET_RAD = 0.1 * NOISE_STUDY_STD_RAD
