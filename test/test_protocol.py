@@ -41,6 +41,29 @@ def test_the_bisection_brackets_a_known_threshold_within_the_resolution(threshol
     assert len(search.history) <= 9  # log2(60 / 0.2) rounded up
 
 
+@pytest.mark.parametrize('threshold_v', [44.25, 47.123, 57.3])
+def test_the_default_searches_of_one_threshold_end_on_interleaved_grids(threshold_v):
+    """The four beams of a symmetric device share one threshold. Undithered, their searches
+    would end in one bracket (one quantisation draw counted four times); the default
+    protocol's end in four different brackets, each holding the threshold and no wider than
+    the resolution, whose common part is narrower than any one of them."""
+    singles = [step for step in DEFAULT_PROTOCOL.steps
+               if isinstance(step, ThresholdSearch) and len(step.beams) == 1
+               and step.width_s == 5e-3]
+    assert len(singles) == 4
+    brackets = []
+    for step in singles:
+        search = step.bisection()
+        while (amplitude := search.next_amplitude()) is not None:
+            search.observe(amplitude >= threshold_v)
+        below, above = search.bracket
+        assert below < threshold_v <= above and above - below <= step.resolution_v
+        brackets.append((below, above))
+    assert len({round(low, 9) for low, _ in brackets}) == 4
+    common = min(high for _, high in brackets) - max(low for low, _ in brackets)
+    assert 0.0 < common < 0.75 * min(high - low for low, high in brackets)
+
+
 def test_a_threshold_outside_the_bracket_leaves_that_side_unseen():
     assert run_bisection(90.0).bracket[1] is None
     assert run_bisection(10.0).bracket[0] is None

@@ -1,7 +1,7 @@
 """The model side of the protocol's thresholds (sphere_sim.fitting.thresholds): the threshold of
 one pulse by the protocol's rule agrees with an independent rule, moves the way the physics
 says with the parameters that set it, and a recorded bracket becomes a residual; the fit of a
-threshold recovers the parameter that made it (sphere_sim.fitting.threshold_fit)."""
+threshold recovers the parameter that made it (sphere_sim.fitting.joint_fit)."""
 
 import math
 
@@ -12,6 +12,7 @@ from physics_helpers import ground_contact_threshold_v
 from sphere_sim.fitting.observations import KickObservation
 from sphere_sim.fitting.protocol import ProbeBracket, probe_brackets, probe_programme
 from sphere_sim.fitting.thresholds import (
+    MODEL_ERROR_V,
     MODEL_RESOLUTION_V,
     ThresholdError,
     ThresholdObservation,
@@ -79,8 +80,9 @@ def test_a_bracket_becomes_a_residual_weighed_by_its_width():
     bracket = ProbeBracket(BEAM, WIDTH_S, 44.0, 44.2, 8, LEVEL)
     obs = ThresholdObservation.from_bracket(bracket)
     assert obs.middle_v == pytest.approx(44.1)
-    # A uniform 0.2 V wide and the model's own 0.01 V, in quadrature.
-    assert obs.std_v == pytest.approx(math.sqrt((0.2 ** 2 + MODEL_RESOLUTION_V ** 2) / 12))
+    # A uniform 0.2 V wide, the model's own 0.01 V and its error, in quadrature.
+    assert obs.std_v == pytest.approx(math.sqrt((0.2 ** 2 + MODEL_RESOLUTION_V ** 2) / 12
+                                                + MODEL_ERROR_V ** 2))
     one_sided = ProbeBracket(BEAM, WIDTH_S, None, 44.2, 3, LEVEL)
     with pytest.raises(ThresholdError, match='one side'):
         ThresholdObservation.from_bracket(one_sided)
@@ -93,59 +95,70 @@ def test_the_fit_of_one_threshold_recovers_the_stiffness_that_made_it(calibrated
     fit's profile interval holds the device's stiffness, is determined, and excludes the start
     set's."""
     from sphere_sim.fitting.identification import fit_parameters
-    from sphere_sim.fitting.threshold_fit import fit_thresholds
+    from sphere_sim.fitting.joint_fit import fit_jointly
 
     device = calibrated.replace(**{K_Z: 0.85 * calibrated.get(K_Z)})
     made = model_threshold_v(device, BEAM, WIDTH_S, LEVEL, (43.0, 46.0))
     low = math.floor(made / 0.2) * 0.2  # a bisection's grid
     obs = [ThresholdObservation(BEAM, WIDTH_S, low, low + 0.2, LEVEL)]
     (fit,) = fit_parameters(calibrated, [K_Z])
-    result = fit_thresholds(calibrated, [fit], obs, max_evaluations=60,
-                            starts_per_parameter=2, descents=1)
+    result = fit_jointly(calibrated, [fit], None, obs, max_evaluations=60,
+                         starts_per_parameter=2, descents=1)
     (estimate,) = result.estimates
     assert estimate.determined, estimate.note
     assert estimate.contains(device.get(K_Z))
     assert not estimate.contains(calibrated.get(K_Z))
-    assert abs(result.residuals[0]) < 1.0
+    assert abs(result.threshold_residuals[0]) < 1.0
 
 
-def test_identify_thresholds_prints_each_parameters_status_and_what_it_left_out(
+def test_identify_thresholds_prints_each_parameters_status_and_writes_the_fitted_file(
         tmp_path, monkeypatch, capsys):
     """The command's wiring, the fit replaced by a known answer: the brackets of the bag are
-    read, a one-sided one is said to be left out, and each parameter is printed with its
-    interval and status, an undetermined one with its range."""
+    read, a one-sided one is said to be left out, each parameter is printed with its interval
+    and status, an undetermined one with its range, and the fitted file loads as a parameter
+    set holding the fitted values."""
     from pathlib import Path
 
-    import sphere_sim.fitting.threshold_fit as threshold_fit
+    import sphere_sim.fitting.joint_fit as joint_fit
     import sphere_twin.protocol_bag as protocol_bag
+    from sphere_sim.fitting.observations import Observations
     from sphere_sim.fitting.profile_fit import ProfileFit
+    from sphere_sim.model.parameters import load_parameter_set
     from sphere_twin import cli
 
     brackets = (ProbeBracket(BEAM, WIDTH_S, 44.0, 44.2, 8, LEVEL),
                 ProbeBracket((1, 2), WIDTH_S, None, 70.0, 8, LEVEL))
-    monkeypatch.setattr(protocol_bag, 'read_protocol',
-                        lambda bag: protocol_bag.ProtocolResults(brackets, (), 9.4e-4))
+    monkeypatch.setattr(protocol_bag, 'protocol_of',
+                        lambda run: protocol_bag.ProtocolResults(brackets, (), 9.4e-4))
     seen = {}
 
-    def known_answer(params, fits, observations, max_evaluations, **kwargs):
-        seen['observations'], seen['limit'] = observations, max_evaluations
-        estimates = (threshold_fit.ThresholdEstimate(fits[0].path, 34.3, 34.1, 34.6, fits[0].low,
-                                                     fits[0].high, True, 'narrow'),
-                     threshold_fit.ThresholdEstimate(fits[1].path, 5e-9, 2.5e-9, 1e-8,
-                                                     fits[1].low, fits[1].high, False,
-                                                     'its profile reaches a bound of the range'))
+    def known_answer(params, fits, kicks, thresholds, workers, scheduler, checkpoint, progress,
+                     max_evaluations):
+        seen['kicks'], seen['thresholds'], seen['limit'] = kicks, thresholds, max_evaluations
+        estimates = (joint_fit.ProfileEstimate(fits[0].path, 34.3, 34.1, 34.6, fits[0].low,
+                                               fits[0].high, True, 'narrow'),
+                     joint_fit.ProfileEstimate(fits[1].path, 5e-9, 2.5e-9, 1e-8, fits[1].low,
+                                               fits[1].high, False,
+                                               'its profile reaches a bound of the range'))
         profile = ProfileFit(np.zeros(2), 0.5, (), 12, False, False)
-        return threshold_fit.ThresholdFitResult(estimates, 0.5, np.array([0.7]),
-                                                np.array([44.14]), 12, profile)
+        none = np.zeros((0, 2))
+        return joint_fit.JointFitResult(estimates, 0.49, 0.0, Observations((), 0.0), (),
+                                        tuple(thresholds), np.array([0.7]), np.array([44.14]),
+                                        none, none, 12, profile)
 
-    monkeypatch.setattr(threshold_fit, 'fit_thresholds', known_answer)
+    monkeypatch.setattr(joint_fit, 'fit_jointly', known_answer)
     bag = Path(__file__).resolve().parents[1] / 'bags' / 'synthetic_device'
+    out = tmp_path / 'fitted.yaml'
     status = cli.main(['identify', str(bag), '--thresholds', '--params', 'calibrated',
-                       '--fit', K_Z, DAMPING, '--max-evaluations', '7'])
-    out = capsys.readouterr().out
+                       '--fit', K_Z, DAMPING, '--max-evaluations', '7', '--out', str(out)])
+    printed = capsys.readouterr().out
     assert status == 0
-    assert seen['limit'] == 7 and [o.beams for o in seen['observations']] == [BEAM]
-    assert 'left out beams 1+2, 5 ms' in out
-    assert 'beam 3, 5 ms: recorded 44.00-44.20 V, model 44.14 V (+0.70 sd)' in out
-    assert f'{K_Z}: 34.3, 95 % profile interval [34.1, 34.6]' in out and ': determined' in out
-    assert f'{DAMPING}: 5e-09' in out and 'undetermined (its profile reaches a bound' in out
+    assert seen['limit'] == 7 and seen['kicks'] is None
+    assert [o.beams for o in seen['thresholds']] == [BEAM]
+    assert 'left out beams 1+2, 5 ms' in printed
+    assert 'beam 3, 5 ms: recorded 44.00-44.20 V, model 44.14 V (+0.70 sd)' in printed
+    assert f'{K_Z}: 34.3, 95 % profile interval [34.1, 34.6]' in printed
+    assert ': determined' in printed
+    assert f'{DAMPING}: 5e-09' in printed and 'undetermined (its profile reaches a bound' in printed
+    fitted = load_parameter_set(str(out))
+    assert fitted.get(K_Z) == pytest.approx(34.3) and fitted.get(DAMPING) == pytest.approx(5e-9)

@@ -50,6 +50,7 @@ from sphere_sim.fitting.observations import (
     KickObservation,
     Observations,
 )
+from sphere_sim.fitting.thresholds import ThresholdObservation, model_threshold_v
 from sphere_sim.integrate.tolerances import FIT_RTOL
 from sphere_sim.kicks.design import (
     KICK_RELAXATION,
@@ -244,9 +245,16 @@ def kick_end_normal(params: ParameterSet, kick: KickObservation,
                           dtype=float)
 
 
-def _kick_task(task: tuple[ParameterSet, KickObservation, float]) -> NDArray[np.float64]:
-    params, kick, rtol = task
-    return kick_end_normal(params, kick, rtol)
+def _observation_task(task: tuple[ParameterSet, KickObservation | ThresholdObservation, float]
+                      ) -> NDArray[np.float64]:
+    """One simulation of one observation: a kick's end normal, or a threshold (V, one entry)."""
+    params, observation, rtol = task
+    if isinstance(observation, ThresholdObservation):
+        return np.array([model_threshold_v(params, observation.beams, observation.width_s,
+                                           observation.normal_before,
+                                           (observation.low_v, observation.high_v),
+                                           rtol=rtol)])
+    return kick_end_normal(params, observation, rtol)
 
 
 def undetermined_kicks(params: ParameterSet, observations: Observations, engine: SerialEngine,
@@ -256,7 +264,7 @@ def undetermined_kicks(params: ParameterSet, observations: Observations, engine:
     standard deviation (:meth:`Observations.residual_std_rad`)."""
     kicks = observations.kicks
     tasks = [(params, kick, r) for r in (rtol, rtol * DETERMINACY_RTOL_FACTOR) for kick in kicks]
-    ends = engine(_kick_task, tasks)
+    ends = engine(_observation_task, tasks)
     n = len(kicks)
     return tuple(i for i in range(n)
                  if np.linalg.norm((np.asarray(ends[i]) - np.asarray(ends[n + i]))[:2])
@@ -274,16 +282,24 @@ def kick_residuals(observations: Observations,
 
 class Evaluator:
     """Residuals at scaled parameter vectors, each simulated once (in batches on an engine)
-    and appended to a checkpoint file that a rerun reads back."""
+    and appended to a checkpoint file that a rerun reads back.
+
+    A vector holds the kicks' residuals (x and y of each, rad) and then, for each of
+    ``thresholds`` (the experiment protocol's searches), the model's threshold (V): every
+    simulation of one parameter vector is one task on the engine, kicks and thresholds alike.
+    """
 
     def __init__(self, params: ParameterSet, observations: Observations,
                  fits: Sequence[FitParameter], engine: SerialEngine, rtol: float = FIT_RTOL,
                  checkpoint: str | Path | None = None,
-                 progress: Callable[[Evaluator], object] | None = None) -> None:
+                 progress: Callable[[Evaluator], object] | None = None,
+                 thresholds: Sequence[ThresholdObservation] = ()) -> None:
         self.params, self.obs, self.fits = params, observations, fits
+        self.thresholds = tuple(thresholds)
         self.engine, self.rtol, self.progress = engine, rtol, progress
         self.cache: dict[tuple[str, ...], NDArray[np.float64]] = {}
-        self.simulated = 0
+        self.simulated = 0  # kicks simulated
+        self.searched = 0  # thresholds searched
         self._written = False  # this run has started its own checkpoint file
         self.checkpoint = Path(checkpoint) if checkpoint is not None else None
         self.digest = self._digest()
@@ -292,7 +308,9 @@ class Evaluator:
     def _digest(self) -> str:
         text = json.dumps({'version': CHECKPOINT_VERSION, 'params': self.params.digest(),
                            'observations': self.obs.digest(), 'rtol': self.rtol,
-                           'fits': [dataclasses.asdict(f) for f in self.fits]},
+                           'fits': [dataclasses.asdict(f) for f in self.fits]}
+                          | ({'thresholds': [dataclasses.asdict(t) for t in self.thresholds]}
+                             if self.thresholds else {}),
                           sort_keys=True, default=list)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -347,18 +365,23 @@ class Evaluator:
         keys = [self.key(u) for u in points]
         todo = list(dict.fromkeys(k for k in keys if k not in self.cache))
         if todo:
-            tasks, owners = [], []
+            tasks: list[tuple[ParameterSet, KickObservation | ThresholdObservation, float]] = []
+            owners = []
             for key in todo:
                 p = params_at(self.params, self.fits,
                               self.values([float.fromhex(v) for v in key]))
                 tasks += [(p, kick, self.rtol) for kick in self.obs.kicks]
+                tasks += [(p, threshold, self.rtol) for threshold in self.thresholds]
                 owners.append(key)
-            ends = self.engine(_kick_task, tasks)
-            self.simulated += len(tasks)
-            n = len(self.obs.kicks)
+            results = self.engine(_observation_task, tasks)
+            n, m = len(self.obs.kicks), len(self.thresholds)
+            self.simulated += n * len(owners)
+            self.searched += m * len(owners)
             entries = []
             for i, key in enumerate(owners):
-                r = kick_residuals(self.obs, ends[i * n:(i + 1) * n])
+                mine = results[i * (n + m):(i + 1) * (n + m)]
+                r = np.concatenate([kick_residuals(self.obs, mine[:n]) if n else np.zeros(0),
+                                    *mine[n:]])
                 self.cache[key] = r
                 entries.append((key, r))
             self._append(entries)

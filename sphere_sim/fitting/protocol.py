@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from msg_defs.device import BEAM_IDS, VOLTAGE_LIMIT_V
-from sphere_sim.fitting.observations import SETTLE_S, KickObservation
+from sphere_sim.fitting.observations import SETTLE_S, KickObservation, Observations
 from sphere_sim.model.programme import PulseProgramme
 
 # A probe is a train of identical pulses, each after the last one's kick has ended: one pulled-in
@@ -495,10 +495,51 @@ def ramp_pull_in(t_s: ArrayLike, normals: ArrayLike, start_s: float, times_s: Ar
 PROBE_BEAMS: tuple[tuple[int, ...], ...] = ((1,), (2,), (3,), (4,), (1, 2), (3, 4))
 PROBE_WIDTHS_S = (1.5e-3, 5e-3)
 BRACKETS_V = {1.5e-3: (30.0, 78.0), 5e-3: (25.0, 70.0)}
+SEARCH_RESOLUTION_V = 0.2
+# The golden ratio's fractional part: i times it, modulo 1, spreads any number of searches
+# evenly over [0, 1) (a low-discrepancy sequence, the same every run).
+GOLDEN_FRACTION = (math.sqrt(5.0) - 1.0) / 2.0
+
+
+def last_bracket_width_v(bracket_v: tuple[float, float], resolution_v: float) -> float:
+    """The width of the last bracket a bisection of ``bracket_v`` to ``resolution_v`` ends in."""
+    low, high = bracket_v
+    halvings = max(0, math.ceil(math.log2((high - low) / resolution_v)))
+    return (high - low) / 2.0 ** halvings
+
+
+def dithered(bracket_v: tuple[float, float], resolution_v: float,
+             search: int) -> tuple[float, float]:
+    """``bracket_v`` shifted by the ``search``-th golden-ratio fraction of its last bracket's
+    width.
+
+    A bisection of one bracket always probes the same amplitudes, so searches of thresholds
+    that lie close together end in the same last bracket: the four beams of a symmetric device
+    did (noiseless paper_b, beams 1-4 at 5 ms, all in 44.16-44.34 V, the model's threshold
+    0.08 V below the middle for each). Their residuals' quantisation is then one draw shared
+    four times, which a fit counting them as four independent ones reads as twice the
+    precision it has. Shifted each by its own fraction, the searches' grids interleave: their
+    quantisation errors are independent, and together they resolve the threshold finer than one.
+    """
+    shift = (search * GOLDEN_FRACTION) % 1.0 * last_bracket_width_v(bracket_v, resolution_v)
+    return bracket_v[0] + shift, bracket_v[1] + shift
+
+
 DEFAULT_PROTOCOL = Protocol((
-    *(ThresholdSearch(beams, width, BRACKETS_V[width], 0.2)
-      for width in PROBE_WIDTHS_S for beams in PROBE_BEAMS),
+    *(ThresholdSearch(beams, width, dithered(BRACKETS_V[width], SEARCH_RESOLUTION_V, i),
+                      SEARCH_RESOLUTION_V)
+      for i, (width, beams) in enumerate(itertools.product(PROBE_WIDTHS_S, PROBE_BEAMS))),
     *(SlowRamp((beam,), 20.0, 30.0, 65.0) for beam in BEAM_IDS),
     BeamsOnlyThreshold((1, 2, 3, 4), 5e-3, (20.0, 70.0)),
     FrictionKicks(20, 0, (0.8, 1.0)),
 ))
+
+
+def friction_kicks(observations: Observations) -> Observations:
+    """The kicks among a recording's programmes: the observations less the protocol's probes
+    and ramps, whose resting normals tell thresholds, not landings (a probe's ten pulses and a
+    ramp's staircase would be read as kicks the model has not been asked for)."""
+    return observations.without(
+        i for i, kick in enumerate(observations.kicks)
+        if probe_of(kick.times_s, kick.voltages_v) is not None
+        or ramp_of(kick.times_s, kick.voltages_v) is not None)

@@ -36,15 +36,19 @@ from sphere_twin.commands.options import (
 )
 
 if TYPE_CHECKING:
-    from sphere_sim.fitting.identification import Evaluator, IdentificationResult
+    from sphere_sim.fitting.identification import Evaluator, FitParameter, IdentificationResult
+    from sphere_sim.fitting.joint_fit import JointFitResult
     from sphere_sim.fitting.observations import KickObservation, Observations
+    from sphere_sim.fitting.protocol import ProbeBracket
+    from sphere_sim.fitting.thresholds import ThresholdObservation
     from sphere_sim.model.parameters import ParameterSet
+    from sphere_twin.bag.locate import BagLocation
 
 TRUTH_FILE = 'truth.yaml'
-# --max-evaluations' defaults: per optimiser run of the kicks' fit; the threshold fit's cost
-# limit (sphere_sim.fitting.threshold_fit.MAX_EVALUATIONS, not imported at parse time).
+# --max-evaluations' defaults: per optimiser run of the kicks' fit; the joint fit's cost limit
+# (sphere_sim.fitting.joint_fit.MAX_EVALUATIONS, not imported at parse time).
 KICK_EVALUATIONS = 30
-THRESHOLD_EVALUATIONS = 300
+JOINT_EVALUATIONS = 300
 # Wall seconds between two redraws of the progress bar while a batch of kicks runs: the first
 # batch (the start and a step per fitted parameter) takes minutes before the count first moves.
 BAR_REDRAW_S = 5.0
@@ -58,6 +62,10 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                     'normal and driven by its recorded programme, reproduces the recorded '
                     'normal after it. Reads only the device\'s topics; writes a parameter file '
                     'usable with every --params and a plot of recorded against fitted normals. '
+                    'A bag of the experiment protocol (sphere-twin experiment) adds its '
+                    'thresholds to the same misfit: a multi-start over the declared ranges '
+                    'and each parameter\'s 95 % profile-likelihood interval, undetermined '
+                    'where the recordings leave it open. '
                     'Resumable: an interrupted fit goes on from its checkpoint file.')
     parser.add_argument('bags', nargs='+', metavar='BAG', help=BAG_HELP)
     add_params_option(parser, default=START_PARAMETER_SET,
@@ -76,54 +84,122 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser.add_argument('--max-evaluations', type=positive_int, default=None,
                         help="most evaluations of the residuals by the optimiser (each one "
                              "simulates every kick; a Jacobian's columns come on top; default "
-                             f"{KICK_EVALUATIONS}); with --thresholds the cost limit of the "
-                             "whole fit, starts and profiles together (default "
-                             f"{THRESHOLD_EVALUATIONS})")
+                             f"{KICK_EVALUATIONS}); for a bag of the experiment protocol the "
+                             "cost limit of the whole fit, starts and profiles together "
+                             f"(default {JOINT_EVALUATIONS})")
     parser.add_argument('--thresholds', action='store_true',
-                        help='fit the recorded thresholds of the experiment protocol (sphere-twin '
-                             'experiment) instead of the kicks: a multi-start over the declared '
-                             'ranges and profile-likelihood intervals, on one process; prints '
-                             'the fit and writes nothing')
+                        help="fit the experiment protocol's recorded thresholds alone, "
+                             "leaving its kicks out")
     parser.set_defaults(func=run)
 
 
-def read_observations(bag_dir: str | os.PathLike[str]) -> Observations:
-    """The kicks of one bag, from the device's topics only."""
-    from sphere_sim.fitting.observations import SETTLE_S, observations_from_samples
+@dataclasses.dataclass(frozen=True)
+class Recording:
+    """What one bag holds for identification: its kicks and, from the experiment protocol, its
+    thresholds (none in a bag of kicks alone) and the searches with a side never seen."""
+
+    kicks: Observations
+    thresholds: list[ThresholdObservation]
+    one_sided: list[ProbeBracket]
+    no_kicks: str = ''  # why the bag has no kick to fit, if it has none
+
+
+def read_recording(bag_dir: str | os.PathLike[str]) -> Recording:
+    """The kicks and the protocol's thresholds of one bag, from the device's topics only. The
+    kicks are every programme but the protocol's probes and ramps, whose resting normals tell
+    thresholds, not landings."""
+    from sphere_sim.fitting.observations import (
+        SETTLE_S,
+        IdentificationError,
+        Observations,
+        observations_from_samples,
+    )
+    from sphere_sim.fitting.protocol import friction_kicks
+    from sphere_sim.fitting.thresholds import observations_of
+    from sphere_twin.protocol_bag import distinct_samples, protocol_of
     from sphere_twin.run_analysis import DEVICE_TOPICS, load_run
 
     run = load_run(bag_dir, DEVICE_TOPICS)
-    return observations_from_samples(run.normal_t_s, run.normals, run.kicks, run.holds,
-                                     SETTLE_S)
+    t_s, normals = distinct_samples(run)
+    thresholds, one_sided = observations_of(protocol_of(run).brackets)
+    try:
+        kicks = friction_kicks(observations_from_samples(t_s, normals, run.kicks, run.holds,
+                                                         SETTLE_S))
+    except IdentificationError as exc:  # a protocol's thresholds may still be fitted
+        return Recording(Observations((), 0.0), thresholds, one_sided, str(exc))
+    return Recording(kicks, thresholds, one_sided)
+
+
+def read_observations(bag_dir: str | os.PathLike[str]) -> Observations:
+    """The kicks of one bag (:func:`read_recording`).
+
+    Raises
+    ------
+    IdentificationError
+        When the bag has no kick to fit.
+    """
+    from sphere_sim.fitting.observations import IdentificationError
+
+    recording = read_recording(bag_dir)
+    if recording.no_kicks:
+        raise IdentificationError(recording.no_kicks)
+    return recording.kicks
 
 
 def run(args: argparse.Namespace) -> int:
-    from sphere_sim.fitting.identification import fit_parameters, identify
+    from sphere_sim.fitting.identification import fit_parameters
     from sphere_sim.fitting.observations import IdentificationError, merge_observations
-    from sphere_sim.model.parameters import ParameterError, load_parameter_set
     from sphere_twin.bag.locate import locate_bag
 
     bags = [locate_bag(b) for b in args.bags]
     base = args.params
-    if args.thresholds:
-        return run_thresholds(args, [b.directory for b in bags])
     try:
         # The request first: a parameter that cannot be fitted is refused before any reading.
         fits = fit_parameters(base, args.fit)
-        obs = merge_observations([_read_saying(b.directory, i, len(bags))
-                                  for i, b in enumerate(bags, 1)])
+        recordings = [_read_saying(b.directory, i, len(bags)) for i, b in enumerate(bags, 1)]
     except IdentificationError as exc:
         raise CommandError(str(exc)) from None
+    thresholds = [t for r in recordings for t in r.thresholds]
+    for bracket in (b for r in recordings for b in r.one_sided):
+        print(f'left out {bracket.label}: the bracket has a side never seen')
+    if args.thresholds and not thresholds:
+        raise CommandError(
+            f'{", ".join(str(b.directory) for b in bags)}: no threshold search of the '
+            'experiment protocol with both sides seen (record one with sphere-twin '
+            'experiment or sphere-twin synthetic record --protocol)')
+    if not thresholds and any(r.no_kicks for r in recordings):
+        raise CommandError(next(r.no_kicks for r in recordings if r.no_kicks))
+    with_kicks = [r.kicks for r in recordings if r.kicks.kicks]
+    obs = merge_observations(with_kicks) if with_kicks and not args.thresholds else None
     out = args.out or DEFAULT_OUT_DIR / f'{bags[0].name}_identified.yaml'
     out.parent.mkdir(parents=True, exist_ok=True)
     checkpoint = out.with_suffix('.partial.jsonl')
-    print(f'{len(obs.kicks)} kicks from {len(bags)} bag(s) ({obs.dropped} programmes without '
-          f'settled samples around them left out); sensor noise {obs.noise_std_rad:.3g} rad '
-          'per axis, from the resting stretches')
+    if obs is not None:
+        print(f'{len(obs.kicks)} kicks from {len(bags)} bag(s) ({obs.dropped} programmes '
+              'without settled samples around them left out); sensor noise '
+              f'{obs.noise_std_rad:.3g} rad per axis, from the resting stretches')
     for fit in fits:
         where = 'declared range' if fit.declared else 'search bound, no declared range'
         print(f'fit {fit.path}{" (with " + ", ".join(fit.tied) + ")" if fit.tied else ""}: '
               f'start {base.get(fit.path):.4g}, {where} [{fit.low:.4g}, {fit.high:.4g}]')
+    if thresholds:
+        return run_joint(args, bags, fits, obs, thresholds, out, checkpoint)
+    if obs is None:
+        raise CommandError(f'{", ".join(str(b.directory) for b in bags)}: no kick to fit '
+                           '(every programme is a probe or a ramp of the protocol)')
+    return run_kicks(args, bags, fits, obs, out, checkpoint)
+
+
+def run_kicks(args: argparse.Namespace, bags: Sequence[BagLocation],
+              fits: Sequence[FitParameter], obs: Observations, out: Path,
+              checkpoint: Path) -> int:
+    """Recordings of kicks alone: the kicks' fit, with intervals from the misfit's curvature
+    (sphere_sim.fitting.identification)."""
+    from sphere_sim.fitting.identification import identify
+    from sphere_sim.fitting.observations import IdentificationError
+    from sphere_sim.model.parameters import ParameterError, load_parameter_set
+
+    base = args.params
     say_setup(args.workers, args.scheduler, len(fits), len(obs.kicks))
     started = time.perf_counter()
     with tqdm(desc='identify', unit='kick') as bar, redrawn(bar, BAR_REDRAW_S):
@@ -157,61 +233,123 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def run_thresholds(args: argparse.Namespace, bags: Sequence[Path]) -> int:
-    """``--thresholds``: the protocol's brackets of every bag, fitted with profile intervals."""
-    from sphere_sim.fitting.identification import fit_parameters
+def run_joint(args: argparse.Namespace, bags: Sequence[BagLocation],
+              fits: Sequence[FitParameter], kicks: Observations | None,
+              thresholds: Sequence[ThresholdObservation], out: Path, checkpoint: Path) -> int:
+    """A protocol's recordings: its thresholds and its kicks (``kicks`` None: the thresholds
+    alone) in one misfit, with profile intervals (sphere_sim.fitting.joint_fit)."""
+    from sphere_sim.fitting.joint_fit import fit_jointly
     from sphere_sim.fitting.observations import IdentificationError
-    from sphere_sim.fitting.threshold_fit import fit_thresholds
-    from sphere_sim.fitting.thresholds import ThresholdError, observations_of
+    from sphere_sim.fitting.thresholds import ThresholdError
     from sphere_sim.model.parameters import load_parameter_set
-    from sphere_twin.protocol_bag import read_protocol
 
-    base = args.params
-    try:
-        fits = fit_parameters(base, args.fit)
-    except IdentificationError as exc:
-        raise CommandError(str(exc)) from None
-    observations = []
-    for bag in bags:
-        say(f'reading the protocol of {bag} ...')
-        used, left = observations_of(read_protocol(bag).brackets)
-        observations += used
-        for bracket in left:
-            print(f'left out {bracket.label}: the bracket has a side never seen')
-    if not observations:
-        raise CommandError(f'{", ".join(map(str, bags))}: no threshold search of the experiment '
-                           'protocol with both sides seen (record one with sphere-twin experiment '
-                           'or sphere-twin synthetic record --protocol)')
-    limit = args.max_evaluations or THRESHOLD_EVALUATIONS
-    print(f'{len(observations)} thresholds; fitting {", ".join(f.path for f in fits)} '
-          f'(cost limit {limit} evaluations, each every threshold, some 0.6-1 s apiece)')
+    limit = args.max_evaluations or JOINT_EVALUATIONS
+    what = f'{len(thresholds)} thresholds' + (f' and {len(kicks.kicks)} kicks' if kicks else '')
+    print(f'{what}, in one misfit; a multi-start over the declared ranges, then each '
+          f'parameter\'s 95 % profile interval (cost limit {limit} evaluations, each every '
+          'threshold, some 0.6-1 s apiece, and every kick)')
+    say(f'on {args.workers} local process(es)' if args.scheduler is None
+        else f'on the Dask cluster at {args.scheduler}')
     started = time.perf_counter()
-    try:
-        result = fit_thresholds(base, fits, observations, max_evaluations=limit)
-    except ThresholdError as exc:
-        raise CommandError(str(exc)) from None
+    with tqdm(desc='identify', unit='evaluation') as bar, redrawn(bar, BAR_REDRAW_S):
+        def progress(evaluator: Evaluator) -> None:
+            bar.n = len(evaluator.cache)
+            bar.refresh()
+
+        try:
+            result = fit_jointly(args.params, fits, kicks, thresholds, args.workers,
+                                 args.scheduler, checkpoint, progress, max_evaluations=limit)
+        except (IdentificationError, ThresholdError) as exc:
+            raise CommandError(str(exc)) from None
     wall_s = time.perf_counter() - started
-    print(f'{result.evaluations} evaluations in {wall_s:.0f} s; sum of squares {result.chi2:.2f} '
-          f'over {len(observations)} thresholds'
-          f'{" (stopped by the cost limit)" if result.profile.cost_limited else ""}')
+    print_joint_result(result, wall_s)
+    write_joint_fitted(out, args.params, fits, result, [str(b.directory) for b in bags], wall_s)
+    checkpoint.unlink(missing_ok=True)
+    print(f'wrote {out}')
+    truth_path = bags[0].directory / TRUTH_FILE
+    if truth_path.exists():
+        truth = load_parameter_set(str(truth_path.resolve()))
+        inside = [e.contains(truth.get(e.path)) for e in result.estimates]
+        for e, within in zip(result.estimates, inside, strict=True):
+            print(f'  {e.path}: truth {truth.get(e.path):.4g}, '
+                  f'{"inside" if within else "OUTSIDE"} its 95 % interval')
+        print(f'identified: {sum(inside)} of {len(inside)} parameters within their 95 % '
+              f'profile interval of the truth; determined '
+              f'{sum(e.determined for e in result.estimates)} of {len(inside)}')
+    return 0
+
+
+def print_joint_result(result: JointFitResult, wall_s: float) -> None:
+    print(f'{result.evaluations} evaluations in {wall_s:.0f} s; sum of squares '
+          f'{result.chi2:.2f}: {result.threshold_chi2:.2f} over {len(result.thresholds)} thresholds'
+          + (f', {result.kicks_chi2:.2f} over {2 * len(result.kicks.kicks)} kick residuals'
+             if result.kicks.kicks else '')
+          + (' (stopped by the cost limit)' if result.profile.cost_limited else ''))
+    if result.undetermined:
+        print(f'{len(result.undetermined)} kick(s) left out: the model does not determine '
+              'their end (a tenth of the tolerance moves it by more than the residual\'s '
+              'noise)')
+    if result.kicks.kicks:
+        print(f'per-kick residual RMS: {_rms(np.hypot(*result.kick_vectors_start.T)):.3g} rad '
+              f'at the start, {_rms(np.hypot(*result.kick_vectors_fitted.T)):.3g} rad fitted')
     if result.profile.lower_found:
         print('a profile went lower than the optimum the search found: the intervals are read '
               'about a point that is not the lowest (raise --max-evaluations)')
-    for obs, model_v, r in zip(observations, result.model_thresholds_v, result.residuals,
-                               strict=True):
+    for obs, model_v, r in zip(result.thresholds, result.model_thresholds_v,
+                               result.threshold_residuals, strict=True):
         print(f'  {obs.label}: recorded {obs.low_v:.2f}-{obs.high_v:.2f} V, model '
               f'{model_v:.2f} V ({r:+.2f} sd)')
-    truth_path = bags[0] / TRUTH_FILE
-    truth = load_parameter_set(str(truth_path.resolve())) if truth_path.exists() else None
     for e in result.estimates:
         status = 'determined' if e.determined else 'undetermined'
-        line = (f'{e.path}: {e.value:.4g}, 95 % profile interval [{e.low:.4g}, {e.high:.4g}] '
-                f'in the range [{e.range_low:.4g}, {e.range_high:.4g}]: {status} ({e.note})')
-        if truth is not None:
-            true = truth.get(e.path)
-            line += f'; truth {true:.4g}, {"inside" if e.contains(true) else "OUTSIDE"}'
-        print(line)
-    return 0
+        print(f'{e.path}: {e.value:.4g}, 95 % profile interval [{e.low:.4g}, {e.high:.4g}] '
+              f'in the range [{e.range_low:.4g}, {e.range_high:.4g}]: {status} ({e.note})')
+
+
+def write_joint_fitted(path: Path, params: ParameterSet, fits: Sequence[FitParameter],
+                       result: JointFitResult, bags: Sequence[str], wall_s: float) -> Path:
+    """The fitted parameter file of a joint fit: ``base:`` + ``overrides:``, and what the fit
+    found (profile intervals, each threshold and each kick at the optimum)."""
+    overrides = {q: float(e.value) for fp, e in zip(fits, result.estimates, strict=True)
+                 for q in (fp.path, *fp.tied)}
+    data = {
+        'name': f'{Path(bags[0]).name}_identified',
+        'description': f'{params.name} with the parameters identified from '
+                       f'{len(result.model_thresholds_v)} thresholds and '
+                       f'{len(result.kicks.kicks)} kicks ({", ".join(Path(b).name for b in bags)})',
+        'base': base_reference(params, path),
+        'overrides': overrides,
+        'identification': {
+            'bags': list(bags),
+            'kicks': len(result.kicks.kicks),
+            'thresholds': len(result.model_thresholds_v),
+            'sensor_noise_rad': float(result.kicks.noise_std_rad),
+            'interval': '95 % profile likelihood: where the sum of squares, the others '
+                        're-minimised, has risen by 3.84 over the optimum',
+            'wall_s': round(wall_s, 1),
+            'evaluations': result.evaluations,
+            'sum_of_squares': {'thresholds': result.threshold_chi2,
+                               'kicks': result.kicks_chi2},
+            'parameters': [{'path': e.path, 'tied': list(fp.tied),
+                            'start': float(params.get(e.path)), 'value': e.value,
+                            'interval': [e.low, e.high], 'range': [e.range_low, e.range_high],
+                            'declared_range': fp.declared,
+                            'status': 'determined' if e.determined else 'undetermined',
+                            'note': e.note}
+                           for fp, e in zip(fits, result.estimates, strict=True)],
+            'per_threshold': [{'step': o.label, 'recorded_v': [o.low_v, o.high_v],
+                               'model_v': float(m), 'residual_sd': float(r)}
+                              for o, m, r in zip(result.thresholds,
+                                                 result.model_thresholds_v,
+                                                 result.threshold_residuals, strict=True)],
+            'per_kick': [{'time_s': round(float(k.time_s), 6),
+                          'residual_start_rad': float(np.hypot(*b)),
+                          'residual_fitted_rad': float(np.hypot(*a))}
+                         for k, b, a in zip(result.kicks.kicks, result.kick_vectors_start,
+                                            result.kick_vectors_fitted, strict=True)],
+        },
+    }
+    path.write_text(yaml.safe_dump(data, sort_keys=False, width=96))
+    return path
 
 
 def say(line: str) -> None:
@@ -219,9 +357,9 @@ def say(line: str) -> None:
     print(f'identify: {line}', file=sys.stderr, flush=True)
 
 
-def _read_saying(bag_dir: Path, number: int, count: int) -> Observations:
+def _read_saying(bag_dir: Path, number: int, count: int) -> Recording:
     say(f'reading {bag_dir} (bag {number} of {count}) ...')
-    return read_observations(bag_dir)
+    return read_recording(bag_dir)
 
 
 def say_setup(workers: int, scheduler: str | None, fitted: int, kicks: int) -> None:

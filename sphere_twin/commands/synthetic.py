@@ -30,6 +30,7 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
     from sphere_sim.fitting.identification import Evaluator
+    from sphere_twin.protocol_run import ProtocolRecord
     from sphere_twin.synthetic_device import SyntheticDevice
 
 DEFAULT_STUDY = Path('identification.md')  # the committed one: --out bench/results/...
@@ -65,6 +66,13 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     study.add_argument('--device', action='append', dest='devices', metavar='NAME',
                        help='study only this device (repeatable; default: device_a to '
                             "device_e; paper_a to paper_e are the paper's device's)")
+    study.add_argument('--protocol', action='store_true',
+                       help='record the experiment protocol on each device and fit its '
+                            'thresholds and kicks in one misfit, with profile intervals '
+                            '(resumable: each fit checkpoints beside --out)')
+    study.add_argument('--max-evaluations', type=positive_int, default=None,
+                       help='with --protocol, the cost limit of each device\'s fit (default '
+                            'that of sphere-twin identify)')
     study.add_argument('--workers', type=positive_int, default=2)
     study.add_argument('--scheduler', default=None)
     study.add_argument('--out', type=output_file('.md'), default=DEFAULT_STUDY,
@@ -105,11 +113,23 @@ def record_protocol(device: SyntheticDevice, out: str | os.PathLike[str],
                     seed: int | None = None) -> None:
     """Record the default protocol on ``device`` into ``out`` with its truth.yaml, and print
     what it found and what it could not run."""
+    from sphere_twin.protocol_bag import read_protocol
+    from sphere_twin.protocol_run import result_lines
+
+    done = record_protocol_bag(device, out, seed)
+    results = read_protocol(out)
+    print(f'wrote {out}: the protocol on {device.name}, {done.samples} samples; sensor noise '
+          f'{results.noise_std_rad:.3g} rad per axis')
+    for line in result_lines(results, done.not_run):
+        print(line)
+
+
+def record_protocol_bag(device: SyntheticDevice, out: str | os.PathLike[str],
+                        seed: int | None = None) -> ProtocolRecord:
+    """Record the default protocol on ``device`` into ``out`` with its truth.yaml."""
     from sphere_sim.fitting.protocol import DEFAULT_PROTOCOL, check_protocol
     from sphere_sim.model.parameters import load_parameter_set
-    from sphere_twin.protocol_bag import read_protocol
     from sphere_twin.protocol_run import record_protocol as record_steps
-    from sphere_twin.protocol_run import result_lines
 
     if Path(out).exists():
         raise CommandError(f'{out} exists: give a new bag directory')
@@ -121,11 +141,7 @@ def record_protocol(device: SyntheticDevice, out: str | os.PathLike[str],
                             device.seed if seed is None else seed,
                             progress=lambda label: bar.update())
     device.write_truth(Path(out) / 'truth.yaml', base)
-    results = read_protocol(out)
-    print(f'wrote {out}: the protocol on {device.name}, {done.samples} samples; sensor noise '
-          f'{results.noise_std_rad:.3g} rad per axis')
-    for line in result_lines(results, done.not_run):
-        print(line)
+    return done
 
 
 def run_record(args: argparse.Namespace) -> int:
@@ -147,6 +163,8 @@ def run_study(args: argparse.Namespace) -> int:
     from sphere_twin.synthetic_device import DEVICES, NOISE_STUDY_STD_RAD
 
     devices = [_device(name) for name in args.devices] if args.devices else DEVICES
+    if args.protocol:
+        return run_protocol_study(args, devices)
     rows: list[dict[str, Any]] = []
     with tempfile.TemporaryDirectory() as tmp, engine_of(args.workers, args.scheduler) as eng:
         for device in devices:
@@ -186,6 +204,108 @@ def run_study(args: argparse.Namespace) -> int:
     print(f'identified: {inside} of {total} parameters within their uncertainty of the truth '
           f'over {len(rows)} device{"s" if len(rows) != 1 else ""}')
     return 0
+
+
+def run_protocol_study(args: argparse.Namespace, devices: Sequence[SyntheticDevice]) -> int:
+    """``study --protocol``: each device's protocol recorded, then its thresholds and kicks
+    fitted in one misfit; the intervals' coverage of the truth and what they determine."""
+    from sphere_sim.fitting.identification import fit_parameters
+    from sphere_sim.fitting.joint_fit import fit_jointly
+    from sphere_sim.kicks.engine import engine_of
+    from sphere_sim.model.parameters import load_parameter_set
+    from sphere_twin.commands.identify import JOINT_EVALUATIONS, read_recording
+
+    limit = args.max_evaluations or JOINT_EVALUATIONS
+    rows: list[dict[str, Any]] = []
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    checkpoints = []
+    with tempfile.TemporaryDirectory() as tmp, engine_of(args.workers, args.scheduler) as eng:
+        for device in devices:
+            bag = Path(tmp) / device.name
+            record_protocol_bag(device, bag)
+            base = load_parameter_set(device.base)
+            recording = read_recording(bag)
+            fits = fit_parameters(base, device.fit)
+            checkpoint = args.out.with_name(f'{args.out.stem}_{device.name}.partial.jsonl')
+            checkpoints.append(checkpoint)
+            started = time.perf_counter()
+            with tqdm(desc=f'identify {device.name}', unit='evaluation', leave=False) as bar:
+                def progress(ev: Evaluator, bar: tqdm = bar) -> None:
+                    bar.n = len(ev.cache)
+                    bar.refresh()
+
+                result = fit_jointly(base, fits, recording.kicks, recording.thresholds, eng,
+                                     None, checkpoint, progress, max_evaluations=limit)
+            truth = device.truth(base)
+            rows.append({
+                'device': device.name, 'base': device.base, 'factors': device.factors,
+                'thresholds': len(recording.thresholds), 'kicks': len(result.kicks.kicks),
+                'undetermined': len(result.undetermined),
+                'wall_s': time.perf_counter() - started, 'evaluations': result.evaluations,
+                'cost_limited': result.profile.cost_limited,
+                'chi2_thresholds': result.threshold_chi2, 'chi2_kicks': result.kicks_chi2,
+                'parameters': [{'path': e.path, 'start': base.get(e.path), 'value': e.value,
+                                'interval': [e.low, e.high],
+                                'range': [e.range_low, e.range_high],
+                                'determined': e.determined, 'note': e.note,
+                                'true': truth.get(e.path),
+                                'within': e.contains(truth.get(e.path))}
+                               for e in result.estimates]})
+            _print_protocol_device(rows[-1])
+    args.out.with_suffix('.json').write_text(json.dumps(rows, indent=2) + '\n')
+    total = sum(len(r['parameters']) for r in rows)
+    determined = sum(p['determined'] for r in rows for p in r['parameters'])
+    coverage = sum(p['within'] for r in rows for p in r['parameters']) / total
+    summary = f'determined {determined} of {total}; coverage {coverage:.2f}'
+    args.out.write_text(_protocol_markdown(rows, args, limit, summary))
+    for checkpoint in checkpoints:
+        checkpoint.unlink(missing_ok=True)
+    print(f'wrote {args.out} and {args.out.with_suffix(".json")}')
+    print(summary)
+    return 0
+
+
+def _print_protocol_device(row: Mapping[str, Any]) -> None:
+    print(f'{row["device"]}: {row["thresholds"]} thresholds and {row["kicks"]} kicks '
+          f'({row["undetermined"]} undetermined), {row["evaluations"]} evaluations in '
+          f'{row["wall_s"]:.0f} s; sum of squares {row["chi2_thresholds"]:.1f} (thresholds) '
+          f'+ {row["chi2_kicks"]:.1f} (kicks)')
+    for p in row['parameters']:
+        print(f'  {p["path"]}: {p["value"]:.4g} in {interval_text(p["interval"])}, true '
+              f'{p["true"]:.4g}: {"within" if p["within"] else "OUTSIDE"}, '
+              f'{"determined" if p["determined"] else "undetermined"} ({p["note"]})')
+
+
+def _protocol_markdown(rows: Sequence[Mapping[str, Any]], args: argparse.Namespace,
+                       limit: int, summary: str) -> str:
+    only = ''.join(f' --device {name}' for name in args.devices or ())
+    lines = ['# Identification of synthetic devices from the experiment protocol', '',
+             f'Made by `sphere-twin synthetic study --protocol --workers {args.workers}'
+             f'{only}`: each device is recorded running the default protocol (threshold '
+             'searches, slow ramps, then kicks), and its thresholds and kicks are fitted in '
+             'one misfit from the bag alone: a multi-start over the declared ranges, then '
+             f'each parameter\'s 95 % profile-likelihood interval (cost limit {limit} '
+             'evaluations). A parameter is determined when its interval spans at most a tenth '
+             'of its scaled range and reaches neither end. See docs/identification.md.', '']
+    for r in rows:
+        factors = ', '.join(f'`{p}` x {f:g}' for p, f in r['factors'].items())
+        lines += [f'## {r["device"]}: `{r["base"]}` with {factors}', '',
+                  f'{r["thresholds"]} thresholds and {r["kicks"]} kicks ({r["undetermined"]} '
+                  f'left out: the model does not determine them), {r["evaluations"]} '
+                  f'evaluations{" (stopped by the cost limit)" if r["cost_limited"] else ""} '
+                  f'in {r["wall_s"]:.0f} s on {args.workers} workers; sum of squares '
+                  f'{r["chi2_thresholds"]:.1f} over the thresholds and {r["chi2_kicks"]:.1f} '
+                  f'over {2 * r["kicks"]} kick residuals.', '',
+                  '| parameter | true | start | identified | 95 % profile interval | '
+                  'determined | within |', '|---|---|---|---|---|---|---|']
+        for p in r['parameters']:
+            lines.append(f'| `{p["path"]}` | {p["true"]:.4g} | {p["start"]:.4g} | '
+                         f'{p["value"]:.4g} | {interval_text(p["interval"])} | '
+                         f'{"yes" if p["determined"] else "no: " + p["note"]} | '
+                         f'{"yes" if p["within"] else "**no**"} |')
+        lines.append('')
+    lines += [summary]
+    return '\n'.join(lines) + '\n'
 
 
 def _rms(values: Sequence[float] | NDArray[np.float64]) -> float:

@@ -1,0 +1,185 @@
+"""One fit of every kind of observation a device's recordings hold: the kicks' landings and the
+experiment protocol's thresholds, in one misfit; a multi-start over the declared ranges; each
+parameter's 95 % profile-likelihood interval; and a parameter the recordings leave open
+reported as undetermined, with its range.
+
+The two kinds tell different things (docs/identification.md, "An experiment protocol"): a
+threshold moves smoothly with the beams' stiffness, gap and damping, a kick's landing tells the
+friction once the beams are pinned, and moves in steps as the pull-in's parameters change.
+Fitted together, the thresholds hold the pull-in's parameters where the kicks alone trade them
+along a valley, and the kicks decide what the thresholds do not see.
+
+The misfit is a plain sum of squares of residuals in units of their standard deviations: the
+kicks' residuals whitened by the sensor noise (with the restart's error,
+:meth:`~sphere_sim.fitting.observations.Observations.whitener`), and each threshold's
+(model - bracket middle) / :attr:`~sphere_sim.fitting.thresholds.ThresholdObservation.std_v`.
+No prior: what the intervals say is what the recordings say. Every parameter vector is
+simulated once, kicks and thresholds as one batch of tasks on the engine, and checkpointed
+(:class:`~sphere_sim.fitting.identification.Evaluator`), so an interrupted fit resumes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from sphere_sim.fitting.identification import (
+    Evaluator,
+    FitParameter,
+    undetermined_kicks,
+)
+from sphere_sim.fitting.observations import IdentificationError, Observations
+from sphere_sim.fitting.profile_fit import ProfileFit, ProfileInterval, fit_profiles
+from sphere_sim.fitting.thresholds import ThresholdObservation
+from sphere_sim.integrate.tolerances import FIT_RTOL
+from sphere_sim.kicks.engine import SerialEngine, engine_for
+from sphere_sim.model.parameters import ParameterSet
+
+# Latin-hypercube starts per fitted parameter, and descents from the lowest of them (the start
+# values are a further start): over the declared ranges a threshold misfit is smooth but far
+# from quadratic (its residuals run to hundreds of standard deviations), so a few descents
+# from spread points find its basin where one from the start values may stall at a bound.
+STARTS_PER_PARAMETER = 3
+DESCENTS = 2
+# The cost limit's default: distinct parameter vectors simulated (each one every kick and every
+# threshold: some 0.1-0.3 s per kick and 0.6-1 s per threshold on one core).
+MAX_EVALUATIONS = 300
+
+
+@dataclasses.dataclass(frozen=True)
+class ProfileEstimate:
+    """One fitted parameter: its value, its 95 % profile interval, its declared range, and
+    whether the recordings determine it (``note`` says why not)."""
+
+    path: str
+    value: float
+    low: float  # the 95 % profile interval (values, not scaled)
+    high: float
+    range_low: float  # the declared range (or search bound)
+    range_high: float
+    determined: bool
+    note: str
+
+    def contains(self, value: float) -> bool:
+        return min(self.low, self.high) <= value <= max(self.low, self.high)
+
+
+@dataclasses.dataclass(frozen=True)
+class JointFitResult:
+    estimates: tuple[ProfileEstimate, ...]
+    chi2: float  # at the optimum: kicks' and thresholds' together
+    kicks_chi2: float  # the kicks' whitened share of it, over 2 x len(kicks.kicks) residuals
+    kicks: Observations  # the kicks fitted (those the model determines)
+    undetermined: tuple[int, ...]  # the kicks left out, indices into those given
+    thresholds: tuple[ThresholdObservation, ...]
+    threshold_residuals: NDArray[np.float64]  # at the optimum, in standard deviations
+    model_thresholds_v: NDArray[np.float64]  # at the optimum
+    kick_vectors_start: NDArray[np.float64]  # (k, 2) model minus recorded, rad, at the start
+    kick_vectors_fitted: NDArray[np.float64]  # the same at the optimum
+    evaluations: int
+    profile: ProfileFit
+
+    @property
+    def threshold_chi2(self) -> float:
+        return float(np.sum(self.threshold_residuals ** 2))
+
+
+class JointMisfit:
+    """Residuals in standard deviations at a scaled parameter vector (each parameter's
+    logarithm mapped onto [0, 1] over its range): the kicks' whitened, then the thresholds'."""
+
+    def __init__(self, evaluator: Evaluator) -> None:
+        self.ev = evaluator
+        self.kick_rows = 2 * len(evaluator.obs.kicks)
+        self.whitener = (evaluator.obs.whitener() if self.kick_rows
+                         else np.zeros((0, 0)))
+        self.middles_v = np.array([t.middle_v for t in evaluator.thresholds])
+        self.stds_v = np.array([t.std_v for t in evaluator.thresholds])
+
+    def kick_vectors(self, u: ArrayLike) -> NDArray[np.float64]:
+        """(k, 2): each kick's model minus recorded resting normal, x and y (rad)."""
+        return self.ev(u)[:self.kick_rows].reshape(-1, 2)
+
+    def thresholds_v(self, u: ArrayLike) -> NDArray[np.float64]:
+        return self.ev(u)[self.kick_rows:]
+
+    def __call__(self, u: ArrayLike) -> NDArray[np.float64]:
+        r = self.ev(u)
+        return np.concatenate([self.whitener @ r[:self.kick_rows],
+                               (r[self.kick_rows:] - self.middles_v) / self.stds_v])
+
+
+def fit_jointly(params: ParameterSet, fits: Sequence[FitParameter],
+                kicks: Observations | None, thresholds: Sequence[ThresholdObservation],
+                workers: int | SerialEngine = 1, scheduler: str | None = None,
+                checkpoint: str | Path | None = None,
+                progress: Callable[[Evaluator], object] | None = None,
+                max_evaluations: int = MAX_EVALUATIONS, seed: int = 0,
+                starts_per_parameter: int = STARTS_PER_PARAMETER, descents: int = DESCENTS,
+                rtol: float = FIT_RTOL) -> JointFitResult:
+    """Fit ``fits`` (starting from their values in ``params``) to recorded kicks and
+    thresholds together.
+
+    Parameters
+    ----------
+    kicks : Observations or None
+        The recorded kicks (None: thresholds alone). A kick whose end the model at the start
+        values does not determine is left out first
+        (:func:`~sphere_sim.fitting.identification.undetermined_kicks`).
+    thresholds : sequence of ThresholdObservation
+        The protocol's recorded brackets (may be empty: kicks alone).
+    workers, scheduler
+        Local processes, or a started engine (left open), or a Dask scheduler's address.
+    checkpoint : path, optional
+        Every evaluation is appended here; a rerun with the same inputs reads them back.
+    max_evaluations : int
+        Distinct parameter vectors simulated, search and profiles together; a profile the
+        limit stops is reported undetermined.
+    """
+    fits = list(fits)
+    if not fits:
+        raise IdentificationError('nothing to fit: name parameters with --fit, or use a '
+                                  'parameter set that declares some uncertain')
+    kicks = kicks if kicks is not None else Observations((), 0.0)
+    if not kicks.kicks and not thresholds:
+        raise IdentificationError('nothing to fit to: no kick and no threshold')
+    start = np.array([min(max(f.to_unit(params.get(f.path)), 0.0), 1.0) for f in fits])
+    with engine_for(workers, scheduler) as engine:
+        undetermined = undetermined_kicks(params, kicks, engine, rtol) if kicks.kicks else ()
+        kicks = kicks.without(undetermined)
+        evaluator = Evaluator(params, kicks, fits, engine, rtol, checkpoint, progress,
+                              thresholds)
+        misfit = JointMisfit(evaluator)
+        fit = fit_profiles(misfit, len(fits), start, starts=starts_per_parameter * len(fits),
+                           descents=descents, seed=seed, max_evaluations=max_evaluations)
+        r = misfit(fit.u)
+        result = JointFitResult(
+            estimates=tuple(_estimate(fp, fit.u, interval)
+                            for fp, interval in zip(fits, fit.intervals, strict=True)),
+            chi2=fit.chi2, kicks_chi2=float(np.sum(r[:misfit.kick_rows] ** 2)), kicks=kicks,
+            undetermined=tuple(undetermined), thresholds=tuple(thresholds),
+            threshold_residuals=r[misfit.kick_rows:],
+            model_thresholds_v=misfit.thresholds_v(fit.u),
+            kick_vectors_start=misfit.kick_vectors(start),
+            kick_vectors_fitted=misfit.kick_vectors(fit.u),
+            evaluations=len(evaluator.cache), profile=fit)
+    return result
+
+
+def _estimate(fp: FitParameter, u: NDArray[np.float64],
+              interval: ProfileInterval) -> ProfileEstimate:
+    ends = sorted((fp.from_unit(interval.low_u), fp.from_unit(interval.high_u)))
+    if interval.determined:
+        note = f'95 % interval {interval.width_u:.3f} of the scaled range'
+    elif not interval.complete:
+        note = 'the cost limit stopped its profile'
+    elif interval.low_at_bound or interval.high_at_bound:
+        note = 'its profile reaches a bound of the range'
+    else:
+        note = f'its 95 % interval spans {interval.width_u:.2f} of the scaled range'
+    return ProfileEstimate(fp.path, fp.from_unit(float(u[interval.index])), ends[0], ends[1],
+                           fp.low, fp.high, interval.determined, note)
