@@ -27,6 +27,7 @@ SHORT_S = 1.5e-3
 K_Z = 'beam.stiffness_z_n_per_m'
 K_PHI = 'beam.stiffness_phi_nm_per_rad'
 DAMPING = 'beam.damping_phi_nms_per_rad'
+STATIC_FRICTION = 'friction.static_coefficient'
 
 
 @pytest.fixture(scope='module')
@@ -139,6 +140,9 @@ def test_identify_thresholds_prints_each_parameters_status_and_writes_the_fitted
                                                fits[0].high, True, 'narrow'),
                      joint_fit.ProfileEstimate(fits[1].path, 5e-9, 2.5e-9, 1e-8, fits[1].low,
                                                fits[1].high, False,
+                                               'its profile reaches a bound of the range'),
+                     joint_fit.ProfileEstimate(fits[2].path, 0.5, 0.2, 1.0, fits[2].low,
+                                               fits[2].high, False,
                                                'its profile reaches a bound of the range'))
         profile = ProfileFit(np.zeros(2), 0.5, (), 12, False, False)
         none = np.zeros((0, 2))
@@ -150,7 +154,8 @@ def test_identify_thresholds_prints_each_parameters_status_and_writes_the_fitted
     bag = Path(__file__).resolve().parents[1] / 'bags' / 'synthetic_device'
     out = tmp_path / 'fitted.yaml'
     status = cli.main(['identify', str(bag), '--thresholds', '--params', 'calibrated',
-                       '--fit', K_Z, DAMPING, '--max-evaluations', '7', '--out', str(out)])
+                       '--fit', K_Z, DAMPING, STATIC_FRICTION, '--max-evaluations', '7',
+                       '--out', str(out)])
     printed = capsys.readouterr().out
     assert status == 0
     assert seen['limit'] == 7 and seen['kicks'] is None
@@ -160,5 +165,12 @@ def test_identify_thresholds_prints_each_parameters_status_and_writes_the_fitted
     assert f'{K_Z}: 34.3, 95 % profile interval [34.1, 34.6]' in printed
     assert ': determined' in printed
     assert f'{DAMPING}: 5e-09' in printed and 'undetermined (its profile reaches a bound' in printed
+    # Thresholds alone: the friction is undetermined, and the line says which experiment
+    # would determine it; the beams' damping has its experiment, so no such word.
+    (friction_line,) = [line for line in printed.splitlines()
+                        if line.startswith(f'{STATIC_FRICTION}:')]
+    assert friction_line.endswith('the recordings hold no kicks, which determine it')
+    assert not any(line.startswith(DAMPING) and 'hold no' in line
+                   for line in printed.splitlines())
     fitted = load_parameter_set(str(out))
     assert fitted.get(K_Z) == pytest.approx(34.3) and fitted.get(DAMPING) == pytest.approx(5e-9)

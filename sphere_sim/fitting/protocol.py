@@ -543,3 +543,22 @@ def friction_kicks(observations: Observations) -> Observations:
         i for i, kick in enumerate(observations.kicks)
         if probe_of(kick.times_s, kick.voltages_v) is not None
         or ramp_of(kick.times_s, kick.voltages_v) is not None)
+
+
+# Which of the protocol's experiments determines a parameter, by its section (the protocol's
+# table, docs/identification.md): the threshold searches the beams' stiffness, gap and damping
+# (where they pull in), the kicks the contact's friction (where a kick lands once the beams are
+# pinned).
+THRESHOLD_SECTIONS = ('beam', 'electrostatics')
+KICK_SECTIONS = ('friction', 'contact', 'sphere')
+
+
+def missing_experiment(path: str, thresholds: bool, kicks: bool) -> str | None:
+    """The experiment that determines the parameter ``path`` if the recordings lack it (they
+    hold ``thresholds`` searches, ``kicks``), else None."""
+    section = path.split('.', 1)[0]
+    if section in THRESHOLD_SECTIONS and not thresholds:
+        return "the protocol's threshold searches"
+    if section in KICK_SECTIONS and not kicks:
+        return 'kicks'
+    return None

@@ -280,6 +280,8 @@ def run_joint(args: argparse.Namespace, bags: Sequence[BagLocation],
 
 
 def print_joint_result(result: JointFitResult, wall_s: float) -> None:
+    from sphere_sim.fitting.protocol import missing_experiment
+
     print(f'{result.evaluations} evaluations in {wall_s:.0f} s; sum of squares '
           f'{result.chi2:.2f}: {result.threshold_chi2:.2f} over {len(result.thresholds)} thresholds'
           + (f', {result.kicks_chi2:.2f} over {2 * len(result.kicks.kicks)} kick residuals'
@@ -301,8 +303,11 @@ def print_joint_result(result: JointFitResult, wall_s: float) -> None:
               f'{model_v:.2f} V ({r:+.2f} sd)')
     for e in result.estimates:
         status = 'determined' if e.determined else 'undetermined'
+        lacking = None if e.determined else missing_experiment(
+            e.path, bool(result.thresholds), bool(result.kicks.kicks))
         print(f'{e.path}: {e.value:.4g}, 95 % profile interval [{e.low:.4g}, {e.high:.4g}] '
-              f'in the range [{e.range_low:.4g}, {e.range_high:.4g}]: {status} ({e.note})')
+              f'in the range [{e.range_low:.4g}, {e.range_high:.4g}]: {status} ({e.note})'
+              + (f'; the recordings hold no {lacking}, which determine it' if lacking else ''))
 
 
 def write_joint_fitted(path: Path, params: ParameterSet, fits: Sequence[FitParameter],
