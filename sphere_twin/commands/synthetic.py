@@ -288,8 +288,7 @@ def _protocol_markdown(rows: Sequence[Mapping[str, Any]], args: argparse.Namespa
              'evaluations). A parameter is determined when its interval spans at most a tenth '
              'of its scaled range and reaches neither end. See docs/identification.md.', '']
     for r in rows:
-        factors = ', '.join(f'`{p}` x {f:g}' for p, f in r['factors'].items())
-        lines += [f'## {r["device"]}: `{r["base"]}` with {factors}', '',
+        lines += [_device_heading(r), '',
                   f'{r["thresholds"]} thresholds and {r["kicks"]} kicks ({r["undetermined"]} '
                   f'left out: the model does not determine them), {r["evaluations"]} '
                   f'evaluations{" (stopped by the cost limit)" if r["cost_limited"] else ""} '
@@ -306,6 +305,12 @@ def _protocol_markdown(rows: Sequence[Mapping[str, Any]], args: argparse.Namespa
         lines.append('')
     lines += [summary]
     return '\n'.join(lines) + '\n'
+
+
+def _device_heading(row: Mapping[str, Any]) -> str:
+    """A study table's heading of one device: its base set and what was changed."""
+    factors = ', '.join(f'`{p}` x {f:g}' for p, f in row['factors'].items())
+    return f'## {row["device"]}: `{row["base"]}` with {factors}'
 
 
 def _rms(values: Sequence[float] | NDArray[np.float64]) -> float:
@@ -344,8 +349,7 @@ def _markdown(rows: Sequence[Mapping[str, Any]], args: argparse.Namespace, noise
              'identified from the bag alone. '
              'Intervals are 2 standard errors either side. See docs/identification.md.', '']
     for r in rows:
-        factors = ', '.join(f'`{p}` x {f:g}' for p, f in r['factors'].items())
-        lines += [f'## {r["device"]}: `{r["base"]}` with {factors}', '',
+        lines += [_device_heading(r), '',
                   f'{r["kicks"]} kicks ({r["undetermined"]} left out: the model does not '
                   f'determine them), {r["wall_s"]:.0f} s wall on {args.workers} workers '
                   f'({r["simulated_kicks"]} kicks simulated, {r["evaluations"]} evaluations); '
