@@ -85,6 +85,11 @@ class _Counted:
     def chi2(self, u: ArrayLike) -> float:
         return float(np.sum(self(u) ** 2))
 
+    def lowest(self) -> tuple[NDArray[np.float64], float]:
+        """The lowest point evaluated so far, and its sum of squares."""
+        best = min(self.cache, key=lambda k: float(np.sum(self.cache[k] ** 2)))
+        return np.array(best), float(np.sum(self.cache[best] ** 2))
+
 
 @dataclasses.dataclass(frozen=True)
 class ProfileInterval:
@@ -234,9 +239,24 @@ def profile(fun: _Counted, u_opt: NDArray[np.float64], chi_opt: float, j: int,
                            tuple(sorted(points)))
 
 
+def search_minimum(residuals: Residuals, dim: int, start: ArrayLike | None = None,
+                   starts: int = 8, descents: int = 2, seed: int = 0,
+                   max_evaluations: int = 400) -> tuple[NDArray[np.float64], float, int]:
+    """The multi-start of :func:`fit_profiles` alone: (lowest point, its sum of squares,
+    evaluations). The cost limit ends the search at the lowest point seen so far."""
+    fun = _Counted(residuals, max_evaluations)
+    extra = [] if start is None else [np.asarray(start, dtype=float)]
+    try:
+        u, chi = multistart(fun, dim, starts, descents, seed, extra)
+    except CostLimitError:
+        u, chi = fun.lowest()
+    return u, chi, fun.evaluations
+
+
 def fit_profiles(residuals: Residuals, dim: int, start: ArrayLike | None = None,
                  starts: int = 8, descents: int = 2, seed: int = 0,
-                 max_evaluations: int = 400) -> ProfileFit:
+                 max_evaluations: int = 400,
+                 extra_starts: Sequence[ArrayLike] = ()) -> ProfileFit:
     """Global minimum of ``sum(residuals(u)**2)`` over the unit cube by multi-start, then each
     coordinate's 95 % profile interval.
 
@@ -246,6 +266,8 @@ def fit_profiles(residuals: Residuals, dim: int, start: ArrayLike | None = None,
         u (shape (dim,), in [0, 1]) -> residual vector, each in units of its standard deviation.
     start : array, optional
         A point the search also starts from (the start values).
+    extra_starts : sequence of arrays
+        Further points the search starts from (another fit's optimum, say).
     starts, descents, seed
         Latin-hypercube points over the cube, and descents from the lowest of them.
     max_evaluations : int
@@ -254,12 +276,12 @@ def fit_profiles(residuals: Residuals, dim: int, start: ArrayLike | None = None,
         is kept.
     """
     fun = _Counted(residuals, max_evaluations)
-    extra = [] if start is None else [np.asarray(start, dtype=float)]
+    extra = ([] if start is None else [np.asarray(start, dtype=float)]) + [
+        np.asarray(p, dtype=float) for p in extra_starts]
     try:
         u_opt, chi_opt = multistart(fun, dim, starts, descents, seed, extra)
     except CostLimitError:
-        best = min(fun.cache, key=lambda k: float(np.sum(fun.cache[k] ** 2)))
-        u_opt, chi_opt = np.array(best), float(np.sum(fun.cache[best] ** 2))
+        u_opt, chi_opt = fun.lowest()
         return ProfileFit(u_opt, chi_opt, tuple(
             ProfileInterval(j, 0.0, 1.0, True, True, False, ()) for j in range(dim)),
             fun.evaluations, True, False)

@@ -238,7 +238,7 @@ def run_joint(args: argparse.Namespace, bags: Sequence[BagLocation],
               thresholds: Sequence[ThresholdObservation], out: Path, checkpoint: Path) -> int:
     """A protocol's recordings: its thresholds and its kicks (``kicks`` None: the thresholds
     alone) in one misfit, with profile intervals (sphere_sim.fitting.joint_fit)."""
-    from sphere_sim.fitting.joint_fit import fit_jointly
+    from sphere_sim.fitting.joint_fit import fit_jointly, thresholds_checkpoint
     from sphere_sim.fitting.observations import IdentificationError
     from sphere_sim.fitting.thresholds import ThresholdError
     from sphere_sim.model.parameters import load_parameter_set
@@ -264,7 +264,8 @@ def run_joint(args: argparse.Namespace, bags: Sequence[BagLocation],
     wall_s = time.perf_counter() - started
     print_joint_result(result, wall_s)
     write_joint_fitted(out, args.params, fits, result, [str(b.directory) for b in bags], wall_s)
-    checkpoint.unlink(missing_ok=True)
+    for done in (checkpoint, thresholds_checkpoint(checkpoint)):
+        done.unlink(missing_ok=True)
     print(f'wrote {out}')
     truth_path = bags[0].directory / TRUTH_FILE
     if truth_path.exists():

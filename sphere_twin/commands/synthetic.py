@@ -210,7 +210,7 @@ def run_protocol_study(args: argparse.Namespace, devices: Sequence[SyntheticDevi
     """``study --protocol``: each device's protocol recorded, then its thresholds and kicks
     fitted in one misfit; the intervals' coverage of the truth and what they determine."""
     from sphere_sim.fitting.identification import fit_parameters
-    from sphere_sim.fitting.joint_fit import fit_jointly
+    from sphere_sim.fitting.joint_fit import fit_jointly, thresholds_checkpoint
     from sphere_sim.kicks.engine import engine_of
     from sphere_sim.model.parameters import load_parameter_set
     from sphere_twin.commands.identify import JOINT_EVALUATIONS, read_recording
@@ -227,7 +227,7 @@ def run_protocol_study(args: argparse.Namespace, devices: Sequence[SyntheticDevi
             recording = read_recording(bag)
             fits = fit_parameters(base, device.fit)
             checkpoint = args.out.with_name(f'{args.out.stem}_{device.name}.partial.jsonl')
-            checkpoints.append(checkpoint)
+            checkpoints += [checkpoint, thresholds_checkpoint(checkpoint)]
             started = time.perf_counter()
             with tqdm(desc=f'identify {device.name}', unit='evaluation', leave=False) as bar:
                 def progress(ev: Evaluator, bar: tqdm = bar) -> None:
