@@ -11,6 +11,7 @@ from sphere_sim.fitting.profile_fit import (
     DETERMINED_SHARE,
     ProfileInterval,
     fit_profiles,
+    search_minimum,
 )
 
 
@@ -62,6 +63,33 @@ def test_the_multistart_finds_the_deeper_of_two_basins_a_descent_from_the_start_
 
     fit = fit_profiles(residuals, 1, start=[0.2], max_evaluations=300)
     assert fit.u[0] == pytest.approx(0.8, abs=1e-3)
+
+
+def double_well(u):
+    """Shallow basin at 0.2 (where the start sits), deep one at 0.8."""
+    x = float(u[0])
+    return np.array([30.0 * (x - 0.2) * (x - 0.8), 0.5 * (x - 0.8) / 0.1])
+
+
+def test_a_search_started_only_where_another_fit_ended_descends_into_that_basin():
+    # No Latin hypercube: the start values alone stay in the shallow basin, a further start in
+    # the deep one (as the thresholds' optimum is for the joint fit) reaches it.
+    shallow = fit_profiles(double_well, 1, start=[0.2], starts=0, descents=1,
+                           max_evaluations=300)
+    assert shallow.u[0] < 0.5
+    deep = fit_profiles(double_well, 1, start=[0.2], starts=0, descents=2,
+                        max_evaluations=300, extra_starts=[[0.75]])
+    assert deep.u[0] == pytest.approx(0.8, abs=1e-3)
+    assert deep.chi2 < shallow.chi2 - 1.0
+
+
+def test_the_search_alone_returns_the_lowest_point_it_saw_when_the_limit_stops_it():
+    u, chi, evaluations = search_minimum(double_well, 1, start=[0.2], max_evaluations=300)
+    assert u[0] == pytest.approx(0.8, abs=1e-3) and evaluations <= 300
+    u, chi, evaluations = search_minimum(double_well, 1, start=[0.2], max_evaluations=3)
+    assert evaluations == 3
+    assert chi == pytest.approx(float(np.sum(double_well(u) ** 2)))
+    assert chi <= float(np.sum(double_well([0.2]) ** 2))
 
 
 def test_the_cost_limit_stops_a_profile_and_marks_it_undetermined():
