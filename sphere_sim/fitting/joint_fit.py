@@ -9,6 +9,9 @@ friction once the beams are pinned, and moves in steps as the pull-in's paramete
 Fitted together, the thresholds hold the pull-in's parameters where the kicks alone trade them
 along a valley, and the kicks decide what the thresholds do not see.
 
+With both kinds, the multi-start runs on the thresholds alone (their misfit is smooth where
+the kicks' has steps) and the joint fit descends from its optimum and from the start values.
+
 The misfit is a plain sum of squares of residuals in units of their standard deviations: the
 kicks' residuals whitened by the sensor noise (with the restart's error,
 :meth:`~sphere_sim.fitting.observations.Observations.whitener`), and each threshold's
@@ -143,7 +146,8 @@ def fit_jointly(params: ParameterSet, fits: Sequence[FitParameter],
         Every evaluation is appended here; a rerun with the same inputs reads them back.
     max_evaluations : int
         Distinct parameter vectors simulated, search and profiles together; a profile the
-        limit stops is reported undetermined.
+        limit stops is reported undetermined. With kicks and thresholds both, the search on
+        the thresholds alone that comes first has a limit of its own, as large.
     """
     fits = list(fits)
     if not fits:
