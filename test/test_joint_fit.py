@@ -129,7 +129,7 @@ def test_the_protocol_study_counts_what_is_determined_and_the_truths_covered(tmp
         return joint_fit.JointFitResult(tuple(estimates), 1.0, 0.0, kicks, (), (threshold,),
                                         np.array([1.0]), np.array([44.2]), none, none, 9,
                                         ProfileFit(np.zeros(len(fits)), 1.0, (), 9, False,
-                                                   False))
+                                                   False), threshold_search_evaluations=4)
 
     monkeypatch.setattr(joint_fit, 'fit_jointly', known_answer)
     out = tmp_path / 'study.md'
@@ -139,6 +139,8 @@ def test_the_protocol_study_counts_what_is_determined_and_the_truths_covered(tmp
     assert status == 0
     assert asked == [(list(device.fit), 9)]
     assert printed[-1] == 'determined 1 of 3; coverage 0.67'
+    assert ('4 evaluations of the thresholds alone and 9 of the thresholds and kicks together'
+            in printed[0])
     assert any(line.strip().startswith(f'{device.fit[2]}:') and 'OUTSIDE' in line
                for line in printed)
     assert out.read_text().strip().splitlines()[-1] == 'determined 1 of 3; coverage 0.67'

@@ -88,8 +88,10 @@ class JointFitResult:
     model_thresholds_v: NDArray[np.float64]  # at the optimum
     kick_vectors_start: NDArray[np.float64]  # (k, 2) model minus recorded, rad, at the start
     kick_vectors_fitted: NDArray[np.float64]  # the same at the optimum
-    evaluations: int
+    evaluations: int  # of the misfit the intervals are read from
     profile: ProfileFit
+    # of the thresholds alone, searched first when kicks and thresholds are fitted together
+    threshold_search_evaluations: int = 0
 
     @property
     def threshold_chi2(self) -> float:
@@ -163,6 +165,7 @@ def fit_jointly(params: ParameterSet, fits: Sequence[FitParameter],
         evaluator = Evaluator(params, kicks, fits, engine, rtol, checkpoint, progress,
                               thresholds)
         misfit = JointMisfit(evaluator)
+        searched = 0
         if kicks.kicks and thresholds:
             # The thresholds' misfit is smooth in the beams' parameters where the kicks'
             # landings move in steps (paper_b: a multi-start of the two together ended at a sum
@@ -171,7 +174,7 @@ def fit_jointly(params: ParameterSet, fits: Sequence[FitParameter],
             alone = Evaluator(params, Observations((), 0.0), fits, engine, rtol,
                               None if checkpoint is None else thresholds_checkpoint(checkpoint),
                               progress, thresholds)
-            u_thresholds, _, _ = search_minimum(
+            u_thresholds, _, searched = search_minimum(
                 JointMisfit(alone), len(fits), start, starts=starts_per_parameter * len(fits),
                 descents=descents, seed=seed, max_evaluations=max_evaluations)
             fit = fit_profiles(misfit, len(fits), start, starts=0, descents=2, seed=seed,
@@ -190,7 +193,8 @@ def fit_jointly(params: ParameterSet, fits: Sequence[FitParameter],
             model_thresholds_v=misfit.thresholds_v(fit.u),
             kick_vectors_start=misfit.kick_vectors(start),
             kick_vectors_fitted=misfit.kick_vectors(fit.u),
-            evaluations=len(evaluator.cache), profile=fit)
+            evaluations=len(evaluator.cache), profile=fit,
+            threshold_search_evaluations=searched)
     return result
 
 

@@ -283,7 +283,10 @@ def run_joint(args: argparse.Namespace, bags: Sequence[BagLocation],
 def print_joint_result(result: JointFitResult, wall_s: float) -> None:
     from sphere_sim.fitting.protocol import missing_experiment
 
-    print(f'{result.evaluations} evaluations in {wall_s:.0f} s; sum of squares '
+    count = (f'{result.threshold_search_evaluations} evaluations of the thresholds alone, then '
+             f'{result.evaluations} of the thresholds and kicks together,'
+             if result.threshold_search_evaluations else f'{result.evaluations} evaluations')
+    print(f'{count} in {wall_s:.0f} s; sum of squares '
           f'{result.chi2:.2f}: {result.threshold_chi2:.2f} over {len(result.thresholds)} thresholds'
           + (f', {result.kicks_chi2:.2f} over {2 * len(result.kicks.kicks)} kick residuals'
              if result.kicks.kicks else '')
@@ -333,6 +336,7 @@ def write_joint_fitted(path: Path, params: ParameterSet, fits: Sequence[FitParam
                         're-minimised, has risen by 3.84 over the optimum',
             'wall_s': round(wall_s, 1),
             'evaluations': result.evaluations,
+            'threshold_search_evaluations': result.threshold_search_evaluations,
             'sum_of_squares': {'thresholds': result.threshold_chi2,
                                'kicks': result.kicks_chi2},
             'parameters': [{'path': e.path, 'tied': list(fp.tied),

@@ -242,6 +242,7 @@ def run_protocol_study(args: argparse.Namespace, devices: Sequence[SyntheticDevi
                 'thresholds': len(recording.thresholds), 'kicks': len(result.kicks.kicks),
                 'undetermined': len(result.undetermined),
                 'wall_s': time.perf_counter() - started, 'evaluations': result.evaluations,
+                'threshold_search_evaluations': result.threshold_search_evaluations,
                 'cost_limited': result.profile.cost_limited,
                 'chi2_thresholds': result.threshold_chi2, 'chi2_kicks': result.kicks_chi2,
                 'parameters': [{'path': e.path, 'start': base.get(e.path), 'value': e.value,
@@ -267,7 +268,7 @@ def run_protocol_study(args: argparse.Namespace, devices: Sequence[SyntheticDevi
 
 def _print_protocol_device(row: Mapping[str, Any]) -> None:
     print(f'{row["device"]}: {row["thresholds"]} thresholds and {row["kicks"]} kicks '
-          f'({row["undetermined"]} undetermined), {row["evaluations"]} evaluations in '
+          f'({row["undetermined"]} undetermined), {_evaluations_text(row)} in '
           f'{row["wall_s"]:.0f} s; sum of squares {row["chi2_thresholds"]:.1f} (thresholds) '
           f'+ {row["chi2_kicks"]:.1f} (kicks)')
     for p in row['parameters']:
@@ -290,8 +291,8 @@ def _protocol_markdown(rows: Sequence[Mapping[str, Any]], args: argparse.Namespa
     for r in rows:
         lines += [_device_heading(r), '',
                   f'{r["thresholds"]} thresholds and {r["kicks"]} kicks ({r["undetermined"]} '
-                  f'left out: the model does not determine them), {r["evaluations"]} '
-                  f'evaluations{" (stopped by the cost limit)" if r["cost_limited"] else ""} '
+                  f'left out: the model does not determine them), {_evaluations_text(r)}'
+                  f'{" (stopped by the cost limit)" if r["cost_limited"] else ""} '
                   f'in {r["wall_s"]:.0f} s on {args.workers} workers; sum of squares '
                   f'{r["chi2_thresholds"]:.1f} over the thresholds and {r["chi2_kicks"]:.1f} '
                   f'over {2 * r["kicks"]} kick residuals.', '',
@@ -305,6 +306,12 @@ def _protocol_markdown(rows: Sequence[Mapping[str, Any]], args: argparse.Namespa
         lines.append('')
     lines += [summary]
     return '\n'.join(lines) + '\n'
+
+
+def _evaluations_text(row: Mapping[str, Any]) -> str:
+    searched = row['threshold_search_evaluations']
+    return (f'{searched} evaluations of the thresholds alone and {row["evaluations"]} of the '
+            'thresholds and kicks together' if searched else f'{row["evaluations"]} evaluations')
 
 
 def _device_heading(row: Mapping[str, Any]) -> str:
