@@ -56,9 +56,10 @@ MODEL_RESOLUTION_V = 0.01
 # model's threshold lies inside the recorded bracket for 55 of the noiseless ones, and the
 # residuals' spread exceeds what the brackets' widths explain by 0.051 V (noiseless) and 0.045 V
 # (the noise study's sensor), nearly all of it paper_d's single beams at 5 ms (0.09 to 0.26 V
-# off, with k_phi x 0.75 and d_B,phi x 1.3). Without it the four single beams of one width count
-# as four observations of a threshold they all miss alike, and the intervals narrowed past the
-# truth (paper_b, all twelve brackets: docs/identification.md).
+# off, with k_phi x 0.75 and d_B,phi x 1.3). Without it (and with the searches undithered) the
+# four single beams of one width counted as four observations of a threshold they all missed
+# alike, and the intervals narrowed past the truth (paper_b, all twelve brackets:
+# docs/identification.md).
 MODEL_ERROR_V = 0.05
 # When the model's threshold lies outside the recorded bracket, the search widens by this much
 # (V) beyond the side it crossed, doubling each time: from the bracket to a threshold 10 V off in
