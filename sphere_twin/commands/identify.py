@@ -61,7 +61,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                     'so that the continuous model, started at rest at each kick\'s recorded '
                     'normal and driven by its recorded programme, reproduces the recorded '
                     'normal after it. Reads only the device\'s topics; writes a parameter file '
-                    'usable with every --params and a plot of recorded against fitted normals. '
+                    'usable with every --params and, for kicks alone, a plot of recorded '
+                    'against fitted normals. '
                     'A bag of the experiment protocol (sphere-twin experiment) adds its '
                     'thresholds to the same misfit: a multi-start over the declared ranges '
                     'and each parameter\'s 95 % profile-likelihood interval, undetermined '
@@ -85,8 +86,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
                         help="most evaluations of the residuals by the optimiser (each one "
                              "simulates every kick; a Jacobian's columns come on top; default "
                              f"{KICK_EVALUATIONS}); for a bag of the experiment protocol the "
-                             "cost limit of the whole fit, starts and profiles together "
-                             f"(default {JOINT_EVALUATIONS})")
+                             "cost limit of the fit, starts and profiles together, and "
+                             "another as large for the search on its thresholds alone that "
+                             f"comes first (default {JOINT_EVALUATIONS})")
     parser.add_argument('--thresholds', action='store_true',
                         help="fit the experiment protocol's recorded thresholds alone, "
                              "leaving its kicks out")
