@@ -85,6 +85,7 @@ class DeviceRecording:
                  seed: int, publish_rate_hz: float, tilt_deg: tuple[float, float]) -> None:
         from msg_defs.topics import PULSE_PROGRAM, SPHERE_STATE, SURFACE_NORMAL
         from sphere_sim.integrate.solve import DEFAULT_METHOD
+        from sphere_sim.integrate.tolerances import DEVICE_RTOL
         from sphere_sim.model.assembly import assemble
         from sphere_sim.model.initial_state import rest_state
         from sphere_sim.model.scene import load_scene
@@ -93,9 +94,9 @@ class DeviceRecording:
 
         model = assemble(load_scene('rest'), params)
         # The device stands in for hardware: integrated by the studies' method, which the fit
-        # also uses, not the live twin's cheaper one.
+        # also uses, not the live twin's cheaper one, and more tightly than the fit.
         plant = ContinuousPlant(model, rest_state(model, (*tilt_deg, 0.0)),
-                                method=DEFAULT_METHOD)
+                                rtol=DEVICE_RTOL, method=DEFAULT_METHOD)
         self.period_s = 1.0 / publish_rate_hz
         self.runner = TwinRunner(plant, self.period_s, noise_std_rad, seed)
         self.bag = bag

@@ -7,12 +7,13 @@ a step it starts on; starts spread over the declared ranges see the basins a sin
 misses (docs/identification.md, "On the paper's device").
 
 The interval of each parameter is read from its profile: the parameter is stepped away from
-the optimum, the others re-minimised at each step (from the neighbouring step's optimum), and
-the 95 % interval ends where the profile's sum of squares has risen by :data:`CHI2_95` over the
-minimum. Unlike the local slope's interval, a profile follows a curved or flattening valley and
-reports where the misfit actually rises. A parameter whose interval reaches a bound of its range,
-or spans more than :data:`DETERMINED_SHARE` of it, is *undetermined*: the experiments do not
-pin it, and the range is what is known.
+the optimum, the others re-minimised at each step (from where the optimum's linearisation puts
+them, with the last step's Jacobian as their first), and the 95 % interval ends where the
+profile's sum of squares has risen by :data:`CHI2_95` over the minimum. Unlike the local
+slope's interval, a profile follows a curved or flattening valley and reports where the misfit
+actually rises. A parameter whose interval reaches a bound of its range, or spans more than
+:data:`DETERMINED_SHARE` of it, is *undetermined*: the experiments do not pin it, and the range
+is what is known.
 
 Pure numerics, no model: the caller's residual function does the simulating and bears the cost,
 which :class:`CostLimitError` bounds (``max_evaluations`` distinct points).
@@ -43,6 +44,21 @@ FD_STEP_UNIT = 0.01
 # narrowest interval of interest) or the cost by less than FTOL of itself.
 XTOL = 1e-4
 FTOL = 1e-6
+# A profile step re-minimises the others by Levenberg-Marquardt on a Jacobian carried from the
+# optimum and updated by Broyden's rule after each accepted step, with no difference steps of
+# its own: the kicks' misfit has narrow islands where one kick lands on its other branch
+# (paper_b's protocol: two of 20 kicks, 50 standard deviations off, within 0.01 of the optimum),
+# and a difference step that lands on one turns the Jacobian to noise (a trust-region descent
+# with difference Jacobians then crawled for 64 evaluations at one profile step). A trial on
+# an island is merely rejected. It stops when a step would lower the sum of squares by less
+# than PROFILE_CHI2_TOL, far below the CHI2_95 the ends are read at, or after
+# MAX_PROFILE_STEP_EVALUATIONS.
+PROFILE_CHI2_TOL = 0.02
+MAX_PROFILE_STEP_EVALUATIONS = 10
+# Levenberg-Marquardt's damping (a share of J^T J's diagonal) after the first rejected step,
+# and its factor on each rejection (divided by it on each acceptance).
+FIRST_DAMPING = 1e-2
+DAMPING_FACTOR = 10.0
 MAX_DESCENT_EVALUATIONS = 40
 # The profile's first step is this share of the 95 % half-width the local curvature predicts
 # (so that a quadratic misfit is bracketed by the second step), kept within [MIN_STEP, MAX_STEP];
@@ -149,6 +165,44 @@ def local_minimum(fun: Callable[[NDArray[np.float64]], NDArray[np.float64]], u0:
     return u, float(np.sum(fun(u) ** 2)), np.asarray(sol.jac, dtype=float)
 
 
+def carried_minimum(fun: Callable[[NDArray[np.float64]], NDArray[np.float64]], u0: ArrayLike,
+                    free: Sequence[int], jac: NDArray[np.float64]
+                    ) -> tuple[NDArray[np.float64], float, NDArray[np.float64]]:
+    """Levenberg-Marquardt over the ``free`` coordinates from ``u0`` (kept in the cube) on the
+    Jacobian ``jac`` of those columns, updated by Broyden's rule after each accepted step and
+    never by differences. Returns (u, sum of squares, the Jacobian carried on)."""
+    u = np.asarray(u0, dtype=float).copy()
+    free = list(free)
+    r = fun(u)
+    chi = float(r @ r)
+    jac = np.array(jac, dtype=float)
+    if not free:
+        return u, chi, jac
+    damping = 0.0
+    for _ in range(MAX_PROFILE_STEP_EVALUATIONS - 1):
+        normal = jac.T @ jac
+        step = -np.linalg.solve(normal + damping * np.diag(np.diag(normal))
+                                + RIDGE * np.eye(len(free)), jac.T @ r)
+        trial = u.copy()
+        trial[free] = np.clip(u[free] + step, 0.0, 1.0)
+        dx = trial[free] - u[free]
+        predicted = chi - float(np.sum((r + jac @ dx) ** 2))
+        if predicted < PROFILE_CHI2_TOL:
+            break
+        r_trial = fun(trial)
+        chi_trial = float(r_trial @ r_trial)
+        if chi_trial < chi:
+            jac += np.outer(r_trial - r - jac @ dx, dx) / float(dx @ dx)
+            gained = chi - chi_trial
+            u, r, chi = trial, r_trial, chi_trial
+            damping /= DAMPING_FACTOR
+            if gained < PROFILE_CHI2_TOL:
+                break
+        else:
+            damping = FIRST_DAMPING if damping < FIRST_DAMPING else damping * DAMPING_FACTOR
+    return u, chi, jac
+
+
 def latin_starts(dim: int, starts: int, seed: int) -> list[NDArray[np.float64]]:
     from scipy.stats import qmc
 
@@ -187,24 +241,30 @@ def _crossing(t0: float, rise0: float, t1: float, rise1: float) -> float:
 
 
 def profile(fun: _Counted, u_opt: NDArray[np.float64], chi_opt: float, j: int,
-            first_step: float) -> ProfileInterval:
+            first_step: float, jac: NDArray[np.float64]) -> ProfileInterval:
     """The 95 % interval of parameter ``j``: step it away from ``u_opt`` either way, the others
-    re-minimised from the last step's optimum, until the sum of squares rises by
-    :data:`CHI2_95` (interpolated, then one step taken there and interpolated again) or the
-    range ends."""
+    re-minimised at each step, until the sum of squares rises by :data:`CHI2_95`
+    (interpolated, then one step taken there and interpolated again) or the range ends.
+
+    ``jac`` is the residuals' Jacobian at ``u_opt``. Each step starts the others where its
+    linearisation puts their minimum (the last step's optimum moved along the valley's
+    direction) and re-minimises them on its columns, carried from step to step
+    (:func:`carried_minimum`)."""
     dim = u_opt.size
     others = [k for k in range(dim) if k != j]
+    # How the others' minimum moves per unit of u_j, to first order.
+    valley = -np.asarray(np.linalg.lstsq(jac[:, others], jac[:, j], rcond=None)[0],
+                         dtype=float)
     ends, bounded, points, complete = [], [], [], True
     for side in (-1.0, 1.0):
-        t_prev, rise_prev, u_prev = 0.0, 0.0, u_opt.copy()
+        t_prev, rise_prev, u_prev, jac_prev = 0.0, 0.0, u_opt.copy(), jac[:, others]
         t, end, at_bound = first_step, None, False
         try:
             for _ in range(MAX_PROFILE_STEPS):
                 target = min(max(u_opt[j] + side * t, 0.0), 1.0)
                 t = abs(target - u_opt[j])
-                start = u_prev.copy()
-                start[j] = target
-                u, chi, _ = local_minimum(fun, start, others)
+                u, chi, jac_step = carried_minimum(fun, _along(u_prev, j, target, valley),
+                                                   others, jac_prev)
                 points.append((target, chi))
                 rise = chi - chi_opt
                 if rise >= CHI2_95:
@@ -212,10 +272,10 @@ def profile(fun: _Counted, u_opt: NDArray[np.float64], chi_opt: float, j: int,
                     # One more step where the interpolation puts the crossing, and the bracket
                     # it falls in interpolated again: exact for a quadratic, close for a valley
                     # that bends.
-                    at = u_prev.copy()
-                    at[j] = u_opt[j] + side * t_cross
-                    _, chi_c, _ = local_minimum(fun, at, others)
-                    points.append((float(at[j]), chi_c))
+                    at = u_opt[j] + side * t_cross
+                    _, chi_c, _ = carried_minimum(fun, _along(u_prev, j, at, valley),
+                                                  others, jac_prev)
+                    points.append((float(at), chi_c))
                     rise_c = chi_c - chi_opt
                     if rise_c >= CHI2_95:
                         t_cross = _crossing(t_prev, rise_prev, t_cross, rise_c)
@@ -226,7 +286,7 @@ def profile(fun: _Counted, u_opt: NDArray[np.float64], chi_opt: float, j: int,
                 if target in (0.0, 1.0):
                     end, at_bound = target, True
                     break
-                t_prev, rise_prev, u_prev = t, rise, u
+                t_prev, rise_prev, u_prev, jac_prev = t, rise, u, jac_step
                 t *= PROFILE_GROWTH
         except CostLimitError:
             complete = False
@@ -237,6 +297,17 @@ def profile(fun: _Counted, u_opt: NDArray[np.float64], chi_opt: float, j: int,
         bounded.append(at_bound)
     return ProfileInterval(j, ends[0], ends[1], bounded[0], bounded[1], complete,
                            tuple(sorted(points)))
+
+
+def _along(u: NDArray[np.float64], j: int, u_j: float, valley: NDArray[np.float64]
+           ) -> NDArray[np.float64]:
+    """``u`` with coordinate ``j`` set to ``u_j`` and the others moved along ``valley`` (their
+    change per unit of ``u_j``) by as much, kept in the cube."""
+    others = [k for k in range(u.size) if k != j]
+    start = u.copy()
+    start[others] = np.clip(start[others] + valley * (u_j - u[j]), 0.0, 1.0)
+    start[j] = u_j
+    return start
 
 
 def search_minimum(residuals: Residuals, dim: int, start: ArrayLike | None = None,
@@ -290,18 +361,22 @@ def fit_profiles(residuals: Residuals, dim: int, start: ArrayLike | None = None,
     except CostLimitError:
         jac = np.zeros((fun(u_opt).size, dim))
     steps = first_steps(jac)
-    intervals = tuple(profile(fun, u_opt, chi_opt, j, float(steps[j])) for j in range(dim))
+    intervals = tuple(profile(fun, u_opt, chi_opt, j, float(steps[j]), jac)
+                      for j in range(dim))
     lowest = min(c for i in intervals for _, c in i.points) if any(
         i.points for i in intervals) else chi_opt
     return ProfileFit(u_opt, chi_opt, intervals, fun.evaluations,
                       not all(i.complete for i in intervals), lowest < chi_opt - LOWER_BY)
 
 
-def _jacobian(fun: _Counted, u: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Forward differences of :data:`FD_STEP_UNIT` (backward at the range's top)."""
+def _jacobian(fun: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+              u: NDArray[np.float64], columns: Sequence[int] | None = None
+              ) -> NDArray[np.float64]:
+    """Forward differences of :data:`FD_STEP_UNIT` (backward at the range's top), of the
+    ``columns`` given (all by default)."""
     r0 = fun(u)
     cols = []
-    for j in range(u.size):
+    for j in range(u.size) if columns is None else columns:
         h = FD_STEP_UNIT if u[j] + FD_STEP_UNIT <= 1.0 else -FD_STEP_UNIT
         shifted = u.copy()
         shifted[j] += h
