@@ -52,8 +52,11 @@ FTOL = 1e-6
 # with difference Jacobians then crawled for 64 evaluations at one profile step). A trial on
 # an island is merely rejected. It stops when a step would lower the sum of squares by less
 # than PROFILE_CHI2_TOL, far below the CHI2_95 the ends are read at, or after
-# MAX_PROFILE_STEP_EVALUATIONS.
-PROFILE_CHI2_TOL = 0.02
+# MAX_PROFILE_STEP_EVALUATIONS. A step shorter than the difference step the Jacobian was taken
+# with does not update it: the misfit jitters with the integrator's step sequence (paper_b:
+# by about 0.5 in chi-square between points 1e-4 apart), and divided by so short a step the
+# jitter would read as slope.
+PROFILE_CHI2_TOL = 0.1
 MAX_PROFILE_STEP_EVALUATIONS = 10
 # Levenberg-Marquardt's damping (a share of J^T J's diagonal) after the first rejected step,
 # and its factor on each rejection (divided by it on each acceptance).
@@ -192,7 +195,8 @@ def carried_minimum(fun: Callable[[NDArray[np.float64]], NDArray[np.float64]], u
         r_trial = fun(trial)
         chi_trial = float(r_trial @ r_trial)
         if chi_trial < chi:
-            jac += np.outer(r_trial - r - jac @ dx, dx) / float(dx @ dx)
+            if float(np.max(np.abs(dx))) >= FD_STEP_UNIT:
+                jac += np.outer(r_trial - r - jac @ dx, dx) / float(dx @ dx)
             gained = chi - chi_trial
             u, r, chi = trial, r_trial, chi_trial
             damping /= DAMPING_FACTOR
