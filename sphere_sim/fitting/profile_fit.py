@@ -8,7 +8,7 @@ misses (docs/identification.md, "On the paper's device").
 
 The interval of each parameter is read from its profile: the parameter is stepped away from
 the optimum, the others re-minimised at each step (from where the optimum's linearisation puts
-them, with the last step's Jacobian as their first), and the 95 % interval ends where the
+them, on the optimum's Jacobian carried from step to step), and the 95 % interval ends where the
 profile's sum of squares has risen by :data:`CHI2_95` over the minimum. Unlike the local
 slope's interval, a profile follows a curved or flattening valley and reports where the misfit
 actually rises. A parameter whose interval reaches a bound of its range, or spans more than
@@ -44,25 +44,25 @@ FD_STEP_UNIT = 0.01
 # narrowest interval of interest) or the cost by less than FTOL of itself.
 XTOL = 1e-4
 FTOL = 1e-6
+MAX_DESCENT_EVALUATIONS = 40
 # A profile step re-minimises the others by Levenberg-Marquardt on a Jacobian carried from the
 # optimum and updated by Broyden's rule after each accepted step, with no difference steps of
-# its own: the kicks' misfit has narrow islands where one kick lands on its other branch
-# (paper_b's protocol: two of 20 kicks, 50 standard deviations off, within 0.01 of the optimum),
-# and a difference step that lands on one turns the Jacobian to noise (a trust-region descent
-# with difference Jacobians then crawled for 64 evaluations at one profile step). A trial on
-# an island is merely rejected. It stops when a step would lower the sum of squares by less
-# than PROFILE_CHI2_TOL, far below the CHI2_95 the ends are read at, or after
-# MAX_PROFILE_STEP_EVALUATIONS. A step shorter than the difference step the Jacobian was taken
-# with does not update it: the misfit jitters with the integrator's step sequence (paper_b:
-# by about 0.5 in chi-square between points 1e-4 apart), and divided by so short a step the
-# jitter would read as slope.
+# its own: the kicks' misfit has thin sheets where one kick lands on its other branch
+# (paper_b's protocol: two of 20 kicks, 50 standard deviations off, 0.005 to 0.04 of the range
+# from the optimum), and a difference step that lands on one turns the Jacobian to noise (a
+# trust-region descent with difference Jacobians then crawled for 64 evaluations at one
+# profile step). A trial on a sheet is merely rejected. It stops when a step would lower the
+# sum of squares by less than PROFILE_CHI2_TOL, far below the CHI2_95 the ends are read at, or
+# after MAX_PROFILE_STEP_EVALUATIONS. A step shorter than the difference step the Jacobian was
+# taken with does not update it: the misfit jitters with the integrator's step sequence
+# (paper_b: by about 0.5 in chi-square between points 1e-4 apart), and divided by so short a
+# step the jitter would read as slope.
 PROFILE_CHI2_TOL = 0.1
 MAX_PROFILE_STEP_EVALUATIONS = 10
 # Levenberg-Marquardt's damping (a share of J^T J's diagonal) after the first rejected step,
 # and its factor on each rejection (divided by it on each acceptance).
 FIRST_DAMPING = 1e-2
 DAMPING_FACTOR = 10.0
-MAX_DESCENT_EVALUATIONS = 40
 # The profile's first step is this share of the 95 % half-width the local curvature predicts
 # (so that a quadratic misfit is bracketed by the second step), kept within [MIN_STEP, MAX_STEP];
 # each further step is PROFILE_GROWTH times the last, at most MAX_PROFILE_STEPS per side.
@@ -373,14 +373,11 @@ def fit_profiles(residuals: Residuals, dim: int, start: ArrayLike | None = None,
                       not all(i.complete for i in intervals), lowest < chi_opt - LOWER_BY)
 
 
-def _jacobian(fun: Callable[[NDArray[np.float64]], NDArray[np.float64]],
-              u: NDArray[np.float64], columns: Sequence[int] | None = None
-              ) -> NDArray[np.float64]:
-    """Forward differences of :data:`FD_STEP_UNIT` (backward at the range's top), of the
-    ``columns`` given (all by default)."""
+def _jacobian(fun: _Counted, u: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Forward differences of :data:`FD_STEP_UNIT` (backward at the range's top)."""
     r0 = fun(u)
     cols = []
-    for j in range(u.size) if columns is None else columns:
+    for j in range(u.size):
         h = FD_STEP_UNIT if u[j] + FD_STEP_UNIT <= 1.0 else -FD_STEP_UNIT
         shifted = u.copy()
         shifted[j] += h
