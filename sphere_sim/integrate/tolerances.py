@@ -36,8 +36,9 @@ FIT_RTOL = 3e-5
 
 assert math.isclose(FIT_RTOL, LIVE_RTOL / 10, rel_tol=1e-12)
 # A synthetic device stands in for hardware, which has no integrator: its recordings are held to
-# a tenth of the fit's tolerance, so that the fit's own error is what the residuals carry. At the
-# live tolerance paper_e's first protocol kick ended 2.2e-3 rad from where the fit's model, at
-# the truth, lands it (7e-5 at FIT_RTOL, 2.3e-4 here, a kick near a landing's branch point),
-# and another 7.4e-4 (5.5e-5 at FIT_RTOL, 4e-5 here); the recording takes about twice as long.
+# a tenth of the fit's tolerance, so that the fit's own error is what the residuals carry. Recorded
+# at the live tolerance, paper_e's first protocol kick ended 2.2e-3 rad from where the fit's model
+# at the truth lands it, and its sixth 7.4e-4; recorded at this one, 2.3e-4 (a kick near a
+# landing's branch point, which the fit leaves out) and 4e-5. A recording takes 1.5 to 2 times
+# as long.
 DEVICE_RTOL = FIT_RTOL / 10
