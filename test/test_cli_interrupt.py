@@ -21,7 +21,11 @@ PROGRESS_PREFIX = 'replay-check: replaying: '
 # The start (imports, the kernel cache) and the first progress line (5 s in) take seconds;
 # the whole replay more than a minute, so the signal lands inside it.
 PROGRESS_TIMEOUT_S = 120.0
-EXIT_TIMEOUT_S = 60.0
+# A budget that only stops a stuck run: alone the command ends 1 to 10 s after the signal, but
+# in three first runs of the two-worker suite after a fresh install it had not ended 60 s after
+# it (a rerun of the same suite in the same clone: seconds). Why is not found; the line and the
+# status are what this test holds.
+EXIT_TIMEOUT_S = 300.0
 
 
 def _numba_style_error() -> SystemError:
