@@ -99,6 +99,23 @@ def test_a_root_within_the_tolerance_keeps_its_own_crossing_below_it():
     assert offset == pytest.approx(24.6, abs=2.0)
 
 
+def test_a_root_that_only_nears_zero_above_a_hump_gives_way_to_the_crossing_below_it():
+    """At (0.32, 0.44) the search ended at 36.42 V, +0.46 deg, where the error dips towards
+    zero without crossing it; below it lies a hump (+23.7 deg at 34.5 V) and, below that, a
+    crossing at 31.6 V whose kick is four times as wide. The sign change at 31-32 V is not the
+    root's own: the error at 32 V already lies further from zero than twice the tolerance."""
+    volts = [20.0, 30.0, 31.0, 31.5, 32.0, 33.0, 34.0, 34.5, 35.5, 36.0, 36.42, 37.0]
+    degrees = [-30.0, -5.25, -2.39, -0.29, 2.83, 0.86, 7.64, 23.73, 18.97, 5.41, 0.46, 6.2]
+
+    def error(v):
+        return math.radians(float(np.interp(v, volts, degrees)))
+
+    lower, evaluations = lowest_crossing(error, (20.0, error(20.0)), (36.42, error(36.42)))
+    assert lower is not None and 31.0 < lower[0] < 32.0
+    assert abs(lower[1]) <= math.radians(1.0)
+    assert evaluations <= 12 + OFFSET_REFINEMENTS + OFFSET_BISECTIONS
+
+
 def test_offset_search_locates_a_step_of_the_error_without_taking_it_for_a_root():
     """A beam snapping down can turn the error's sign with no root between: the bisections
     narrow the step to OFFSET_STEP_V and stop, the residual stays the step's."""
@@ -173,14 +190,53 @@ def test_reused_offsets_are_only_checked_for_a_lower_crossing(monkeypatch):
                                                                         degrees)))
             return KickEffect(1e-3 * np.array([math.cos(angle), math.sin(angle)]))
 
+        def tip_pushes(self, normal, design, intensity, offset_v, beam):
+            return offset_v > 36.0
+
     monkeypatch.setattr(characteristics, '_bench', lambda params: Bench())
     design = KickDesign()
     fresh = characteristics.voltage_offsets(design, 0.16, math.radians(12.0))
-    assert all(30.0 < s.offset_v < 33.0 for s in fresh)
-    high = [dataclasses.replace(s, offset_v=40.016, direction_error_rad=math.radians(0.1))
-            for s in fresh]
+    assert all(30.0 < s.offset_v < 33.0 and s.pushes is False for s in fresh)
+    high = [dataclasses.replace(s, offset_v=40.016, direction_error_rad=math.radians(0.1),
+                                pushes=True) for s in fresh]
     moved = characteristics.voltage_offsets(design, 0.16, math.radians(12.0), reuse=high)
+    # The moved states' branch is measured at their new offset, not carried over.
     assert all(30.0 < s.offset_v < 33.0 and abs(s.direction_error_rad) <= math.radians(1.0)
-               and s.evaluations > h.evaluations for s, h in zip(moved, high, strict=True))
+               and s.evaluations > h.evaluations and s.pushes is False
+               for s, h in zip(moved, high, strict=True))
+    # A file of a search that did not measure the branch gets it measured.
+    unmeasured = [dataclasses.replace(s, pushes=None) for s in fresh]
+    measured = characteristics.voltage_offsets(design, 0.16, math.radians(12.0),
+                                               reuse=unmeasured)
+    assert [dataclasses.replace(s, pushes=None) for s in measured] == unmeasured
+    assert all(s.pushes is False for s in measured)
     kept = characteristics.voltage_offsets(design, 0.16, math.radians(12.0), reuse=fresh)
     assert all(a is b for a, b in zip(kept, fresh, strict=True))
+
+
+def test_the_offsets_two_branches_meet_where_the_compensating_tip_strikes_the_sphere_again():
+    """At (0.48, -0.24), V1's tip loses the sphere before V1's rear lands up to 13.25 V of
+    offset; from 13.3 V it loses it and strikes it again as the rear lands; from 15 V it keeps
+    it. Released, the kick is wide and turns slowly with the offset (-1.76 deg at 13 V, 0.21
+    deg wide); pushed, V1 turns it onto its direction but takes most of it (+3.8 deg, 0.04 deg
+    wide at 15 V); in the band between, the second strike sends it 17 deg off at 14 V."""
+    from pathlib import Path
+
+    from sphere_sim.kicks.characteristics import KickBench, direction_error
+    from sphere_sim.kicks.discrete import normal_from_xy
+    from sphere_sim.kicks.offset_lookup import compensating_beam
+    from sphere_sim.model.parameters import load_parameter_set
+
+    design = KickDesign.load(Path(__file__).parents[1] / 'bench' / 'results'
+                             / 'kick_optimization.json')
+    bench = KickBench(load_parameter_set('calibrated'))
+    normal = normal_from_xy(0.48, -0.24)
+    beam = compensating_beam(design, upper_right=True)
+    assert [bench.tip_pushes(normal, design, 1.0, v, beam) for v in (13.0, 14.0, 15.0)] == \
+        [False, False, True]
+    released, band, pushed = (bench.effect(normal, design, 1.0, v, beam)
+                              for v in (13.0, 14.0, 15.0))
+    assert abs(direction_error(released, design)) < math.radians(3.0)
+    assert abs(direction_error(pushed, design)) < math.radians(5.0)
+    assert abs(direction_error(band, design)) > math.radians(10.0)
+    assert released.width_rad > 3.0 * pushed.width_rad

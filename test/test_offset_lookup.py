@@ -66,6 +66,41 @@ def test_the_lookup_is_exact_on_nodes_bilinear_between_and_mirrored_across_the_a
     assert OffsetLookup().offset_v(d, 0.2, 0.1) == 0.0
 
 
+def two_branch_lookup(design):
+    """10 V on the released branch (x_sn < 0.1), 20 V on the pushing one, on the half of a
+    5 x 5 grid: the cells between x_sn = 0 and 0.16 have corners on both."""
+    axis = STEP * np.arange(-2, 3)
+    nodes = [(x, y) for x in axis for y in axis
+             if side_of_axis(design.direction_rad, x, y) >= -1e-9]
+    return OffsetLookup(STEP, tuple((x, y, 20.0 if x > 0.1 else 10.0) for x, y in nodes),
+                        tuple(x > 0.1 for x, _ in nodes))
+
+
+def test_a_cell_across_the_branches_reads_the_branch_that_holds_most_of_the_weight():
+    """Between a node whose compensating beam releases the sphere and one whose beam pushes it,
+    a bilinear mean would put the offset in the band between the branches (13 V here at 0.3 of
+    the cell); the point takes the branch nearer it instead, and that branch's mean."""
+    lookup = two_branch_lookup(DIAGONAL)
+    d = DIAGONAL.direction_rad
+    y = 0.16  # the cells from (0, 0.16) to (0.16, 0.32) lie in the upper-right half
+    assert lookup.offset_v(d, 0.3 * STEP, y) == pytest.approx(10.0)
+    assert lookup.offset_v(d, 0.7 * STEP, y + 0.5 * STEP) == pytest.approx(20.0)
+    assert lookup.offset_v(d, 0.5 * STEP, y) == pytest.approx(20.0)  # a tie: pushing
+    # Without the branches the same nodes interpolate bilinearly across the band.
+    plain = OffsetLookup(STEP, lookup.nodes)
+    assert plain.offset_v(d, 0.3 * STEP, y) == pytest.approx(13.0)
+    # A cell with all four corners on one branch is plain bilinear, whatever the branch.
+    linear = linear_lookup(DIAGONAL)
+    pushing = OffsetLookup(STEP, linear.nodes, (True,) * len(linear.nodes))
+    for x, y in ((0.1, 0.05), (0.23, 0.11), (-0.05, 0.2)):
+        assert pushing.offset_v(d, x, y) == pytest.approx(linear.offset_v(d, x, y), abs=1e-12)
+    # The lower-left half reads its image's branch: (x, y) -> (-y, -x).
+    assert lookup.offset_v(d, -y, -0.3 * STEP) == pytest.approx(10.0)
+    assert lookup.offset_v(d, -y - 0.5 * STEP, -0.7 * STEP) == pytest.approx(20.0)
+    with pytest.raises(ValueError, match='branches'):
+        OffsetLookup(STEP, lookup.nodes, lookup.pushes[:-1])
+
+
 def test_the_offset_scales_with_intensity_and_vanishes_with_the_kick():
     lookup = linear_lookup(DIAGONAL)
     x, y = 0.16, 0.0
@@ -119,6 +154,12 @@ def test_offsets_load_from_their_file_only_for_their_design_and_set(tmp_path):
     path.write_text(json.dumps({'parameter_set': 'calibrated', 'design': DIAGONAL.to_dict(),
                                 'grid_step': STEP, 'states': states}))
     assert OffsetLookup.load(path, DIAGONAL, 'calibrated') == linear_lookup(DIAGONAL)
+    branches = two_branch_lookup(DIAGONAL)
+    path.write_text(json.dumps({
+        'parameter_set': 'calibrated', 'design': DIAGONAL.to_dict(), 'grid_step': STEP,
+        'states': [{'x_sn': x, 'y_sn': y, 'offset_v': v, 'pushes': p}
+                   for (x, y, v), p in zip(branches.nodes, branches.pushes, strict=True)]}))
+    assert OffsetLookup.load(path, DIAGONAL, 'calibrated') == branches
     with pytest.raises(OffsetError, match='another kick design'):
         OffsetLookup.load(path, AXIS, 'calibrated')
     with pytest.raises(OffsetError, match='another kick design'):
@@ -139,3 +180,7 @@ def test_a_table_spec_round_trips_its_offsets():
     del data['offsets']
     assert not TableSpec.from_dict(data).offsets
     assert math.isclose(again.offsets.offset_v(DIAGONAL.direction_rad, 0.0, 0.0), 5.0)
+    branches = TableSpec(offsets=two_branch_lookup(DIAGONAL))
+    assert TableSpec.from_dict(json.loads(json.dumps(branches.to_dict()))) == branches
+    unmeasured = TableSpec(offsets=OffsetLookup(STEP, branches.offsets.nodes))
+    assert unmeasured.digest('p') != branches.digest('p')

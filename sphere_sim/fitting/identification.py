@@ -98,6 +98,11 @@ DETERMINACY_RTOL_FACTOR = 0.1
 # run that recorded it, paper_e's 1st 27 times and 2.3e-4 rad; the kicks kept move within 0.6
 # of their shift (docs/identification.md).
 START_PROBE_RAD = 1e-4
+# The starts' shifts, one unit along x and along y.
+START_SHIFTS = (np.array([1.0, 0.0]), np.array([0.0, 1.0]))
+# What undetermined_kicks simulates of each kick: the start values at two tolerances and the
+# shifted starts.
+DETERMINACY_SIMULATIONS_PER_KICK = 2 + len(START_SHIFTS)
 # Finite-difference step in the scaled coordinate ([0, 1] over the range, logarithmic). The
 # integrator's error jumps as a parameter moves (a few 1e-6 rad); divided by the step, the jumps
 # must stay well below what a residual's noise can tell, or the Jacobian reads them as
@@ -279,7 +284,7 @@ def undetermined_kicks(params: ParameterSet, observations: Observations, engine:
     n = len(kicks)
     sigmas = [observations.residual_std_rad(i) for i in range(n)]
     probes = [max(sigma, START_PROBE_RAD) for sigma in sigmas]
-    shifts = [np.array([1.0, 0.0]), np.array([0.0, 1.0])]
+    shifts = START_SHIFTS
     tasks = [(params, kick, r) for r in (rtol, rtol * DETERMINACY_RTOL_FACTOR) for kick in kicks]
     tasks += [(params, dataclasses.replace(
         kick, normal_before=_shifted(kick.normal_before, probe * shift)), rtol)

@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from msg_defs.device import KICK_WINDOW_S
+from sphere_sim.integrate.solve import simulate
 from sphere_sim.kicks.design import KickDesign, cardan_of_normal, simulate_kick
 from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD, normal_from_cardan, normal_from_xy
 from sphere_sim.kicks.lookup_table import TableSpec
@@ -29,6 +30,11 @@ from sphere_sim.model.programme import PulseProgramme
 from sphere_sim.model.scene import load_scene
 
 CHARACTERISTIC_RTOL = 1e-6
+# The offsets are searched on half the table's grid step. Between nodes the offset's effect is
+# not linear in the volts: over 307 states of a 0.02 grid on the lower right of the half cone,
+# the full kick strayed more than 5 deg from 55 with the offsets on the table's own step and
+# from 31 on half of it (22 with the two branches kept apart; docs/motion_primitives.md).
+OFFSET_GRID_STEP = 0.5 * TableSpec.grid_step
 # The offset search stops once the kick's direction is this close to the nominal one; below it
 # the direction is set by the interpolation of the table rather than by the offset.
 OFFSET_DIRECTION_TOL_RAD = math.radians(1.0)
@@ -59,6 +65,20 @@ OFFSET_STEP_V = 0.02
 # -1.4 deg at 32.5 V, +35 at 35, +14.6 at 37.5), so a 1 V step sees it. With the rule those
 # five moved to 31.5-34.1 V and every other node kept its offset.
 OFFSET_LOWEST_ROOT_STEP_V = 1.0
+# A sign change below a root within the tolerance is the root's own crossing unless the error
+# turns back between them; sampled there at more than this times the larger of the root's error
+# and the tolerance, it has (lowest_crossing).
+OWN_CROSSING_FACTOR = 2.0
+# Whether the compensating beam's tip pushes the sphere until that beam's rear lands (the
+# offsets' two branches, :meth:`KickBench.tip_pushes`) is read off samples this far apart. Where
+# the tip loses the sphere and strikes it again as the rear lands (at (0.48, -0.24), 13.4 V:
+# off from 0.95 to 1.17 ms), it is off for about 0.2 ms.
+TIP_CONTACT_SAMPLE_S = 2e-5
+# A tip that leaves the sphere no earlier than this before its beam's rear lands has pushed it
+# through the stroke. Measured at (0.48, -0.24), (0.48, -0.16), (0.40, -0.16), (0.30, 0.30)
+# and (0, 0.24): pushing tips leave 0-0.02 ms before the landing; released ones, and those that
+# strike again, 0.22-0.42 ms before it.
+TIP_RELEASE_MARGIN_S = 1e-4
 
 
 @dataclasses.dataclass(frozen=True)
@@ -114,6 +134,31 @@ class KickBench:
         moved = self.final_normal(normal, design.programme(intensity, offset_v, offset_beam))
         return KickEffect(moved[:2] - normal[:2])
 
+    def tip_pushes(self, normal: NDArray[np.float64], design: KickDesign, intensity: float,
+                   offset_v: float, beam: int) -> bool:
+        """Whether ``beam``'s tip stays on the sphere until the beam's rear lands, within its
+        pulse: the branch of the offsets on which that beam pushes the sphere through its whole
+        stroke.
+
+        Its pull-in races the sphere, which the high pair lifts away from it. Below the race's
+        voltage the tip loses the sphere before the rear lands; just above, it loses it and
+        strikes it again as the rear lands; well above, it keeps it (docs/motion_primitives.md,
+        "Two branches of the offset").
+        """
+        programme = design.programme(intensity, offset_v, beam)
+        pulse = next(p for p in programme.pulses if p.beam == beam)
+        traj = simulate(self.model, self.rest(normal), pulse.end_s, programme, rtol=self.rtol,
+                        sample_period_s=TIP_CONTACT_SAMPLE_S)
+        k = self.model.beams.index(beam)
+        rear = np.array([self.model.ground_gaps(traj.x[:, i])[0, k] for i in range(traj.t.size)])
+        landed = np.flatnonzero(rear <= 0.0)
+        if not landed.size:
+            return False
+        before = traj.t < traj.t[landed[0]] - TIP_RELEASE_MARGIN_S
+        tip = np.array([self.model.sphere_gaps(traj.x[:, i])[k]
+                        for i in np.flatnonzero(before)])
+        return bool(np.all(tip <= 0.0))
+
 
 @dataclasses.dataclass(frozen=True)
 class WidthCurve:
@@ -167,6 +212,9 @@ class OffsetSolution:
     direction_error_without_rad: float
     width_rad: float
     evaluations: int  # kicks simulated by the search
+    # Whether the compensating beam's tip pushes the sphere until its rear lands, at offset_v
+    # (KickBench.tip_pushes); None in a file of a search that did not measure it.
+    pushes: bool | None = None
 
 
 def find_offset(error_of_offset: Callable[[float], float], candidates_v: Iterable[float],
@@ -182,9 +230,11 @@ def find_offset(error_of_offset: Callable[[float], float], candidates_v: Iterabl
     more than ``tol_rad`` off, up to ``bisections`` more offsets are tried, each the middle of
     the sign change, among all the offsets tried so far, whose end is nearest zero (brackets
     narrower than :data:`OFFSET_STEP_V` are steps, not roots, and are left alone). A search
-    that regula falsi finishes is the same with or without the bisections. A root found
-    within ``tol_rad`` is then checked for a lower one in its scanned bracket
-    (:func:`lowest_crossing`); where there is none, the result is the same as without the check.
+    that regula falsi finishes is the same with or without the bisections. The offset found,
+    within ``tol_rad`` or not, is then checked for a lower root within it in its scanned
+    bracket (:func:`lowest_crossing`); where there is none, the result is the same as without
+    the check. (At (0.2, 0.6) the bisections ended at 36.37 V, 1.34 deg off with a kick 0.27 deg
+    wide; the crossing below lies at 31.5 V, 0.86 deg wide.)
 
     Parameters
     ----------
@@ -209,7 +259,7 @@ def find_offset(error_of_offset: Callable[[float], float], candidates_v: Iterabl
     best, evaluations = _refine(error_of_offset, points, (va, ea), (vb, eb), best, evaluations,
                                 tol_rad, refinements, bisections)
     below = [p for p in scanned if p[0] < best[0]]
-    if abs(best[1]) > tol_rad or not below:
+    if not below:
         return best[0], best[1], evaluations
     lower, extra = lowest_crossing(error_of_offset, below[-1], best, tol_rad, refinements,
                                    bisections)
@@ -263,7 +313,11 @@ def lowest_crossing(error_of_offset: Callable[[float], float], scanned: tuple[fl
 
     The sampling stops one step short of ``root``. Its first sign change is ``root``'s own
     crossing (the error within the tolerance but not yet at zero) unless the error turns back
-    between them: at ``root`` itself or at a sampled offset above the sign change. A sign
+    between them: changes sign again at ``root`` itself or at a sampled offset above the sign
+    change, or lies there further from zero than :data:`OWN_CROSSING_FACTOR` times the larger
+    of ``root``'s error and ``tol_rad`` (a hump: ``root`` is then a near miss of zero, not a
+    crossing, as at (0.32, 0.44): +2.8 deg at 32 V, +23.7 deg at 34.5 V, +0.46 deg at the
+    root, 36.42 V, whose kick is a quarter as wide as the crossing's at 31.6 V). A sign
     change that refines to no root within ``tol_rad`` is a step of the error (a beam
     snapping down), and None. The rule keeps neighbouring nodes of the cone's edge on one
     branch of the offsets (the low one, where the kick is widest; see
@@ -283,10 +337,14 @@ def lowest_crossing(error_of_offset: Callable[[float], float], scanned: tuple[fl
         e = error_of_offset(v)
         evaluations += 1
         if previous[1] * e < 0.0 and abs(previous[1] - e) < math.pi:
-            turned = e * root[1] < 0.0
+            # Between its own crossing and the root the error runs from zero to the root's;
+            # one further from zero than twice that (or the tolerance) rose and came back.
+            hump = OWN_CROSSING_FACTOR * max(abs(root[1]), tol_rad)
+            turned = e * root[1] < 0.0 or abs(e) > hump
             for w in grid[n + 1:] if not turned else ():
                 evaluations += 1
-                if e * error_of_offset(w) < 0.0:
+                ew = error_of_offset(w)
+                if e * ew < 0.0 or abs(ew) > hump:
                     turned = True
                     break
             if not turned:
@@ -326,23 +384,30 @@ def _offset_job(args: tuple[ParameterSet | None, KickDesign, float, float, float
     def error(offset_v: float) -> float:
         return direction_error(effect(offset_v), design)
 
+    def with_branch(found: OffsetSolution) -> OffsetSolution:
+        if found.pushes is not None:
+            return found
+        pushes = bench.tip_pushes(normal, design, intensity, found.offset_v, beam)
+        return dataclasses.replace(found, pushes=pushes)
+
     if solution is not None:
         scanned = sorted({0.0, *candidates})
         below = [v for v in scanned if v < solution.offset_v]
         if (solution.offset_v in scanned or not below
                 or solution.offset_v - below[-1] < 2.0 * OFFSET_LOWEST_ROOT_STEP_V):
-            return solution  # a scanned offset, or a root with no step of room below it
+            return with_branch(solution)  # a scanned offset, or a root with no room below it
         lower, extra = lowest_crossing(error, (below[-1], error(below[-1])),
                                        (solution.offset_v, solution.direction_error_rad))
         if lower is None:
-            return solution
-        return dataclasses.replace(solution, offset_v=lower[0], direction_error_rad=lower[1],
-                                   width_rad=effect(lower[0]).width_rad,
-                                   evaluations=solution.evaluations + extra)
+            return with_branch(solution)
+        return with_branch(dataclasses.replace(
+            solution, offset_v=lower[0], direction_error_rad=lower[1],
+            width_rad=effect(lower[0]).width_rad, evaluations=solution.evaluations + extra,
+            pushes=None))
     error_at_zero = error(0.0)
     offset_v, residual, evaluations = find_offset(error, candidates)
-    return OffsetSolution(x_sn, y_sn, beam, offset_v, residual, error_at_zero,
-                          effect(offset_v).width_rad, evaluations)
+    return with_branch(OffsetSolution(x_sn, y_sn, beam, offset_v, residual, error_at_zero,
+                                      effect(offset_v).width_rad, evaluations))
 
 
 _BENCHES: dict[ParameterSet | None, KickBench] = {}
@@ -370,7 +435,7 @@ def upper_right_nodes(design: KickDesign, grid_step: float,
             if side_of_axis(design.direction_rad, x, y) >= -ON_AXIS_TOL]
 
 
-def voltage_offsets(design: KickDesign | None = None, grid_step: float = TableSpec.grid_step,
+def voltage_offsets(design: KickDesign | None = None, grid_step: float = OFFSET_GRID_STEP,
                     cone_half_angle_rad: float = CONE_HALF_ANGLE_RAD, intensity: float = 1.0,
                     params: ParameterSet | None = None, workers: int = 1,
                     progress: Callable[[], object] | None = None,

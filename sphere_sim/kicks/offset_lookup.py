@@ -73,23 +73,33 @@ class OffsetLookup:
     nodes : tuple of (x_sn, y_sn, offset_v)
         The searched grid nodes, all in the upper-right half (or on the axis), in the frame of
         the design's own kick direction.
+    pushes : tuple of bool
+        For each node, whether the compensating beam's tip pushes the sphere until that beam's
+        rear lands at the node's offset (the offset's branch,
+        :meth:`~sphere_sim.kicks.characteristics.KickBench.tip_pushes`); empty where it was
+        not measured, and then every node counts as on one branch.
     """
 
     grid_step: float = 0.0
     nodes: tuple[tuple[float, float, float], ...] = ()
+    pushes: tuple[bool, ...] = ()
 
     def __post_init__(self) -> None:
         nodes = tuple((float(x), float(y), float(v)) for x, y, v in self.nodes)
         object.__setattr__(self, 'nodes', nodes)
+        object.__setattr__(self, 'pushes', tuple(bool(p) for p in self.pushes))
         if nodes and not self.grid_step > 0.0:
             raise ValueError('offsets need the grid step they were searched on')
+        if self.pushes and len(self.pushes) != len(nodes):
+            raise ValueError(f'{len(self.pushes)} branches for {len(nodes)} offset nodes')
 
     def __bool__(self) -> bool:
         return bool(self.nodes)
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> OffsetLookup:
-        return cls(float(data.get('grid_step', 0.0)), tuple(map(tuple, data.get('nodes', ()))))
+        return cls(float(data.get('grid_step', 0.0)), tuple(map(tuple, data.get('nodes', ()))),
+                   tuple(data.get('pushes', ())))
 
     @classmethod
     def load(cls, path: str | Path, design: KickDesign, parameter_set: str) -> OffsetLookup:
@@ -105,8 +115,11 @@ class OffsetLookup:
         try:
             data = json.loads(Path(path).read_text())
             searched = (data['design'], data['parameter_set'])
-            lookup = cls(float(data['grid_step']), tuple((s['x_sn'], s['y_sn'], s['offset_v'])
-                                                         for s in data['states']))
+            states = data['states']
+            pushes = [s.get('pushes') for s in states]
+            lookup = cls(float(data['grid_step']),
+                         tuple((s['x_sn'], s['y_sn'], s['offset_v']) for s in states),
+                         () if None in pushes else tuple(pushes))
         except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
             raise OffsetError(f'{path} holds no voltage offsets saved by `sphere-twin '
                               f'primitives offsets`: {type(exc).__name__}: {exc}') from exc
@@ -118,22 +131,32 @@ class OffsetLookup:
         return lookup
 
     def offset_v(self, direction_rad: float, x_sn: float, y_sn: float) -> float:
-        """The full kick's offset at (x_sn, y_sn), bilinear over the grid.
+        """The full kick's offset at (x_sn, y_sn), bilinear over the grid, on one branch.
 
         A point of the lower-left half reads its mirror image's offset; grid nodes the search
-        left out (beyond the cone) take the nearest searched node's.
+        left out (beyond the cone) take the nearest searched node's. In a cell whose corners lie
+        on both branches (:attr:`pushes`), the point takes the branch that holds most of its
+        bilinear weight (the pushing one at a tie) and the weighted mean of that branch's
+        corners: between the branches lies the band where the compensating beam's tip loses
+        the sphere and strikes it again, and a mean across it would put the offset there
+        (docs/motion_primitives.md, "Two branches of the offset").
         """
         if not self.nodes:
             return 0.0
-        grid, axis = _full_grid(self, round(direction_rad, 12))
+        grid, pushing, axis = _full_grid(self, round(direction_rad, 12))
         point = np.array([x_sn, y_sn, 1.0])
         if side_of_axis(direction_rad, x_sn, y_sn) < 0.0:
             point = kick_axis_mirror(direction_rad).apply_vector(point)
         u = np.clip((point[:2] - axis[0]) / self.grid_step, 0.0, axis.size - 1)
         i, j = np.minimum(np.floor(u).astype(int), axis.size - 2)
         fx, fy = u - (i, j)
-        return float((1 - fx) * (1 - fy) * grid[i, j] + fx * (1 - fy) * grid[i + 1, j]
-                     + (1 - fx) * fy * grid[i, j + 1] + fx * fy * grid[i + 1, j + 1])
+        corners = (slice(i, i + 2), slice(j, j + 2))
+        weights = np.outer((1 - fx, fx), (1 - fy, fy))
+        branch = pushing[corners]
+        if branch.any() and not branch.all():
+            branch = branch if weights[branch].sum() >= 0.5 else ~branch
+            weights = np.where(branch, weights, 0.0)
+        return float(np.sum(weights * grid[corners]) / np.sum(weights))
 
     def programme(self, design: KickDesign, x_sn: float, y_sn: float, intensity: float,
                   upper_right: bool | None = None) -> PulseProgramme:
@@ -152,20 +175,24 @@ class OffsetLookup:
 
 
 @functools.lru_cache(maxsize=8)
-def _full_grid(lookup: OffsetLookup,
-               direction_rad: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The offsets on the whole square grid: the searched half, its mirror image, and the
-    nearest searched node's offset beyond the cone."""
+def _full_grid(lookup: OffsetLookup, direction_rad: float
+               ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
+    """The offsets and their branches on the whole square grid: the searched half, its mirror
+    image, and the nearest searched node's beyond the cone."""
     step = lookup.grid_step
     half = max(round(max(abs(c) for n in lookup.nodes for c in n[:2]) / step), 1)
     axis = step * np.arange(-half, half + 1)
     grid = np.full((axis.size, axis.size), np.nan)
+    pushing = np.zeros(grid.shape, dtype=bool)
     mirror = kick_axis_mirror(direction_rad)
-    for x, y, v in lookup.nodes:
+    pushes = lookup.pushes or (False,) * len(lookup.nodes)
+    for (x, y, v), push in zip(lookup.nodes, pushes, strict=True):
         for px, py, _ in (np.array([x, y, 1.0]), mirror.apply_vector([x, y, 1.0])):
             grid[round(px / step) + half, round(py / step) + half] = v
+            pushing[round(px / step) + half, round(py / step) + half] = push
     known = np.argwhere(np.isfinite(grid))
     for i, j in np.argwhere(~np.isfinite(grid)):
-        nearest = known[np.argmin(np.hypot(*(known - (i, j)).T))]
-        grid[i, j] = grid[tuple(nearest)]
-    return grid, cast(NDArray[np.float64], axis)
+        nearest = tuple(known[np.argmin(np.hypot(*(known - (i, j)).T))])
+        grid[i, j] = grid[nearest]
+        pushing[i, j] = pushing[nearest]
+    return grid, pushing, cast(NDArray[np.float64], axis)

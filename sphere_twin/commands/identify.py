@@ -25,7 +25,10 @@ import yaml
 from numpy.typing import NDArray
 from tqdm import tqdm
 
-from sphere_sim.fitting.identification import START_PARAMETER_SET
+from sphere_sim.fitting.identification import (
+    DETERMINACY_SIMULATIONS_PER_KICK,
+    START_PARAMETER_SET,
+)
 from sphere_twin.commands.bag import BAG_HELP
 from sphere_twin.commands.options import (
     DEFAULT_OUT_DIR,
@@ -381,9 +384,9 @@ def say_setup(workers: int, scheduler: str | None, fitted: int, kicks: int) -> N
     where = f'the Dask cluster at {scheduler}' if scheduler else f'{workers} local process(es)'
     say(f'starting {where}; each builds the model and loads its compiled kernels '
         '(numba compiles them on first use, a minute or more)')
-    say(f'first: {4 * kicks} kick simulations (every kick at the start values, at the fit\'s '
-        'tolerance and a tenth of it and from starts shifted along x and y, to leave out those '
-        'the model does not determine), then '
+    say(f'first: {DETERMINACY_SIMULATIONS_PER_KICK * kicks} kick simulations (every kick at '
+        'the start values, at the fit\'s tolerance and a tenth of it and from starts shifted '
+        'along x and y, to leave out those the model does not determine), then '
         f'a batch of {(1 + fitted) * kicks} (the start and one step per fitted parameter) '
         'before the count below first moves')
 

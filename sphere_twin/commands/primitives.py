@@ -12,13 +12,13 @@ from tqdm import tqdm
 
 from sphere_sim.kicks.characteristics import (
     OFFSET_DIRECTION_TOL_RAD,
+    OFFSET_GRID_STEP,
     OffsetSolution,
     rotation_width_curves,
     voltage_offsets,
 )
 from sphere_sim.kicks.design import KickDesign
 from sphere_sim.kicks.discrete import CONE_HALF_ANGLE_RAD
-from sphere_sim.kicks.lookup_table import TableSpec
 from sphere_twin.commands.optimize import DEFAULT_OUTPUT as DEFAULT_DESIGN
 from sphere_twin.commands.options import (
     DEFAULT_OUT_DIR,
@@ -55,8 +55,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     offsets = sub.add_parser('offsets', help='voltage offsets over the cone (Fig. 8)',
                              description='For each grid state, the offset on the compensating '
                                          'beam that puts the kick on its nominal direction.')
-    offsets.add_argument('--grid-step', type=GRID_STEP, default=TableSpec.grid_step,
-                         help="step in x_sn and y_sn, 0.01 to 1 (default the table's own)")
+    offsets.add_argument('--grid-step', type=GRID_STEP, default=OFFSET_GRID_STEP,
+                         help=f"step in x_sn and y_sn, 0.01 to 1 (default {OFFSET_GRID_STEP:g}, "
+                              "half the table's)")
     offsets.add_argument('--workers', type=positive_int, default=2, help='local processes')
     offsets.add_argument('--reuse', type=Path, default=None,
                          help='an earlier offsets JSON of the same design, parameters and '
