@@ -35,7 +35,9 @@ LIVE_ERROR_BOUND_RAD = 0.1 * NOISE_STUDY_STD_RAD
 # carries times in whole nanoseconds) and its voltages to this. A sender's voltage offset
 # (§4.1) follows the normal it measured, the plant's the normal it holds: where the shipped
 # offsets are steepest (99.5 V per unit of x_sn between neighbouring nodes) the tolerance admits
-# senders 2.5 mrad apart, and more elsewhere.
+# senders 2.5 mrad apart, and more elsewhere. Between nodes on the offsets' two branches the
+# offset jumps by a few volts (OffsetLookup.offset_v): a sender and a plant on either side of
+# that line disagree. The 41 cells with such a line lie 0.14 to 0.60 from the cone's centre.
 DECODE_TIME_TOL_S = 1e-8
 DECODE_VOLTAGE_TOL_V = 0.25
 # Times built from sums of periods differ from products in the last bits; events this close
