@@ -91,6 +91,7 @@ CASES = [
           f'argument --grid-step: {GRID_RANGE}'),
     _case(['table', 'build', '--grid-step', '1e-9', '--output', 'out.npz'],
           f'argument --grid-step: {GRID_RANGE}'),
+    _case(['table', 'check', '--grid', '0'], f'argument --grid: {GRID_RANGE}'),
     _case(['table', 'build', '--window-s', 'nan', '--output', 'out.npz'],
           'argument --window-s: must be a positive number from 0.01 to 1'),
     _case(['evaluate', '--kick-period-s', '1e6', '--out', 'out'],

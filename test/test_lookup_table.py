@@ -302,6 +302,26 @@ def test_between_a_released_and_a_pushing_node_the_offset_stays_on_one_branch():
     assert width > narrower
 
 
+def test_the_directions_grid_covers_the_simulated_half_of_the_cone_once():
+    """`table check --grid`: the states of a square grid inside the cone on the half the table
+    simulates, action 0; the other half is their mirror image, so none of them is sampled."""
+    from sphere_sim.kicks.table_build import grid_check_states
+
+    spec = TableSpec()
+    radius = math.sin(spec.cone_half_angle_rad)
+    states = grid_check_states(0.03, spec)
+    xy = np.array([normal[:2] for normal, _ in states])
+    assert all(action == 0 for _, action in states)
+    assert np.all(np.hypot(*xy.T) <= radius + 1e-12)
+    assert all(spec.side(x, y) >= 0.0 for x, y in xy)
+    np.testing.assert_allclose(xy / 0.03, np.round(xy / 0.03), atol=1e-9)
+    # Half the disc's grid points, the axis's counted once: pi r^2 / 2 / step^2 within its rim.
+    assert abs(len(states) - math.pi * radius ** 2 / 2.0 / 0.03 ** 2) < 2.0 * radius / 0.03 * 2
+    mirrored = {tuple(np.round(KICK_AXIS_MIRROR.apply_vector([x, y, 0.0])[:2], 9))
+                for x, y in xy if spec.side(x, y) > 1e-9}
+    assert not mirrored & {tuple(np.round(p, 9)) for p in xy}
+
+
 def test_an_unkicked_sphere_stays_where_it_rests_across_the_shipped_table(shipped):
     """The u_K = 0 entries (every beam at the low voltage, below pull-in) are the model's own
     drift over a kick window: with friction that holds there is none to subtract."""

@@ -373,16 +373,30 @@ class OffGridDirection:
                                   2.0 * math.pi))
 
 
+def grid_check_states(step: float, spec: TableSpec) -> list[tuple[NDArray[np.float64], int]]:
+    """(normal, action 0) at the states of a square ``step`` grid inside the cone on the half
+    the table simulates (:meth:`TableSpec.side` >= 0): every other state and action is an image
+    of one of these under the device's symmetry."""
+    radius = math.sin(spec.cone_half_angle_rad)
+    axis = step * np.arange(-math.floor(radius / step), math.floor(radius / step) + 1)
+    return [(normal_from_xy(float(x), float(y)), 0) for x in axis for y in axis
+            if math.hypot(x, y) <= radius and spec.side(float(x), float(y)) >= 0.0]
+
+
 def check_directions(table: LookupTable, n_points: int = 8, seed: int = 0,
-                     progress: Callable[[int, int], object] | None = None
-                     ) -> list[OffGridDirection]:
+                     progress: Callable[[int, int], object] | None = None,
+                     grid_step: float | None = None) -> list[OffGridDirection]:
     """The full kick's direction at the states and actions of :func:`check_table` (the same
-    seed gives the same states), each with the offset the table's spec interpolates there:
-    between the nodes, where the offsets' nodes do not reach (docs/motion_primitives.md)."""
+    seed gives the same states), or with ``grid_step`` at those of :func:`grid_check_states`,
+    each with the offset the table's spec interpolates there: between the nodes, where the
+    offsets' nodes do not reach (docs/motion_primitives.md)."""
     spec = spec_from_dict(table.meta['spec'])
     params = table.parameters()
+    states = (grid_check_states(grid_step, spec) if grid_step is not None else
+              [(normal, action) for normal, action, _ in
+               random_check_points(n_points, seed, spec.cone_half_angle_rad)])
     out: list[OffGridDirection] = []
-    for normal, action, _ in random_check_points(n_points, seed, spec.cone_half_angle_rad):
+    for normal, action in states:
         nominal = table.directions_rad[action]
         predicted = table.kick(normal, action, 1.0).normal[:2] - normal[:2]
         simulated = direct_kick(spec, params, normal, action, 1.0).normal[:2] - normal[:2]
@@ -392,5 +406,5 @@ def check_directions(table: LookupTable, n_points: int = 8, seed: int = 0,
             math.remainder(math.atan2(predicted[1], predicted[0]) - nominal, 2.0 * math.pi),
             float(np.hypot(*simulated))))
         if progress is not None:
-            progress(len(out), n_points)
+            progress(len(out), len(states))
     return out
