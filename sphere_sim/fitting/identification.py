@@ -284,17 +284,16 @@ def undetermined_kicks(params: ParameterSet, observations: Observations, engine:
     n = len(kicks)
     sigmas = [observations.residual_std_rad(i) for i in range(n)]
     probes = [max(sigma, START_PROBE_RAD) for sigma in sigmas]
-    shifts = START_SHIFTS
     tasks = [(params, kick, r) for r in (rtol, rtol * DETERMINACY_RTOL_FACTOR) for kick in kicks]
     tasks += [(params, dataclasses.replace(
         kick, normal_before=_shifted(kick.normal_before, probe * shift)), rtol)
-        for shift in shifts for kick, probe in zip(kicks, probes, strict=True)]
+        for shift in START_SHIFTS for kick, probe in zip(kicks, probes, strict=True)]
     ends = [np.asarray(e)[:2] for e in engine(_observation_task, tasks)]
     left_out = []
     for i in range(n):
         apart = np.linalg.norm(ends[i] - ends[n + i])
         moved = max(np.linalg.norm(ends[(2 + k) * n + i] - ends[i] - probes[i] * shift)
-                    for k, shift in enumerate(shifts))
+                    for k, shift in enumerate(START_SHIFTS))
         if apart > sigmas[i] or moved > probes[i]:
             left_out.append(i)
     return tuple(left_out)

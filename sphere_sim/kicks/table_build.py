@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 from threadpoolctl import threadpool_limits
 
+from sphere_sim.kicks.characteristics import offset_grid
 from sphere_sim.kicks.design import KICK_RELAXATION, cardan_of_normal, simulate_kick
 from sphere_sim.kicks.discrete import KickResult, normal_from_xy
 from sphere_sim.kicks.engine import DaskEngine, PoolEngine, SerialEngine, engine_for
@@ -377,10 +378,8 @@ def grid_check_states(step: float, spec: TableSpec) -> list[tuple[NDArray[np.flo
     """(normal, action 0) at the states of a square ``step`` grid inside the cone on the half
     the table simulates (:meth:`TableSpec.side` >= 0): every other state and action is an image
     of one of these under the device's symmetry."""
-    radius = math.sin(spec.cone_half_angle_rad)
-    axis = step * np.arange(-math.floor(radius / step), math.floor(radius / step) + 1)
-    return [(normal_from_xy(float(x), float(y)), 0) for x in axis for y in axis
-            if math.hypot(x, y) <= radius and spec.side(float(x), float(y)) >= 0.0]
+    return [(normal_from_xy(x, y), 0) for x, y in offset_grid(step, spec.cone_half_angle_rad)
+            if spec.side(x, y) >= 0.0]
 
 
 def check_directions(table: LookupTable, n_points: int = 8, seed: int = 0,
