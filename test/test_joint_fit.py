@@ -75,7 +75,8 @@ def test_the_joint_misfit_is_the_kicks_whitened_then_the_thresholds_in_sd(calibr
 
     end = kick_end_normal(calibrated, kicks.kicks[0])
     expected_kick = kicks.whitener() @ (end - kicks.kicks[0].normal_after)[:2]
-    model_v = model_threshold_v(calibrated, (3,), 5e-3, (0.0, 0.0, 1.0), (46.4, 46.6))
+    model_v = model_threshold_v(calibrated, (3,), 5e-3, (0.0, 0.0, 1.0), 46.5,
+                                origin_v=threshold.low_v)
     assert r.shape == (3,)
     np.testing.assert_allclose(r[:2], expected_kick, rtol=1e-9)
     assert r[2] == pytest.approx((model_v - threshold.middle_v) / threshold.std_v, rel=1e-9)
@@ -90,6 +91,36 @@ def test_the_joint_misfit_is_the_kicks_whitened_then_the_thresholds_in_sd(calibr
     other = Evaluator(calibrated, kicks, fits, SerialEngine(), checkpoint=checkpoint,
                       thresholds=[ThresholdObservation((3,), 5e-3, 46.2, 46.4, LEVEL)])
     assert other.resumed == 0
+
+
+def test_a_threshold_near_one_searched_starts_at_its_predicted_cell(calibrated, monkeypatch):
+    """The second of two nearby points searches each threshold from the cell the first one's
+    threshold predicts: a few pulses, not the seven of a search from the recorded bracket's
+    middle, and the same cell a search from that middle finds."""
+    from sphere_sim.fitting import thresholds
+
+    thresholds.clear_cache()  # an earlier test may have searched the first point
+    pulses = []
+    pulls_in = thresholds._Probe.pulls_in
+    monkeypatch.setattr(thresholds._Probe, 'pulls_in',
+                        lambda probe, amplitude_v: pulses.append(amplitude_v)
+                        or pulls_in(probe, amplitude_v))
+    threshold = ThresholdObservation((3,), 5e-3, 46.4, 46.6, (0.0, 0.0, 1.0))
+    fits = fit_parameters(calibrated, [K_Z])
+    u = fits[0].to_unit(calibrated.get(K_Z))
+    ev = Evaluator(calibrated, Observations((), 0.0), fits, SerialEngine(),
+                   thresholds=[threshold])
+    ev(np.array([u]))
+    from_middle = len(pulses)
+    near = np.array([u + 2e-4])  # k_z 0.025 % stiffer: the threshold moves by some 6 mV
+    (predicted_v,) = ev.predicted_thresholds_v(near)
+    assert predicted_v == ev(np.array([u]))[0]  # one point searched: its threshold
+    (value_v,) = ev(near)
+    assert len(pulses) - from_middle <= 3 < from_middle
+    thresholds.clear_cache()
+    params = calibrated.replace(**{K_Z: fits[0].from_unit(float(near[0]))})
+    assert value_v == model_threshold_v(params, (3,), 5e-3, (0.0, 0.0, 1.0),
+                                        threshold.middle_v, origin_v=threshold.low_v)
 
 
 def test_the_protocol_study_counts_what_is_determined_and_the_truths_covered(tmp_path,

@@ -38,8 +38,8 @@ def calibrated():
 
 
 def test_the_protocols_rule_finds_the_threshold_the_beam_touching_down_finds(calibrated):
-    # Searched from a guess 3 V wide that does not hold it centred: the search widens as needed.
-    by_rule = model_threshold_v(calibrated, BEAM, WIDTH_S, LEVEL, (44.0, 46.0))
+    # Searched from a guess 1.5 V below it: the search gallops up as needed.
+    by_rule = model_threshold_v(calibrated, BEAM, WIDTH_S, LEVEL, 45.0)
     by_contact = ground_contact_threshold_v(calibrated, BEAM[0], WIDTH_S, 44.0, 49.0)
     assert abs(by_rule - by_contact) < 0.1
 
@@ -49,14 +49,72 @@ def test_softer_suspension_lowers_the_threshold_and_more_damping_raises_a_short_
     def threshold(params, width_s, guess):
         return model_threshold_v(params, BEAM, width_s, LEVEL, guess)
 
-    long_pulse = threshold(calibrated, WIDTH_S, (46.4, 46.6))
+    long_pulse = threshold(calibrated, WIDTH_S, 46.5)
     softer = threshold(calibrated.replace(**{K_Z: 0.9 * calibrated.get(K_Z)}), WIDTH_S,
-                       (46.4, 46.6))
+                       46.5)
     assert softer < long_pulse - 10 * MODEL_RESOLUTION_V
-    short_pulse = threshold(calibrated, SHORT_S, (56.0, 56.4))
+    short_pulse = threshold(calibrated, SHORT_S, 56.2)
     damped = threshold(calibrated.replace(**{DAMPING: 1.3 * calibrated.get(DAMPING)}), SHORT_S,
-                       (56.0, 56.4))
+                       56.2)
     assert damped > short_pulse + 10 * MODEL_RESOLUTION_V
+
+
+class SteppedProbe:
+    """A probe whose pulses pull in from ``threshold_v`` up, counting the pulses."""
+
+    def __init__(self, threshold_v):
+        self.threshold_v, self.pulses = threshold_v, 0
+
+    def pulls_in(self, amplitude_v):
+        self.pulses += 1
+        return amplitude_v >= self.threshold_v
+
+
+@pytest.mark.parametrize('guess_v', [44.237, 44.23, 44.25, 44.19, 44.31, 40.0, 49.5, 0.0, 89.0])
+def test_the_models_threshold_is_its_lattice_cell_wherever_the_search_starts(guess_v):
+    from sphere_sim.fitting.thresholds import _search
+
+    stepped = SteppedProbe(44.2371)
+    assert _search(stepped, guess_v, MODEL_RESOLUTION_V) == pytest.approx(44.235, abs=1e-9)
+    # A guess d cells off costs at most two pulses and two per doubling of d.
+    cells = max(abs(guess_v - 44.235) / MODEL_RESOLUTION_V, 1.0)
+    assert stepped.pulses <= 2 + 2 * math.ceil(math.log2(cells)) + 1
+
+
+def test_a_guess_in_the_right_cell_costs_its_two_ends_and_no_threshold_reads_the_limit():
+    from msg_defs.device import VOLTAGE_LIMIT_V
+    from sphere_sim.fitting.thresholds import _search
+
+    stepped = SteppedProbe(44.2371)
+    _search(stepped, 44.2371, MODEL_RESOLUTION_V)
+    assert stepped.pulses == 2
+    # A lattice from an origin (a recorded bracket's low end): the cell [44.233, 44.243).
+    for guess_v in (44.24, 44.1, 45.0):
+        assert _search(SteppedProbe(44.2371), guess_v, MODEL_RESOLUTION_V,
+                       origin_v=44.003) == pytest.approx(44.238, abs=1e-9)
+    assert _search(SteppedProbe(math.inf), 50.0, MODEL_RESOLUTION_V) == VOLTAGE_LIMIT_V
+
+
+def test_a_threshold_is_predicted_from_the_points_searched_near_it():
+    from sphere_sim.fitting.thresholds import PREDICTION_RADIUS_U, predicted_thresholds_v
+
+    rng = np.random.default_rng(3)
+    points = 0.5 + 0.02 * rng.standard_normal((6, 2))
+    slope = np.array([[3.0, -1.0], [0.5, 2.0]])  # two thresholds, affine in u
+    values = 44.0 + (points - 0.5) @ slope
+    u = np.array([0.51, 0.49])
+    fallback = np.array([40.0, 41.0])
+    np.testing.assert_allclose(predicted_thresholds_v(points, values, u, fallback),
+                               44.0 + (u - 0.5) @ slope, atol=1e-9)
+    # No more points than parameters: the nearest one's.
+    np.testing.assert_allclose(predicted_thresholds_v(points[:2], values[:2], u, fallback),
+                               values[np.argmin(np.linalg.norm(points[:2] - u, axis=1))])
+    # Nothing searched near: the fallback (the recorded brackets' middles).
+    far = u + 2 * PREDICTION_RADIUS_U
+    np.testing.assert_array_equal(predicted_thresholds_v(points, values, far, fallback),
+                                  fallback)
+    np.testing.assert_array_equal(predicted_thresholds_v(np.zeros((0, 2)), np.zeros((0, 2)),
+                                                         u, fallback), fallback)
 
 
 def probe(beams, width_s, amplitude_v, before, after):
@@ -99,7 +157,7 @@ def test_the_fit_of_one_threshold_recovers_the_stiffness_that_made_it(calibrated
     from sphere_sim.fitting.joint_fit import fit_jointly
 
     device = calibrated.replace(**{K_Z: 0.85 * calibrated.get(K_Z)})
-    made = model_threshold_v(device, BEAM, WIDTH_S, LEVEL, (43.0, 46.0))
+    made = model_threshold_v(device, BEAM, WIDTH_S, LEVEL, 44.5)
     low = math.floor(made / 0.2) * 0.2  # a bisection's grid
     obs = [ThresholdObservation(BEAM, WIDTH_S, low, low + 0.2, LEVEL)]
     (fit,) = fit_parameters(calibrated, [K_Z])

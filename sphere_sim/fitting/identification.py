@@ -50,7 +50,11 @@ from sphere_sim.fitting.observations import (
     KickObservation,
     Observations,
 )
-from sphere_sim.fitting.thresholds import ThresholdObservation, model_threshold_v
+from sphere_sim.fitting.thresholds import (
+    ThresholdObservation,
+    model_threshold_v,
+    predicted_thresholds_v,
+)
 from sphere_sim.integrate.tolerances import FIT_RTOL
 from sphere_sim.kicks.design import (
     KICK_RELAXATION,
@@ -147,7 +151,8 @@ MAX_RESTARTS = 2
 # The reported interval: this many standard errors either side (about 95 % for a Gaussian
 # estimate), in the scaled coordinate, so that it is a factor either way in the value.
 UNCERTAINTY_SIGMAS = 2.0
-CHECKPOINT_VERSION = 1
+# 2: the model's thresholds are the cells of a fixed lattice (thresholds.model_threshold_v).
+CHECKPOINT_VERSION = 2
 
 
 # --- the parameters fitted ------------------------------------------------------------------------
@@ -261,14 +266,20 @@ def kick_end_normal(params: ParameterSet, kick: KickObservation,
                           dtype=float)
 
 
-def _observation_task(task: tuple[ParameterSet, KickObservation | ThresholdObservation, float]
-                      ) -> NDArray[np.float64]:
+# One simulation's inputs: the parameters, the observation, the tolerance, and for a threshold
+# where its search starts (V; None: the recorded bracket's middle).
+ObservationTask = tuple[ParameterSet, KickObservation | ThresholdObservation, float,
+                        float | None]
+
+
+def _observation_task(task: ObservationTask) -> NDArray[np.float64]:
     """One simulation of one observation: a kick's end normal, or a threshold (V, one entry)."""
-    params, observation, rtol = task
+    params, observation, rtol, guess_v = task
     if isinstance(observation, ThresholdObservation):
         return np.array([model_threshold_v(params, observation.beams, observation.width_s,
                                            observation.normal_before,
-                                           (observation.low_v, observation.high_v),
+                                           observation.middle_v if guess_v is None
+                                           else guess_v, origin_v=observation.low_v,
                                            rtol=rtol)])
     return kick_end_normal(params, observation, rtol)
 
@@ -284,9 +295,10 @@ def undetermined_kicks(params: ParameterSet, observations: Observations, engine:
     n = len(kicks)
     sigmas = [observations.residual_std_rad(i) for i in range(n)]
     probes = [max(sigma, START_PROBE_RAD) for sigma in sigmas]
-    tasks = [(params, kick, r) for r in (rtol, rtol * DETERMINACY_RTOL_FACTOR) for kick in kicks]
+    tasks: list[ObservationTask] = [(params, kick, r, None) for r in (
+        rtol, rtol * DETERMINACY_RTOL_FACTOR) for kick in kicks]
     tasks += [(params, dataclasses.replace(
-        kick, normal_before=_shifted(kick.normal_before, probe * shift)), rtol)
+        kick, normal_before=_shifted(kick.normal_before, probe * shift)), rtol, None)
         for shift in START_SHIFTS for kick, probe in zip(kicks, probes, strict=True)]
     ends = [np.asarray(e)[:2] for e in engine(_observation_task, tasks)]
     left_out = []
@@ -399,13 +411,14 @@ class Evaluator:
         keys = [self.key(u) for u in points]
         todo = list(dict.fromkeys(k for k in keys if k not in self.cache))
         if todo:
-            tasks: list[tuple[ParameterSet, KickObservation | ThresholdObservation, float]] = []
+            tasks: list[ObservationTask] = []
             owners = []
             for key in todo:
-                p = params_at(self.params, self.fits,
-                              self.values([float.fromhex(v) for v in key]))
-                tasks += [(p, kick, self.rtol) for kick in self.obs.kicks]
-                tasks += [(p, threshold, self.rtol) for threshold in self.thresholds]
+                u = [float.fromhex(v) for v in key]
+                p = params_at(self.params, self.fits, self.values(u))
+                tasks += [(p, kick, self.rtol, None) for kick in self.obs.kicks]
+                tasks += [(p, threshold, self.rtol, float(guess)) for threshold, guess
+                          in zip(self.thresholds, self.predicted_thresholds_v(u), strict=True)]
                 owners.append(key)
             results = self.engine(_observation_task, tasks)
             n, m = len(self.obs.kicks), len(self.thresholds)
@@ -425,6 +438,19 @@ class Evaluator:
 
     def __call__(self, u: ArrayLike) -> NDArray[np.float64]:
         return self.many([u])[0]
+
+    def predicted_thresholds_v(self, u: ArrayLike) -> NDArray[np.float64]:
+        """Where each threshold's search at ``u`` starts: predicted from those already
+        searched (:func:`~sphere_sim.fitting.thresholds.predicted_thresholds_v`), which sets
+        the search's cost and not its value."""
+        if not self.thresholds:
+            return np.zeros(0)
+        rows = 2 * len(self.obs.kicks)
+        keys = list(self.cache)
+        return predicted_thresholds_v(
+            [[float.fromhex(v) for v in key] for key in keys],
+            [self.cache[key][rows:] for key in keys], u,
+            [t.middle_v for t in self.thresholds])
 
     def jacobian(self, u: ArrayLike, step: float = FD_STEP) -> NDArray[np.float64]:
         """Forward differences (backward at the range's top), all columns in one batch."""

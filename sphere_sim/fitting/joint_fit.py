@@ -54,7 +54,8 @@ from sphere_sim.model.parameters import ParameterSet
 STARTS_PER_PARAMETER = 3
 DESCENTS = 2
 # The cost limit's default: distinct parameter vectors simulated (each one every kick and every
-# threshold: some 0.1-0.3 s per kick and 0.6-1 s per threshold on one core).
+# threshold: some 0.1-0.3 s per kick on one core, and per threshold 0.3 s where its cell is
+# predicted from the points near (thresholds.predicted_thresholds_v), 0.6-1.3 s elsewhere).
 MAX_EVALUATIONS = 300
 
 

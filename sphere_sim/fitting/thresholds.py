@@ -3,20 +3,23 @@ for a parameter set, and a recorded bracket as a residual.
 
 A threshold search (:mod:`sphere_sim.fitting.protocol`) brackets the amplitude at which a
 probe of ``beams`` and ``width_s`` pulls in, from the sphere resting where the recording says
-it rested. The model's threshold is found the same way, by bisection on direct simulation,
-with the rule the protocol's floor encodes: one pulse, started at rest at the recorded normal,
-has pulled in when the resting normal :data:`~sphere_sim.fitting.protocol.PROBE_SPACING_S`
-after its start (when the train's next pulse would begin) lies more than
-:data:`~sphere_sim.fitting.protocol.PULL_IN_STEP_RAD` from the normal before it.
+it rested. The model's threshold is found on direct simulation, on a fixed lattice of
+amplitudes (:data:`MODEL_RESOLUTION_V`), with the rule the protocol's floor encodes: one pulse,
+started at rest at the recorded normal, has pulled in when the resting normal
+:data:`~sphere_sim.fitting.protocol.PROBE_SPACING_S` after its start (when the train's next
+pulse would begin) lies more than :data:`~sphere_sim.fitting.protocol.PULL_IN_STEP_RAD` from
+the normal before it.
 
 Unlike a kick's landing, which moves in steps as the beams' parameters change, a threshold moves
 smoothly with them (docs/identification.md, "An experiment protocol"); its misfit has only the
-bisection's own resolution as steps (:data:`MODEL_RESOLUTION_V`).
+lattice's resolution as steps.
 
 Cost, measured on one core (`calibrated` and paper_b's twelve brackets, each from its recorded
-rest): the rest state 0.2 s, one pulse 0.05 s (not pulled in) to 0.1 s (pulled in); a threshold
-searched from its recorded bracket to :data:`MODEL_RESOLUTION_V`, 0.5 to 0.8 s at the device's
-parameters and 1.0 to 1.3 s where the model's threshold lies one to three volts off.
+rest): the rest state 0.1 s, one pulse 0.05 s (not pulled in) to 0.1 s (pulled in). All twelve
+at paper_b's truth, 7.6 s (70 pulses) searched from the recorded brackets' middles, 3.4 s (24
+pulses) from the right cells, 4.6 s (36) from 0.013 V above them, 15 s (156) from 0.5 V above
+them. A fit predicts each search's cell from the thresholds of the points it searched before
+(:func:`predicted_thresholds_v`).
 """
 
 from __future__ import annotations
@@ -27,13 +30,13 @@ from collections import OrderedDict
 from collections.abc import Iterable, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from threadpoolctl import threadpool_limits
 
 from msg_defs.device import VOLTAGE_LIMIT_V
 from sphere_sim.fitting.protocol import (
     PROBE_SPACING_S,
     PULL_IN_STEP_RAD,
-    Bisection,
     ProbeBracket,
     moved_rad,
     probe_programme,
@@ -45,10 +48,11 @@ from sphere_sim.kicks.table_build import BLAS_THREADS_PER_KICK
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.parameters import ParameterSet
 
-# The model's threshold is bisected to this width (V) and reported at the middle: a twentieth of
-# the protocol's 0.2 V resolution. Its quantisation (uniform, within +-0.005 V) moves a residual
-# by at most a tenth of a bracket's standard deviation (0.052 V), so that the misfit's steps stay
-# well below the rise of 3.84 an interval is read at; each halving costs one more pulse.
+# The model's threshold is the cell of this width (V) it lies in, on a lattice from 0 V, reported
+# at the cell's middle: a twentieth of the protocol's 0.2 V resolution. Its quantisation (uniform,
+# within +-0.005 V) moves a residual by at most a tenth of a bracket's standard deviation
+# (0.052 V), so that the misfit's steps stay well below the rise of 3.84 an interval is read at;
+# each halving costs one more pulse.
 MODEL_RESOLUTION_V = 0.01
 # The model's own error in a threshold (V, one standard deviation): one pulse from rest at the
 # resting normal stands in for a train of ten from the sphere as the search left it. Measured at
@@ -61,13 +65,18 @@ MODEL_RESOLUTION_V = 0.01
 # alike, and the intervals narrowed past the truth (paper_b, all twelve brackets:
 # docs/identification.md).
 MODEL_ERROR_V = 0.05
-# When the model's threshold lies outside the recorded bracket, the search widens by this much
-# (V) beyond the side it crossed, doubling each time: from the bracket to a threshold 10 V off in
-# five pulses.
-EXPAND_STEP_V = 0.5
-# Thresholds kept per process (each is some 0.6-1 s of simulation): a fit's multi-start and its
+# Thresholds kept per process (each is some 0.3-1.3 s of simulation): a fit's multi-start and its
 # profiles come back to points they evaluated.
 CACHE_SIZE = 4096
+# Neighbours per fitted parameter that a threshold's prediction is fitted to (an affine fit needs
+# n + 1): twice that, so that one point from across a kink or a sheet moves it little.
+PREDICTION_NEIGHBOURS_PER_PARAMETER = 2
+# A threshold is predicted only from points this near in the scaled parameters (a tenth of each
+# range, the width of an interval called determined). The pulses' outcome need not rise with
+# the amplitude far from the threshold: on paper_b, beams 1+2 at 1.5 ms move the sphere at
+# 47.6 V and not from there up to their threshold at 54.4 V, so a search started 3 V below it
+# ends at 47.6 V. From the middle of the recorded bracket it finds what the device's search did.
+PREDICTION_RADIUS_U = 0.1
 
 
 class ThresholdError(ValueError):
@@ -160,52 +169,99 @@ class _Probe:
 
 
 def model_threshold_v(params: ParameterSet, beams: Sequence[int], width_s: float,
-                      normal_before: Sequence[float], guess_v: tuple[float, float],
-                      resolution_v: float = MODEL_RESOLUTION_V,
+                      normal_before: Sequence[float], guess_v: float,
+                      resolution_v: float = MODEL_RESOLUTION_V, origin_v: float = 0.0,
                       rtol: float = FIT_RTOL) -> float:
     """The model's pull-in threshold (V) of one pulse of ``width_s`` on ``beams``, from rest at
-    ``normal_before``: the middle of a bisected bracket no wider than ``resolution_v``.
+    ``normal_before``: the middle of the cell of the lattice of ``resolution_v`` (multiples of
+    it from ``origin_v``) whose lower end does not pull in and whose upper end does. A fit puts
+    each observation's origin at its recorded bracket's low end, so that the searches'
+    lattices are dithered as the device's were
+    (:func:`~sphere_sim.fitting.protocol.dithered`) and the model's quantisation of four
+    thresholds alike is not one draw shared four times.
 
-    The search starts from ``guess_v`` (the recorded bracket, say), widening beyond a side the
-    model crosses, and keeps to 0 to the device's limit: a model that does not pull in below
-    :data:`~msg_defs.device.VOLTAGE_LIMIT_V` returns the limit (the residual is then a bound).
-    Cached per (parameters, step, start, guess, resolution, tolerance).
+    The search starts at the cell holding ``guess_v`` and gallops outwards from it, so a good
+    guess costs two pulses (the cell's two ends) and a guess d cells off some 2 log2(d) more.
+    Where the pulses' outcome rises with the amplitude (none pulls in below the threshold,
+    every one above it), the value does not depend on the guess, since the cells are fixed;
+    where it does not, the search ends at the switch nearest the guess
+    (:data:`PREDICTION_RADIUS_U` says where that was seen). It keeps to 0 to the device's
+    limit: a model that does not pull in below :data:`~msg_defs.device.VOLTAGE_LIMIT_V`
+    returns the limit (the residual is then a bound).
+    Cached per (parameters, step, start, lattice, tolerance).
     """
     key = (params, tuple(int(b) for b in beams), float(width_s),
-           tuple(float(v) for v in normal_before), tuple(float(v) for v in guess_v),
-           float(resolution_v), float(rtol))
+           tuple(float(v) for v in normal_before), float(resolution_v), float(origin_v),
+           float(rtol))
     if key in _cache:
         _cache.move_to_end(key)
         return _cache[key]
     with threadpool_limits(limits=BLAS_THREADS_PER_KICK):
-        value = _search(_Probe(params, key[1], key[2], key[3], rtol), guess_v, resolution_v)
+        value = _search(_Probe(params, key[1], key[2], key[3], rtol), guess_v, resolution_v,
+                        origin_v)
     _cache[key] = value
     if len(_cache) > CACHE_SIZE:
         _cache.popitem(last=False)
     return value
 
 
-def _search(probe: _Probe, guess_v: tuple[float, float], resolution_v: float) -> float:
-    low, high = sorted(float(v) for v in guess_v)
-    step = EXPAND_STEP_V
-    while not probe.pulls_in(high):  # the threshold lies above: widen upwards
-        if high >= VOLTAGE_LIMIT_V:
-            return VOLTAGE_LIMIT_V
-        low, high = high, min(high + step, VOLTAGE_LIMIT_V)
-        step *= 2.0
-    step = EXPAND_STEP_V
-    while low > 0.0 and probe.pulls_in(low):  # it lies below: widen downwards
-        low, high = max(low - step, 0.0), low
-        step *= 2.0
-    # Then the protocol's own bisection, as the device's search runs it.
-    bisection = Bisection(low, high, resolution_v)
-    while (amplitude_v := bisection.next_amplitude()) is not None:
-        bisection.observe(probe.pulls_in(amplitude_v))
-    not_pulled_in_v, pulled_in_v = bisection.bracket
-    low = low if not_pulled_in_v is None else not_pulled_in_v
-    high = high if pulled_in_v is None else pulled_in_v
-    return 0.5 * (low + high)
+def _search(probe: _Probe, guess_v: float, resolution_v: float, origin_v: float = 0.0) -> float:
+    # Lattice points k = bottom ... top lie at origin_v + k resolution_v, from the highest at or
+    # below 0 V to the highest at or below the device's limit.
+    bottom = math.floor(-origin_v / resolution_v + 1e-9)
+    top = math.floor((VOLTAGE_LIMIT_V - origin_v) / resolution_v + 1e-9)
+    low = min(max(math.floor((guess_v - origin_v) / resolution_v), bottom), top - 1)
+
+    def pulls_in(k: int) -> bool:  # no pulse of 0 V or less pulls in
+        amplitude_v = origin_v + k * resolution_v
+        return amplitude_v > 0.0 and probe.pulls_in(amplitude_v)
+
+    high, step = low + 1, 1
+    if pulls_in(high):  # it lies at or below the guess's cell: gallop down
+        while pulls_in(low):
+            high, low = low, max(low - step, bottom)
+            step *= 2
+    else:  # above it: gallop up
+        while True:
+            low, high = high, min(high + step, top)
+            step *= 2
+            if pulls_in(high):
+                break
+            if high == top:
+                return VOLTAGE_LIMIT_V
+    while high - low > 1:  # bisect the lattice between the two
+        middle = (low + high) // 2
+        low, high = (low, middle) if pulls_in(middle) else (middle, high)
+    return origin_v + (low + 0.5) * resolution_v
 
 
 def clear_cache() -> None:
     _cache.clear()
+
+
+def predicted_thresholds_v(points: ArrayLike, thresholds_v: ArrayLike, u: ArrayLike,
+                           fallback_v: ArrayLike) -> NDArray[np.float64]:
+    """Each threshold at the scaled parameter vector ``u``, predicted from those searched at
+    ``points`` (m, n) as ``thresholds_v`` (m, t): the affine least-squares fit of the
+    :data:`PREDICTION_NEIGHBOURS_PER_PARAMETER` x n nearest, or the nearest alone while
+    there are no more than n of them; ``fallback_v`` (t,, the recorded brackets' middles)
+    where none lies within :data:`PREDICTION_RADIUS_U`.
+
+    Along a profile or a descent the parameters move a little from point to point and the
+    thresholds smoothly with them, so the predicted cell is mostly the right one or next to
+    it, and the search (:func:`model_threshold_v`) costs two or three pulses in place of
+    seven. Far from every point searched, the search starts where the device's did.
+    """
+    u = np.asarray(u, dtype=float)
+    p = np.asarray(points, dtype=float).reshape(-1, u.size)
+    fallback = np.asarray(fallback_v, dtype=float)
+    distance = np.linalg.norm(p - u, axis=1)
+    if not np.any(distance <= PREDICTION_RADIUS_U):
+        return fallback.copy()
+    values = np.asarray(thresholds_v, dtype=float).reshape(p.shape[0], fallback.size)
+    near = np.argsort(distance, kind='stable')[:PREDICTION_NEIGHBOURS_PER_PARAMETER * u.size]
+    if near.size <= u.size:
+        return values[near[0]].copy()
+    design = np.column_stack([np.ones(near.size), p[near] - u])
+    coefficients = np.linalg.lstsq(design, values[near], rcond=None)[0]
+    return np.asarray(np.clip(coefficients[0], 0.0, VOLTAGE_LIMIT_V), dtype=float)
