@@ -83,11 +83,17 @@ def test_the_models_threshold_is_its_lattice_cell_wherever_the_search_starts(gue
 
 def test_a_guess_in_the_right_cell_costs_its_two_ends_and_no_threshold_reads_the_limit():
     from msg_defs.device import VOLTAGE_LIMIT_V
-    from sphere_sim.fitting.thresholds import _search
+    from sphere_sim.fitting.thresholds import UNPREDICTED_STEP_V, _search
 
     stepped = SteppedProbe(44.2371)
     _search(stepped, 44.2371, MODEL_RESOLUTION_V)
     assert stepped.pulses == 2
+    # From a guess that is no prediction, 4 V off, a wide first step gallops in fewer pulses
+    # to the same cell.
+    narrow, wide = SteppedProbe(44.2371), SteppedProbe(44.2371)
+    assert (_search(narrow, 48.2, MODEL_RESOLUTION_V)
+            == _search(wide, 48.2, MODEL_RESOLUTION_V, first_step_v=UNPREDICTED_STEP_V))
+    assert wide.pulses < narrow.pulses
     # A lattice from an origin (a recorded bracket's low end): the cell [44.233, 44.243).
     for guess_v in (44.24, 44.1, 45.0):
         assert _search(SteppedProbe(44.2371), guess_v, MODEL_RESOLUTION_V,
@@ -103,18 +109,14 @@ def test_a_threshold_is_predicted_from_the_points_searched_near_it():
     slope = np.array([[3.0, -1.0], [0.5, 2.0]])  # two thresholds, affine in u
     values = 44.0 + (points - 0.5) @ slope
     u = np.array([0.51, 0.49])
-    fallback = np.array([40.0, 41.0])
-    np.testing.assert_allclose(predicted_thresholds_v(points, values, u, fallback),
+    np.testing.assert_allclose(predicted_thresholds_v(points, values, u),
                                44.0 + (u - 0.5) @ slope, atol=1e-9)
     # No more points than parameters: the nearest one's.
-    np.testing.assert_allclose(predicted_thresholds_v(points[:2], values[:2], u, fallback),
+    np.testing.assert_allclose(predicted_thresholds_v(points[:2], values[:2], u),
                                values[np.argmin(np.linalg.norm(points[:2] - u, axis=1))])
-    # Nothing searched near: the fallback (the recorded brackets' middles).
-    far = u + 2 * PREDICTION_RADIUS_U
-    np.testing.assert_array_equal(predicted_thresholds_v(points, values, far, fallback),
-                                  fallback)
-    np.testing.assert_array_equal(predicted_thresholds_v(np.zeros((0, 2)), np.zeros((0, 2)),
-                                                         u, fallback), fallback)
+    # Nothing searched near: no prediction (the search starts at the recorded bracket).
+    assert predicted_thresholds_v(points, values, u + 2 * PREDICTION_RADIUS_U) is None
+    assert predicted_thresholds_v(np.zeros((0, 2)), np.zeros((0, 2)), u) is None
 
 
 def probe(beams, width_s, amplitude_v, before, after):

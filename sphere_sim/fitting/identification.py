@@ -51,6 +51,8 @@ from sphere_sim.fitting.observations import (
     Observations,
 )
 from sphere_sim.fitting.thresholds import (
+    MODEL_RESOLUTION_V,
+    UNPREDICTED_STEP_V,
     ThresholdObservation,
     model_threshold_v,
     predicted_thresholds_v,
@@ -267,7 +269,8 @@ def kick_end_normal(params: ParameterSet, kick: KickObservation,
 
 
 # One simulation's inputs: the parameters, the observation, the tolerance, and for a threshold
-# where its search starts (V; None: the recorded bracket's middle).
+# its predicted value, where its search starts (V; None: no prediction, the search starts at the
+# recorded bracket's middle with a wide step).
 ObservationTask = tuple[ParameterSet, KickObservation | ThresholdObservation, float,
                         float | None]
 
@@ -276,10 +279,11 @@ def _observation_task(task: ObservationTask) -> NDArray[np.float64]:
     """One simulation of one observation: a kick's end normal, or a threshold (V, one entry)."""
     params, observation, rtol, guess_v = task
     if isinstance(observation, ThresholdObservation):
+        start_v, step_v = ((observation.middle_v, UNPREDICTED_STEP_V) if guess_v is None
+                           else (guess_v, MODEL_RESOLUTION_V))
         return np.array([model_threshold_v(params, observation.beams, observation.width_s,
-                                           observation.normal_before,
-                                           observation.middle_v if guess_v is None
-                                           else guess_v, origin_v=observation.low_v,
+                                           observation.normal_before, start_v,
+                                           origin_v=observation.low_v, first_step_v=step_v,
                                            rtol=rtol)])
     return kick_end_normal(params, observation, rtol)
 
@@ -417,8 +421,10 @@ class Evaluator:
                 u = [float.fromhex(v) for v in key]
                 p = params_at(self.params, self.fits, self.values(u))
                 tasks += [(p, kick, self.rtol, None) for kick in self.obs.kicks]
-                tasks += [(p, threshold, self.rtol, float(guess)) for threshold, guess
-                          in zip(self.thresholds, self.predicted_thresholds_v(u), strict=True)]
+                predicted = self.predicted_thresholds_v(u)
+                tasks += [(p, threshold, self.rtol,
+                           None if predicted is None else float(predicted[i]))
+                          for i, threshold in enumerate(self.thresholds)]
                 owners.append(key)
             results = self.engine(_observation_task, tasks)
             n, m = len(self.obs.kicks), len(self.thresholds)
@@ -439,18 +445,16 @@ class Evaluator:
     def __call__(self, u: ArrayLike) -> NDArray[np.float64]:
         return self.many([u])[0]
 
-    def predicted_thresholds_v(self, u: ArrayLike) -> NDArray[np.float64]:
+    def predicted_thresholds_v(self, u: ArrayLike) -> NDArray[np.float64] | None:
         """Where each threshold's search at ``u`` starts: predicted from those already
         searched (:func:`~sphere_sim.fitting.thresholds.predicted_thresholds_v`), which sets
-        the search's cost and not its value."""
+        the search's cost and not its value; None with no point searched near."""
         if not self.thresholds:
-            return np.zeros(0)
+            return None
         rows = 2 * len(self.obs.kicks)
         keys = list(self.cache)
-        return predicted_thresholds_v(
-            [[float.fromhex(v) for v in key] for key in keys],
-            [self.cache[key][rows:] for key in keys], u,
-            [t.middle_v for t in self.thresholds])
+        return predicted_thresholds_v([[float.fromhex(v) for v in key] for key in keys],
+                                      [self.cache[key][rows:] for key in keys], u)
 
     def jacobian(self, u: ArrayLike, step: float = FD_STEP) -> NDArray[np.float64]:
         """Forward differences (backward at the range's top), all columns in one batch."""

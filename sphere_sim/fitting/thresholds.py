@@ -18,7 +18,7 @@ Cost, measured on one core (`calibrated` and paper_b's twelve brackets, each fro
 rest): the rest state 0.1 s, one pulse 0.05 s (not pulled in) to 0.1 s (pulled in). All twelve
 at paper_b's truth, 7.6 s (70 pulses) searched from the recorded brackets' middles, 3.4 s (24
 pulses) from the right cells, 4.6 s (36) from 0.013 V above them, 15 s (156) from 0.5 V above
-them. A fit predicts each search's cell from the thresholds of the points it searched before
+them, each galloping from a step of one cell. A fit predicts each search's cell from the thresholds of the points it searched before
 (:func:`predicted_thresholds_v`).
 """
 
@@ -77,6 +77,11 @@ PREDICTION_NEIGHBOURS_PER_PARAMETER = 2
 # 47.6 V and not from there up to their threshold at 54.4 V, so a search started 3 V below it
 # ends at 47.6 V. From the middle of the recorded bracket it finds what the device's search did.
 PREDICTION_RADIUS_U = 0.1
+# The gallop's first step (V) from a guess that is no prediction (the recorded bracket's middle):
+# there the model's threshold may lie volts off (paper_e's twelve at `calibrated`, 1.1 to 7 V
+# below), and every pulse far above it is dear (0.15-0.3 s against 0.09 near it). Galloping
+# from a cell, those twelve took 242 pulses.
+UNPREDICTED_STEP_V = 0.5
 
 
 class ThresholdError(ValueError):
@@ -171,6 +176,7 @@ class _Probe:
 def model_threshold_v(params: ParameterSet, beams: Sequence[int], width_s: float,
                       normal_before: Sequence[float], guess_v: float,
                       resolution_v: float = MODEL_RESOLUTION_V, origin_v: float = 0.0,
+                      first_step_v: float = MODEL_RESOLUTION_V,
                       rtol: float = FIT_RTOL) -> float:
     """The model's pull-in threshold (V) of one pulse of ``width_s`` on ``beams``, from rest at
     ``normal_before``: the middle of the cell of the lattice of ``resolution_v`` (multiples of
@@ -180,8 +186,11 @@ def model_threshold_v(params: ParameterSet, beams: Sequence[int], width_s: float
     (:func:`~sphere_sim.fitting.protocol.dithered`) and the model's quantisation of four
     thresholds alike is not one draw shared four times.
 
-    The search starts at the cell holding ``guess_v`` and gallops outwards from it, so a good
-    guess costs two pulses (the cell's two ends) and a guess d cells off some 2 log2(d) more.
+    The search starts at the cell holding ``guess_v`` and gallops outwards from it, from a
+    step of ``first_step_v`` (doubling), then bisects: a guess in the right cell costs two
+    pulses (the cell's two ends), one d cells off some 2 log2(d) more at the first step of one
+    cell, and ``log2(first_step_v / resolution_v)`` fewer galloping at a wider first step
+    (:data:`UNPREDICTED_STEP_V`, for a guess that is no prediction).
     Where the pulses' outcome rises with the amplitude (none pulls in below the threshold,
     every one above it), the value does not depend on the guess, since the cells are fixed;
     where it does not, the search ends at the switch nearest the guess
@@ -198,14 +207,15 @@ def model_threshold_v(params: ParameterSet, beams: Sequence[int], width_s: float
         return _cache[key]
     with threadpool_limits(limits=BLAS_THREADS_PER_KICK):
         value = _search(_Probe(params, key[1], key[2], key[3], rtol), guess_v, resolution_v,
-                        origin_v)
+                        origin_v, first_step_v)
     _cache[key] = value
     if len(_cache) > CACHE_SIZE:
         _cache.popitem(last=False)
     return value
 
 
-def _search(probe: _Probe, guess_v: float, resolution_v: float, origin_v: float = 0.0) -> float:
+def _search(probe: _Probe, guess_v: float, resolution_v: float, origin_v: float = 0.0,
+            first_step_v: float = MODEL_RESOLUTION_V) -> float:
     # Lattice points k = bottom ... top lie at origin_v + k resolution_v, from the highest at or
     # below 0 V to the highest at or below the device's limit.
     bottom = math.floor(-origin_v / resolution_v + 1e-9)
@@ -216,7 +226,7 @@ def _search(probe: _Probe, guess_v: float, resolution_v: float, origin_v: float 
         amplitude_v = origin_v + k * resolution_v
         return amplitude_v > 0.0 and probe.pulls_in(amplitude_v)
 
-    high, step = low + 1, 1
+    high, step = low + 1, max(1, round(first_step_v / resolution_v))
     if pulls_in(high):  # it lies at or below the guess's cell: gallop down
         while pulls_in(low):
             high, low = low, max(low - step, bottom)
@@ -239,13 +249,13 @@ def clear_cache() -> None:
     _cache.clear()
 
 
-def predicted_thresholds_v(points: ArrayLike, thresholds_v: ArrayLike, u: ArrayLike,
-                           fallback_v: ArrayLike) -> NDArray[np.float64]:
+def predicted_thresholds_v(points: ArrayLike, thresholds_v: ArrayLike,
+                           u: ArrayLike) -> NDArray[np.float64] | None:
     """Each threshold at the scaled parameter vector ``u``, predicted from those searched at
     ``points`` (m, n) as ``thresholds_v`` (m, t): the affine least-squares fit of the
     :data:`PREDICTION_NEIGHBOURS_PER_PARAMETER` x n nearest, or the nearest alone while
-    there are no more than n of them; ``fallback_v`` (t,, the recorded brackets' middles)
-    where none lies within :data:`PREDICTION_RADIUS_U`.
+    there are no more than n of them; None where none lies within :data:`PREDICTION_RADIUS_U`
+    (a search then starts from the recorded bracket's middle, at :data:`UNPREDICTED_STEP_V`).
 
     Along a profile or a descent the parameters move a little from point to point and the
     thresholds smoothly with them, so the predicted cell is mostly the right one or next to
@@ -254,11 +264,10 @@ def predicted_thresholds_v(points: ArrayLike, thresholds_v: ArrayLike, u: ArrayL
     """
     u = np.asarray(u, dtype=float)
     p = np.asarray(points, dtype=float).reshape(-1, u.size)
-    fallback = np.asarray(fallback_v, dtype=float)
     distance = np.linalg.norm(p - u, axis=1)
     if not np.any(distance <= PREDICTION_RADIUS_U):
-        return fallback.copy()
-    values = np.asarray(thresholds_v, dtype=float).reshape(p.shape[0], fallback.size)
+        return None
+    values = np.asarray(thresholds_v, dtype=float).reshape(p.shape[0], -1)
     near = np.argsort(distance, kind='stable')[:PREDICTION_NEIGHBOURS_PER_PARAMETER * u.size]
     if near.size <= u.size:
         return values[near[0]].copy()
