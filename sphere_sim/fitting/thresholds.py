@@ -18,8 +18,8 @@ Cost, measured on one core (`calibrated` and paper_b's twelve brackets, each fro
 rest): the rest state 0.1 s, one pulse 0.05 s (not pulled in) to 0.1 s (pulled in). All twelve
 at paper_b's truth, 7.6 s (70 pulses) searched from the recorded brackets' middles, 3.4 s (24
 pulses) from the right cells, 4.6 s (36) from 0.013 V above them, 15 s (156) from 0.5 V above
-them, each galloping from a step of one cell. A fit predicts each search's cell from the thresholds of the points it searched before
-(:func:`predicted_thresholds_v`).
+them, each galloping from a step of one cell. A fit predicts each search's cell from the
+thresholds of the points it searched before (:func:`predicted_thresholds_v`).
 """
 
 from __future__ import annotations
