@@ -115,6 +115,13 @@ def test_a_threshold_near_one_searched_starts_at_its_predicted_cell(calibrated, 
     near = np.array([u + 2e-4])  # k_z 0.025 % stiffer: the threshold moves by some 6 mV
     (predicted_v,) = ev.predicted_thresholds_v(near)
     assert predicted_v == ev(np.array([u]))[0]  # one point searched: its threshold
+    # A second evaluator (the joint fit's, after the search on the thresholds alone) predicts
+    # from the first one's searches too.
+    joint = Evaluator(calibrated, Observations((), 0.0), fits, SerialEngine(),
+                      thresholds=[threshold], predicted_from=(ev,))
+    assert joint.predicted_thresholds_v(near) == predicted_v
+    assert Evaluator(calibrated, Observations((), 0.0), fits, SerialEngine(),
+                     thresholds=[threshold]).predicted_thresholds_v(near) is None
     (value_v,) = ev(near)
     assert len(pulses) - from_middle <= 3 < from_middle
     thresholds.clear_cache()

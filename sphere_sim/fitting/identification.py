@@ -343,9 +343,13 @@ class Evaluator:
                  fits: Sequence[FitParameter], engine: SerialEngine, rtol: float = FIT_RTOL,
                  checkpoint: str | Path | None = None,
                  progress: Callable[[Evaluator], object] | None = None,
-                 thresholds: Sequence[ThresholdObservation] = ()) -> None:
+                 thresholds: Sequence[ThresholdObservation] = (),
+                 predicted_from: Sequence[Evaluator] = ()) -> None:
         self.params, self.obs, self.fits = params, observations, fits
         self.thresholds = tuple(thresholds)
+        # Evaluators of the same thresholds and fits whose searches predict this one's too
+        # (the joint fit's, from the search on the thresholds alone that came before it).
+        self.predicted_from = tuple(predicted_from)
         self.engine, self.rtol, self.progress = engine, rtol, progress
         self.cache: dict[tuple[str, ...], NDArray[np.float64]] = {}
         self.simulated = 0  # kicks simulated
@@ -451,10 +455,12 @@ class Evaluator:
         the search's cost and not its value; None with no point searched near."""
         if not self.thresholds:
             return None
-        rows = 2 * len(self.obs.kicks)
-        keys = list(self.cache)
-        return predicted_thresholds_v([[float.fromhex(v) for v in key] for key in keys],
-                                      [self.cache[key][rows:] for key in keys], u)
+        points, values = [], []
+        for evaluator in (self, *self.predicted_from):
+            rows = 2 * len(evaluator.obs.kicks)
+            points += [[float.fromhex(v) for v in key] for key in evaluator.cache]
+            values += [r[rows:] for r in evaluator.cache.values()]
+        return predicted_thresholds_v(points, values, u)
 
     def jacobian(self, u: ArrayLike, step: float = FD_STEP) -> NDArray[np.float64]:
         """Forward differences (backward at the range's top), all columns in one batch."""

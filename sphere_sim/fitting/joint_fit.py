@@ -163,18 +163,21 @@ def fit_jointly(params: ParameterSet, fits: Sequence[FitParameter],
     with engine_for(workers, scheduler) as engine:
         undetermined = undetermined_kicks(params, kicks, engine, rtol) if kicks.kicks else ()
         kicks = kicks.without(undetermined)
+        both = bool(kicks.kicks) and bool(thresholds)
+        # With both, the search on the thresholds alone comes first (below), and the thresholds
+        # it searched predict where the joint fit's searches start.
+        alone = Evaluator(params, Observations((), 0.0), fits, engine, rtol,
+                          None if checkpoint is None else thresholds_checkpoint(checkpoint),
+                          progress, thresholds) if both else None
         evaluator = Evaluator(params, kicks, fits, engine, rtol, checkpoint, progress,
-                              thresholds)
+                              thresholds, predicted_from=() if alone is None else (alone,))
         misfit = JointMisfit(evaluator)
         searched = 0
-        if kicks.kicks and thresholds:
+        if alone is not None:
             # The thresholds' misfit is smooth in the beams' parameters where the kicks'
             # landings move in steps (paper_b: a multi-start of the two together ended at a sum
             # of squares of 198 against the truth's 34). Its basin is found on the thresholds
             # alone, and the joint fit descends from there and from the start values.
-            alone = Evaluator(params, Observations((), 0.0), fits, engine, rtol,
-                              None if checkpoint is None else thresholds_checkpoint(checkpoint),
-                              progress, thresholds)
             u_thresholds, _, searched = search_minimum(
                 JointMisfit(alone), len(fits), start, starts=starts_per_parameter * len(fits),
                 descents=descents, seed=seed, max_evaluations=max_evaluations)
