@@ -668,19 +668,18 @@ def test_a_kick_whose_end_turns_sharply_on_its_start_is_left_out():
     assert idf.undetermined_kicks(truth, obs, SerialEngine()) == (0,)
 
 
-def test_identify_says_each_set_up_step_before_its_first_batch(tmp_path, monkeypatch, capsys):
+def test_identify_says_each_set_up_step_before_its_first_batch(device_bag, tmp_path,
+                                                               monkeypatch, capsys):
     """Minutes pass before the first batch of kicks reports: reading the bags, starting the
     workers (which build the model and load or compile its kernels) and that batch's size are
     each said on stderr first. The fit itself is stopped where it would start."""
-    from pathlib import Path
-
     from sphere_twin import cli
 
     def stop_before_fitting(*args, **kwargs):
         raise kobs.IdentificationError('stopped where the fit starts')
 
     monkeypatch.setattr(idf, 'identify', stop_before_fitting)
-    bag = Path(__file__).resolve().parents[1] / 'bags' / 'synthetic_device'
+    bag = device_bag
     status = cli.main(['identify', str(bag), '--fit', 'friction.coulomb',
                        '--out', str(tmp_path / 'fitted.yaml')])
     said = [line for line in capsys.readouterr().err.splitlines()
@@ -688,10 +687,10 @@ def test_identify_says_each_set_up_step_before_its_first_batch(tmp_path, monkeyp
     assert status == 2
     assert said[0] == f'identify: reading {bag} (bag 1 of 1) ...'
     assert said[1].startswith('identify: starting 2 local process(es); each builds the model')
-    # 40 kicks at two tolerances and from two shifted starts, then at the start and at one
+    # Every kick at two tolerances and from two shifted starts, then at the start and at one
     # step of the one fitted parameter
-    assert said[2].startswith('identify: first: 160 kick simulations')
-    assert 'then a batch of 80' in said[2]
+    assert said[2].startswith(f'identify: first: {4 * DEVICE_KICKS} kick simulations')
+    assert f'then a batch of {2 * DEVICE_KICKS}' in said[2]
 
 
 def test_the_progress_bar_is_redrawn_while_a_batch_runs():
