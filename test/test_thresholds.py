@@ -234,3 +234,41 @@ def test_identify_thresholds_prints_each_parameters_status_and_writes_the_fitted
                    for line in printed.splitlines())
     fitted = load_parameter_set(str(out))
     assert fitted.get(K_Z) == pytest.approx(34.3) and fitted.get(DAMPING) == pytest.approx(5e-9)
+
+
+def test_the_threshold_bench_counts_each_starts_pulses_and_the_cells_it_missed(monkeypatch,
+                                                                               tmp_path):
+    """``bench thresholds``' rows with the simulation replaced by stepped probes (each
+    threshold known): a start in the right cell costs its two ends, one off costs more, a wide
+    first step costs more a few cells off, and every start ends in the first one's cell."""
+    from sphere_sim.fitting.thresholds import SearchCost, _search
+    from sphere_twin.commands import bench_thresholds
+
+    known_v = {44.0: 44.1371, 46.0: 46.2049}  # bracket low end -> the model's threshold
+
+    def stepped_cost(params, observation, guess_v, first_step_v=MODEL_RESOLUTION_V):
+        stepped = SteppedProbe(known_v[observation.low_v])
+        value = _search(stepped, guess_v, MODEL_RESOLUTION_V, observation.low_v, first_step_v)
+        return SearchCost(value, stepped.pulses, 0.1 * stepped.pulses)
+
+    monkeypatch.setattr(bench_thresholds, 'search_cost', stepped_cost)
+    observations = [ThresholdObservation(BEAM, WIDTH_S, low, low + 0.2, LEVEL)
+                    for low in known_v]
+    rows = bench_thresholds.start_rows(None, observations)
+    assert [r.elsewhere for r in rows] == [0] * 5
+    middle, wide, right, next_cell, far = rows
+    assert right.pulses == 2 * len(observations)
+    assert middle.pulses > next_cell.pulses > right.pulses and far.pulses > next_cell.pulses
+    assert wide.pulses > middle.pulses  # a few cells off, the wide first step overshoots
+    bench_thresholds.write_results(rows, tmp_path / 'paper_b', 2, tmp_path / 'out.md')
+    table = (tmp_path / 'out.md').read_text()
+    assert f'| the right cell | {right.pulses} | {right.wall_s:.1f} | 0 |' in table
+
+
+def test_the_threshold_bench_refuses_a_bag_without_its_truth(tmp_path, capsys):
+    from sphere_twin import cli
+
+    status = cli.main(['bench', 'thresholds', '--bag', str(tmp_path), '--out', str(tmp_path)])
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert status == 2
+    assert line.startswith('sphere-twin bench thresholds: error: ') and 'no truth.yaml' in line

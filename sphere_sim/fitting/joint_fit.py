@@ -55,7 +55,8 @@ STARTS_PER_PARAMETER = 3
 DESCENTS = 2
 # The cost limit's default: distinct parameter vectors simulated (each one every kick and every
 # threshold: some 0.1-0.3 s per kick on one core, and per threshold 0.3 s where its cell is
-# predicted from the points near (thresholds.predicted_thresholds_v), 0.6-1.3 s elsewhere).
+# predicted from the points near (thresholds.predicted_thresholds_v), 0.6 s from the recorded
+# bracket, up to 1.7 s where the model's threshold lies volts off it).
 MAX_EVALUATIONS = 300
 
 

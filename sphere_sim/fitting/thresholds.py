@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from collections import OrderedDict
 from collections.abc import Iterable, Sequence
 
@@ -65,7 +66,7 @@ MODEL_RESOLUTION_V = 0.01
 # alike, and the intervals narrowed past the truth (paper_b, all twelve brackets:
 # docs/identification.md).
 MODEL_ERROR_V = 0.05
-# Thresholds kept per process (each is some 0.3-1.3 s of simulation): a fit's multi-start and its
+# Thresholds kept per process (each is some 0.3-1.7 s of simulation): a fit's multi-start and its
 # profiles come back to points they evaluated.
 CACHE_SIZE = 4096
 # Neighbours per fitted parameter that a threshold's prediction is fitted to (an affine fit needs
@@ -243,6 +244,29 @@ def _search(probe: _Probe, guess_v: float, resolution_v: float, origin_v: float 
         middle = (low + high) // 2
         low, high = (low, middle) if pulls_in(middle) else (middle, high)
     return origin_v + (low + 0.5) * resolution_v
+
+
+@dataclasses.dataclass(frozen=True)
+class SearchCost:
+    """One search of the model's threshold, uncached: its value (V), the pulses it simulated
+    and its wall time (s), the rest state's included."""
+
+    value_v: float
+    pulses: int
+    wall_s: float
+
+
+def search_cost(params: ParameterSet, observation: ThresholdObservation, guess_v: float,
+                first_step_v: float = MODEL_RESOLUTION_V,
+                rtol: float = FIT_RTOL) -> SearchCost:
+    """What :func:`model_threshold_v` costs for ``observation`` from ``guess_v``, on its
+    lattice from the bracket's low end, bypassing the cache."""
+    started = time.perf_counter()
+    with threadpool_limits(limits=BLAS_THREADS_PER_KICK):
+        probe = _Probe(params, observation.beams, observation.width_s,
+                       observation.normal_before, rtol)
+        value = _search(probe, guess_v, MODEL_RESOLUTION_V, observation.low_v, first_step_v)
+    return SearchCost(value, probe.pulses, time.perf_counter() - started)
 
 
 def clear_cache() -> None:

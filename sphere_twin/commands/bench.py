@@ -19,6 +19,10 @@ one worker, and on a process pool and a Dask cluster of each worker count asked 
 on as many processes, and writes ``throughput.{json,md}``. Its last line is
 ``throughput vs bare integration: <a> table build, <b> optimisation``.
 
+``bench thresholds`` searches each threshold of a protocol recording at its truth from the
+recorded brackets and from predicted cells, and writes ``threshold_search.md``
+(``sphere_twin/commands/bench_thresholds.py``).
+
 ``bench startup`` installs the package as colcon does into a scratch prefix and times a
 simulator from there to its first ``/sphere/surface_normal``, cold (compiling the physics) and
 warm, and writes ``startup.{json,md}`` (``sphere_twin/commands/bench_startup.py``).
@@ -55,7 +59,13 @@ from sphere_sim.studies.work_precision import (
     Plan,
     work_precision,
 )
-from sphere_twin.commands import bench_fidelity, bench_levers, bench_startup, bench_twin
+from sphere_twin.commands import (
+    bench_fidelity,
+    bench_levers,
+    bench_startup,
+    bench_thresholds,
+    bench_twin,
+)
 from sphere_twin.commands.bench_scenes import optimised_design, work_precision_scenes
 from sphere_twin.commands.options import DEFAULT_OUT_DIR, output_directory, worker_counts
 
@@ -276,6 +286,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     bench_fidelity.register(sub)
     bench_levers.register(sub)
     bench_startup.register(sub)
+    bench_thresholds.register(sub)
 
 
 def run_work_precision(args: argparse.Namespace) -> int:

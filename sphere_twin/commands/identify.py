@@ -252,8 +252,8 @@ def run_joint(args: argparse.Namespace, bags: Sequence[BagLocation],
     what = f'{len(thresholds)} thresholds' + (f' and {len(kicks.kicks)} kicks' if kicks else '')
     print(f'{what}, in one misfit; a multi-start over the declared ranges, then each '
           f'parameter\'s 95 % profile interval (cost limit {limit} evaluations, each every '
-          'threshold, some 0.3 s apiece near points already searched and up to 1.3 s far from '
-          'them, and every kick)')
+          'threshold, some 0.3 s apiece near points already searched and up to 1.7 s where the '
+          'model lies volts off the recording, and every kick)')
     say(f'on {args.workers} local process(es)' if args.scheduler is None
         else f'on the Dask cluster at {args.scheduler}')
     started = time.perf_counter()
