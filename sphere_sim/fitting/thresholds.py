@@ -49,8 +49,9 @@ from sphere_sim.kicks.table_build import BLAS_THREADS_PER_KICK
 from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.parameters import ParameterSet
 
-# The model's threshold is the cell of this width (V) it lies in, on a lattice from 0 V, reported
-# at the cell's middle: a twentieth of the protocol's 0.2 V resolution. Its quantisation (uniform,
+# The model's threshold is the cell of this width (V) it lies in, on a lattice from a fixed origin
+# (in a fit, the recorded bracket's low end), reported at the cell's middle: a twentieth of the
+# protocol's 0.2 V resolution. Its quantisation (uniform,
 # within +-0.005 V) moves a residual by at most a tenth of a bracket's standard deviation
 # (0.052 V), so that the misfit's steps stay well below the rise of 3.84 an interval is read at;
 # each halving costs one more pulse.
@@ -194,11 +195,11 @@ def model_threshold_v(params: ParameterSet, beams: Sequence[int], width_s: float
     (:data:`UNPREDICTED_STEP_V`, for a guess that is no prediction).
     Where the pulses' outcome rises with the amplitude (none pulls in below the threshold,
     every one above it), the value does not depend on the guess, since the cells are fixed;
-    where it does not, the search ends at the switch nearest the guess
+    where it does not, the search ends at a switch near the guess
     (:data:`PREDICTION_RADIUS_U` says where that was seen). It keeps to 0 to the device's
     limit: a model that does not pull in below :data:`~msg_defs.device.VOLTAGE_LIMIT_V`
     returns the limit (the residual is then a bound).
-    Cached per (parameters, step, start, lattice, tolerance).
+    Cached per (parameters, step, resting normal, lattice, tolerance), not per guess.
     """
     key = (params, tuple(int(b) for b in beams), float(width_s),
            tuple(float(v) for v in normal_before), float(resolution_v), float(origin_v),
