@@ -73,8 +73,9 @@ CACHE_SIZE = 4096
 # Neighbours per fitted parameter that a threshold's prediction is fitted to (an affine fit needs
 # n + 1): twice that, so that one point from across a kink or a sheet moves it little.
 PREDICTION_NEIGHBOURS_PER_PARAMETER = 2
-# A threshold is predicted only from points this near in the scaled parameters (a tenth of each
-# range, the width of an interval called determined). The pulses' outcome need not rise with
+# A threshold is predicted only where a point searched lies this near in the scaled parameters (a
+# tenth of each range, the width of an interval called determined); the affine fit then takes
+# the nearest ones, that one first. The pulses' outcome need not rise with
 # the amplitude far from the threshold: on paper_b, beams 1+2 at 1.5 ms move the sphere at
 # 47.6 V and not from there up to their threshold at 54.4 V, so a search started 3 V below it
 # ends at 47.6 V. From the middle of the recorded bracket it finds what the device's search did.

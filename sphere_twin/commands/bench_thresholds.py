@@ -103,9 +103,10 @@ def main(bag: Path, out_dir: Path = DEFAULT_OUT_DIR) -> list[StartRow]:
     for row in rows:
         print(f'{row.start}: {row.pulses} pulses, {row.wall_s:.1f} s; {row.elsewhere} ended '
               'in another cell')
-    ratio = rows[0].pulses / max(rows[2].pulses, 1)
-    print(f"threshold search: {rows[0].pulses} pulses from the brackets' middles, "
-          f'{rows[2].pulses} from the right cells ({ratio:.1f}x)')
+    from_middle, right_cell = rows[0], rows[2]  # start_rows' order
+    print(f"threshold search: {from_middle.pulses} pulses from the brackets' middles, "
+          f'{right_cell.pulses} from the right cells '
+          f'({from_middle.pulses / max(right_cell.pulses, 1):.1f}x)')
     return rows
 
 
