@@ -6,6 +6,7 @@ unless the user chose a range explicitly.
 
 from __future__ import annotations
 
+import faulthandler
 import importlib
 import os
 import re
@@ -216,6 +217,10 @@ def run_node_module(module_name: str, args: list[str] | None = None) -> int:
     C extension, which reports it as its own error), as a signal during start-up does.
     """
     install_shutdown_signal_handlers()
+    # A crash in a C extension (the RMW, rclpy, a compiled kernel) kills the node with no word
+    # of where: with this, it prints every thread's Python stack on stderr first, which is
+    # all that a supervisor (launch, a test) keeps of a rare crash.
+    faulthandler.enable()
     main = None
     try:
         main = importlib.import_module(module_name).main
