@@ -147,3 +147,42 @@ def test_the_cost_limit_stops_a_profile_and_marks_it_undetermined():
 def test_an_interval_at_a_bound_is_undetermined_however_narrow():
     assert not ProfileInterval(0, 0.0, 0.02, True, False, True, ()).determined
     assert ProfileInterval(0, 0.4, 0.42, False, False, True, ()).determined
+
+
+class Batched:
+    """Residuals with a ``many``: the batches asked for, and the single points."""
+
+    def __init__(self, residuals):
+        self.residuals, self.batches, self.singles = residuals, [], 0
+
+    def __call__(self, u):
+        self.singles += 1
+        return self.residuals(u)
+
+    def many(self, points):
+        self.batches.append(len(points))
+        return [self.residuals(u) for u in points]
+
+
+def test_independent_points_come_as_one_batch_and_give_the_fit_of_single_points():
+    """The multi-start's points and each Jacobian's columns are one batch each; the fit is the
+    one that the same residuals give point by point."""
+    matrix = np.array([[40.0, 0.0], [25.0, 30.0], [3.0, -2.0]])
+    residuals = linear_residuals(matrix, [0.4, 0.55])
+    batched = Batched(residuals)
+    fit = fit_profiles(batched, 2, start=[0.5, 0.5], starts=6, max_evaluations=400)
+    single = fit_profiles(residuals, 2, start=[0.5, 0.5], starts=6, max_evaluations=400)
+    assert batched.batches[0] == 7  # the start and the six Latin-hypercube points
+    # Every descent's Jacobian: one column per parameter (its point is cached by then).
+    assert batched.batches.count(2) >= 2
+    assert fit.u.tolist() == single.u.tolist()
+    assert [(i.low_u, i.high_u) for i in fit.intervals] == [
+        (i.low_u, i.high_u) for i in single.intervals]
+    assert fit.evaluations == single.evaluations
+
+
+def test_a_batch_over_the_cost_limit_evaluates_up_to_it_and_stops():
+    batched = Batched(linear_residuals([[1.0]], [0.5]))
+    u, chi, evaluations = search_minimum(batched, 1, start=[0.2], starts=8, max_evaluations=5)
+    assert evaluations == 5 and batched.batches == [5]  # the start and four of the eight
+    assert chi == min(float((p - 0.5) ** 2) for p in [0.2] + [u[0]])

@@ -419,26 +419,29 @@ class Evaluator:
         keys = [self.key(u) for u in points]
         todo = list(dict.fromkeys(k for k in keys if k not in self.cache))
         if todo:
-            tasks: list[ObservationTask] = []
-            owners = []
+            # Every point's threshold searches are queued before any kick: they are the
+            # longer tasks (several pulses each), and a pool that takes the longest first
+            # ends the batch with both workers busy instead of one finishing a search alone.
+            searches: list[ObservationTask] = []
+            kicks: list[ObservationTask] = []
             for key in todo:
                 u = [float.fromhex(v) for v in key]
                 p = params_at(self.params, self.fits, self.values(u))
-                tasks += [(p, kick, self.rtol, None) for kick in self.obs.kicks]
+                kicks += [(p, kick, self.rtol, None) for kick in self.obs.kicks]
                 predicted = self.predicted_thresholds_v(u)
-                tasks += [(p, threshold, self.rtol,
-                           None if predicted is None else float(predicted[i]))
-                          for i, threshold in enumerate(self.thresholds)]
-                owners.append(key)
-            results = self.engine(_observation_task, tasks)
+                searches += [(p, threshold, self.rtol,
+                              None if predicted is None else float(predicted[i]))
+                             for i, threshold in enumerate(self.thresholds)]
+            results = self.engine(_observation_task, searches + kicks)
             n, m = len(self.obs.kicks), len(self.thresholds)
-            self.simulated += n * len(owners)
-            self.searched += m * len(owners)
+            found, ends = results[:m * len(todo)], results[m * len(todo):]
+            self.simulated += n * len(todo)
+            self.searched += m * len(todo)
             entries = []
-            for i, key in enumerate(owners):
-                mine = results[i * (n + m):(i + 1) * (n + m)]
-                r = np.concatenate([kick_residuals(self.obs, mine[:n]) if n else np.zeros(0),
-                                    *mine[n:]])
+            for i, key in enumerate(todo):
+                mine = ends[i * n:(i + 1) * n]
+                r = np.concatenate([kick_residuals(self.obs, mine) if n else np.zeros(0),
+                                    *found[i * m:(i + 1) * m]])
                 self.cache[key] = r
                 entries.append((key, r))
             self._append(entries)

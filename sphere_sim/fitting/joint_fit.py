@@ -120,7 +120,13 @@ class JointMisfit:
         return self.ev(u)[self.kick_rows:]
 
     def __call__(self, u: ArrayLike) -> NDArray[np.float64]:
-        r = self.ev(u)
+        return self._whitened(self.ev(u))
+
+    def many(self, points: Sequence[ArrayLike]) -> list[NDArray[np.float64]]:
+        """The residuals at each point, simulated as one batch on the engine."""
+        return [self._whitened(r) for r in self.ev.many(points)]
+
+    def _whitened(self, r: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.concatenate([self.whitener @ r[:self.kick_rows],
                                (r[self.kick_rows:] - self.middles_v) / self.stds_v])
 

@@ -16,7 +16,10 @@ actually rises. A parameter whose interval reaches a bound of its range, or span
 is what is known.
 
 Pure numerics, no model: the caller's residual function does the simulating and bears the cost,
-which :class:`CostLimitError` bounds (``max_evaluations`` distinct points).
+which :class:`CostLimitError` bounds (``max_evaluations`` distinct points). Points that do not
+depend on one another (the multi-start's, a Jacobian's columns) are asked for together: a
+residual function with a ``many(points)`` method gets them as one batch, which a pool of
+workers shares out as one queue instead of idling at the end of each point's.
 """
 
 from __future__ import annotations
@@ -83,7 +86,8 @@ class CostLimitError(RuntimeError):
 
 
 class _Counted:
-    """The caller's residuals, each distinct point evaluated once, at most ``limit`` points."""
+    """The caller's residuals, each distinct point evaluated once, at most ``limit`` points;
+    :meth:`many` passes a batch to the residuals' own ``many`` where they have one."""
 
     def __init__(self, fun: Residuals, limit: int) -> None:
         self.fun, self.limit = fun, limit
@@ -100,6 +104,22 @@ class _Counted:
                 raise CostLimitError(f'the cost limit of {self.limit} evaluations is reached')
             self.cache[key] = np.asarray(self.fun(np.array(key)), dtype=float)
         return self.cache[key]
+
+    def many(self, points: Sequence[ArrayLike]) -> list[NDArray[np.float64]]:
+        """The residuals at each of ``points``, the new ones evaluated in one batch. Over the
+        limit, the points within it are evaluated (in order) and then CostLimitError is
+        raised, as evaluating them one by one would."""
+        keys = [tuple(float(v) for v in np.asarray(u, dtype=float)) for u in points]
+        new = list(dict.fromkeys(k for k in keys if k not in self.cache))
+        room = max(self.limit - len(self.cache), 0)
+        batch = getattr(self.fun, 'many', None)
+        todo = [np.array(k) for k in new[:room]]
+        values = batch(todo) if batch is not None else [self.fun(u) for u in todo]
+        for key, value in zip(new[:room], values, strict=True):
+            self.cache[key] = np.asarray(value, dtype=float)
+        if len(new) > room:
+            raise CostLimitError(f'the cost limit of {self.limit} evaluations is reached')
+        return [self.cache[k] for k in keys]
 
     def chi2(self, u: ArrayLike) -> float:
         return float(np.sum(self(u) ** 2))
@@ -142,11 +162,15 @@ class ProfileFit:
     lower_found: bool  # a profile went lower than the optimum (the search missed a basin)
 
 
-def local_minimum(fun: Callable[[NDArray[np.float64]], NDArray[np.float64]], u0: ArrayLike,
+def local_minimum(fun: _Counted, u0: ArrayLike,
                   free: Sequence[int]) -> tuple[NDArray[np.float64], float,
                                                 NDArray[np.float64]]:
     """Bounded least squares (trust-region reflective) over the ``free`` coordinates from
-    ``u0``, the others held. Returns (u, sum of squares, Jacobian of the free columns)."""
+    ``u0``, the others held. Returns (u, sum of squares, Jacobian of the free columns).
+
+    The Jacobian is scipy's ``'2-point'`` at ``diff_step`` :data:`FD_STEP_UNIT` (on the unit
+    cube its step is that, backward where forward would leave the cube), its columns
+    evaluated as one batch."""
     from scipy.optimize import least_squares
 
     base = np.asarray(u0, dtype=float).copy()
@@ -161,8 +185,19 @@ def local_minimum(fun: Callable[[NDArray[np.float64]], NDArray[np.float64]], u0:
         r = fun(base)
         return base, float(np.sum(r ** 2)), np.zeros((r.size, 0))
     x0 = np.clip(base[free], 1e-6, 1.0 - 1e-6)
-    sol = least_squares(lambda x: fun(full(x)), x0, jac='2-point', diff_step=FD_STEP_UNIT,
-                        bounds=(0.0, 1.0), method='trf', x_scale=1.0, xtol=XTOL, ftol=FTOL,
+
+    def jac(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        shifted, steps = [], []
+        for j in range(x.size):
+            moved = x.copy()
+            moved[j] += FD_STEP_UNIT if x[j] + FD_STEP_UNIT <= 1.0 else -FD_STEP_UNIT
+            shifted.append(full(moved))
+            steps.append(moved[j] - x[j])  # the step as represented, as scipy divides by
+        r0, *rs = fun.many([full(x), *shifted])
+        return np.column_stack([(r - r0) / h for r, h in zip(rs, steps, strict=True)])
+
+    sol = least_squares(lambda x: fun(full(x)), x0, jac=jac, bounds=(0.0, 1.0),
+                        method='trf', x_scale=1.0, xtol=XTOL, ftol=FTOL,
                         max_nfev=MAX_DESCENT_EVALUATIONS)
     u = full(sol.x)
     return u, float(np.sum(fun(u) ** 2)), np.asarray(sol.jac, dtype=float)
@@ -218,7 +253,7 @@ def multistart(fun: _Counted, dim: int, starts: int, descents: int, seed: int,
     """The lowest of local descents from the ``descents`` lowest of ``starts`` Latin-hypercube
     points over the cube (and ``extra`` points, say the start values)."""
     points = [np.asarray(p, dtype=float) for p in extra] + latin_starts(dim, starts, seed)
-    chis = [fun.chi2(p) for p in points]
+    chis = [float(np.sum(r ** 2)) for r in fun.many(points)]
     best_u, best_chi = points[int(np.argmin(chis))], float(min(chis))
     for i in np.argsort(chis)[:descents]:
         u, chi, _ = local_minimum(fun, points[int(i)], range(dim))
@@ -375,11 +410,12 @@ def fit_profiles(residuals: Residuals, dim: int, start: ArrayLike | None = None,
 
 def _jacobian(fun: _Counted, u: NDArray[np.float64]) -> NDArray[np.float64]:
     """Forward differences of :data:`FD_STEP_UNIT` (backward at the range's top)."""
-    r0 = fun(u)
-    cols = []
+    steps, points = [], [u]
     for j in range(u.size):
         h = FD_STEP_UNIT if u[j] + FD_STEP_UNIT <= 1.0 else -FD_STEP_UNIT
         shifted = u.copy()
         shifted[j] += h
-        cols.append((fun(shifted) - r0) / h)
-    return np.column_stack(cols)
+        steps.append(h)
+        points.append(shifted)
+    r0, *rs = fun.many(points)
+    return np.column_stack([(r - r0) / h for r, h in zip(rs, steps, strict=True)])
