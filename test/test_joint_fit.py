@@ -130,6 +130,37 @@ def test_a_threshold_near_one_searched_starts_at_its_predicted_cell(calibrated, 
                                         threshold.middle_v, origin_v=threshold.low_v)
 
 
+def test_a_threshold_whose_pulses_switch_more_than_once_is_left_out_of_the_fit(calibrated,
+                                                                                monkeypatch):
+    """The scan before the fit (replaced here by its answer) leaves the first threshold out:
+    the search sees only the second, and the result names the first with its switches."""
+    from sphere_sim.fitting import joint_fit
+    from sphere_sim.fitting.profile_fit import ProfileFit, ProfileInterval
+
+    kept = ThresholdObservation((3,), 5e-3, 46.4, 46.6, (0.0, 0.0, 1.0))
+    switching = ThresholdObservation((1, 2), 1.5e-3, 54.28, 54.46, (0.0, 0.0, 1.0))
+    scan = ((47.0, False), (48.0, True), (52.0, False), (55.0, True))
+    monkeypatch.setattr(joint_fit, 'non_monotone', lambda params, thresholds, engine, rtol: {
+        i: scan for i, t in enumerate(thresholds) if t is switching})
+    seen = []
+
+    def fit_at_start(misfit, dim, start, **kwargs):
+        seen.append(misfit.ev.thresholds)
+        return ProfileFit(np.asarray(start), 0.0, (ProfileInterval(0, 0.4, 0.6, False, False,
+                                                                   True, ()),), 1, False, False)
+
+    monkeypatch.setattr(joint_fit, 'fit_profiles', fit_at_start)
+    result = joint_fit.fit_jointly(calibrated, fit_parameters(calibrated, [K_Z]), None,
+                                   [switching, kept], workers=SerialEngine())
+    assert seen == [(kept,)]
+    assert result.thresholds == (kept,) and len(result.model_thresholds_v) == 1
+    assert result.non_monotone == ((switching, 'pulls in at 48.00 V, not at 52.00 V, pulls '
+                                                'in at 55.00 V'),)
+    with pytest.raises(joint_fit.IdentificationError, match='nothing left to fit'):
+        joint_fit.fit_jointly(calibrated, fit_parameters(calibrated, [K_Z]), None,
+                              [switching], workers=SerialEngine())
+
+
 def test_the_protocol_study_counts_what_is_determined_and_the_truths_covered(tmp_path,
                                                                            monkeypatch, capsys):
     """``synthetic study --protocol``: the recording and the fit stubbed with known answers

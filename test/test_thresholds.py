@@ -3,10 +3,12 @@ one pulse by the protocol's rule agrees with an independent rule, moves the way 
 says with the parameters that set it, and a recorded bracket becomes a residual; the fit of a
 threshold recovers the parameter that made it (sphere_sim.fitting.joint_fit)."""
 
+import itertools
 import math
 
 import numpy as np
 import pytest
+import yaml
 from physics_helpers import ground_contact_threshold_v
 
 from sphere_sim.fitting.observations import KickObservation
@@ -14,10 +16,15 @@ from sphere_sim.fitting.protocol import ProbeBracket, probe_brackets, probe_prog
 from sphere_sim.fitting.thresholds import (
     MODEL_ERROR_V,
     MODEL_RESOLUTION_V,
+    OUTCOME_STEP_V,
+    OUTCOME_WINDOW_V,
     ThresholdError,
     ThresholdObservation,
     model_threshold_v,
+    non_monotone,
     observations_of,
+    rises_once,
+    switches_text,
 )
 
 LEVEL = (0.0, 0.0, 1.0)
@@ -125,6 +132,33 @@ def probe(beams, width_s, amplitude_v, before, after):
     return KickObservation(0.0, times, volts, unit[0], unit[1], 60, 60)
 
 
+def test_rising_once_is_no_pulse_pulling_in_below_one_that_does_not():
+    assert rises_once([(1.0, False), (2.0, False), (3.0, True)])
+    assert rises_once([(3.0, True), (1.0, False)])  # in any order
+    assert rises_once([(1.0, False)]) and rises_once([(1.0, True)])
+    window = [(1.0, False), (2.0, True), (3.0, False), (4.0, True)]
+    assert not rises_once(window)
+    assert switches_text(window) == 'pulls in at 2.00 V, not at 3.00 V, pulls in at 4.00 V'
+
+
+def test_a_pair_at_short_pulses_switches_three_times_and_is_left_out(calibrated):
+    """At the start values (calibrated), paper_b's pair of beams 1+2 at 1.5 ms, from level:
+    its pulses pull in from about 49 V, not from about 52 V, and again from about 54 V (the
+    device's bisection found 54.28-54.46 V); the same pair at 5 ms rises once."""
+    from sphere_sim.kicks.engine import SerialEngine
+
+    short = ThresholdObservation((1, 2), SHORT_S, 54.28, 54.46, LEVEL)
+    long = ThresholdObservation((1, 2), WIDTH_S, 40.68, 40.85, LEVEL)
+    scans = non_monotone(calibrated, (long, short), SerialEngine())
+    assert scans.keys() == {1}
+    outcomes = scans[1]
+    assert len(outcomes) == round(2 * OUTCOME_WINDOW_V / OUTCOME_STEP_V) + 1
+    assert not rises_once(outcomes)
+    switches = [a for (_, p), (a, q) in itertools.pairwise(outcomes) if p != q]
+    assert len(switches) == 3
+    assert 47.0 < switches[0] < switches[1] < switches[2] < 56.0
+
+
 def test_a_bracket_keeps_where_the_sphere_rested_before_its_end_probes():
     tilt = 2e-3
     probes = [probe(BEAM, WIDTH_S, 40.0, (0, 0, 1), (0, 0, 1)),  # not pulled in
@@ -206,9 +240,11 @@ def test_identify_thresholds_prints_each_parameters_status_and_writes_the_fitted
                                                'its profile reaches a bound of the range'))
         profile = ProfileFit(np.zeros(2), 0.5, (), 12, False, False)
         none = np.zeros((0, 2))
+        pair = ThresholdObservation((1, 2), SHORT_S, 54.28, 54.46, LEVEL)
         return joint_fit.JointFitResult(estimates, 0.49, 0.0, Observations((), 0.0), (),
                                         tuple(thresholds), np.array([0.7]), np.array([44.14]),
-                                        none, none, 12, profile)
+                                        none, none, 12, profile, non_monotone=(
+                                            (pair, 'pulls in at 47.9 V, not at 51.4 V'),))
 
     monkeypatch.setattr(joint_fit, 'fit_jointly', known_answer)
     bag = Path(__file__).resolve().parents[1] / 'bags' / 'synthetic_device'
@@ -222,6 +258,9 @@ def test_identify_thresholds_prints_each_parameters_status_and_writes_the_fitted
     assert [o.beams for o in seen['thresholds']] == [BEAM]
     assert 'left out beams 1+2, 5 ms' in printed
     assert 'beam 3, 5 ms: recorded 44.00-44.20 V, model 44.14 V (+0.70 sd)' in printed
+    assert ('left out beams 1+2, 1.5 ms (recorded 54.28-54.46 V): at the start values its '
+            'pulses switch more than once around it (pulls in at 47.9 V, not at 51.4 V)'
+            in printed)
     assert f'{K_Z}: 34.3, 95 % profile interval [34.1, 34.6]' in printed
     assert ': determined' in printed
     assert f'{DAMPING}: 5e-09' in printed and 'undetermined (its profile reaches a bound' in printed
@@ -234,6 +273,10 @@ def test_identify_thresholds_prints_each_parameters_status_and_writes_the_fitted
                    for line in printed.splitlines())
     fitted = load_parameter_set(str(out))
     assert fitted.get(K_Z) == pytest.approx(34.3) and fitted.get(DAMPING) == pytest.approx(5e-9)
+    report = yaml.safe_load(out.read_text())['identification']
+    assert report['left_out_thresholds'] == [{
+        'step': 'beams 1+2, 1.5 ms', 'recorded_v': [54.28, 54.46],
+        'switches': 'pulls in at 47.9 V, not at 51.4 V'}]
 
 
 def test_the_threshold_bench_counts_each_starts_pulses_and_the_cells_it_missed(monkeypatch,

@@ -42,7 +42,7 @@ from sphere_sim.fitting.profile_fit import (
     fit_profiles,
     search_minimum,
 )
-from sphere_sim.fitting.thresholds import ThresholdObservation
+from sphere_sim.fitting.thresholds import ThresholdObservation, non_monotone, switches_text
 from sphere_sim.integrate.tolerances import FIT_RTOL
 from sphere_sim.kicks.engine import SerialEngine, engine_for
 from sphere_sim.model.parameters import ParameterSet
@@ -94,6 +94,9 @@ class JointFitResult:
     profile: ProfileFit
     # of the thresholds alone, searched first when kicks and thresholds are fitted together
     threshold_search_evaluations: int = 0
+    # thresholds left out, whose pulses at the start values do not rise once with the
+    # amplitude (thresholds.non_monotone), each with where its outcome switches
+    non_monotone: tuple[tuple[ThresholdObservation, str], ...] = ()
 
     @property
     def threshold_chi2(self) -> float:
@@ -149,7 +152,9 @@ def fit_jointly(params: ParameterSet, fits: Sequence[FitParameter],
         values does not determine is left out first
         (:func:`~sphere_sim.fitting.identification.undetermined_kicks`).
     thresholds : sequence of ThresholdObservation
-        The protocol's recorded brackets (may be empty: kicks alone).
+        The protocol's recorded brackets (may be empty: kicks alone). One whose pulses at the
+        start values do not rise once with the amplitude around it is left out first
+        (:func:`~sphere_sim.fitting.thresholds.non_monotone`).
     workers, scheduler
         Local processes, or a started engine (left open), or a Dask scheduler's address.
     checkpoint : path, optional
@@ -170,6 +175,14 @@ def fit_jointly(params: ParameterSet, fits: Sequence[FitParameter],
     with engine_for(workers, scheduler) as engine:
         undetermined = undetermined_kicks(params, kicks, engine, rtol) if kicks.kicks else ()
         kicks = kicks.without(undetermined)
+        scans = non_monotone(params, thresholds, engine, rtol) if thresholds else {}
+        left_out = tuple((t, switches_text(scans[i])) for i, t in enumerate(thresholds)
+                         if i in scans)
+        thresholds = [t for i, t in enumerate(thresholds) if i not in scans]
+        if not kicks.kicks and not thresholds:
+            raise IdentificationError(
+                'nothing left to fit to: every threshold\'s pulses switch more than once '
+                'around it, and there is no kick')
         both = bool(kicks.kicks) and bool(thresholds)
         # With both, the search on the thresholds alone comes first (below), and the thresholds
         # it searched predict where the joint fit's searches start.
@@ -205,7 +218,7 @@ def fit_jointly(params: ParameterSet, fits: Sequence[FitParameter],
             kick_vectors_start=misfit.kick_vectors(start),
             kick_vectors_fitted=misfit.kick_vectors(fit.u),
             evaluations=len(evaluator.cache), profile=fit,
-            threshold_search_evaluations=searched)
+            threshold_search_evaluations=searched, non_monotone=left_out)
     return result
 
 

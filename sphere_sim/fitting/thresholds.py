@@ -12,7 +12,10 @@ the normal before it.
 
 Unlike a kick's landing, which moves in steps as the beams' parameters change, a threshold moves
 smoothly with them (docs/identification.md, "An experiment protocol"); its misfit has only the
-lattice's resolution as steps.
+lattice's resolution as steps, where the pulses' outcome rises once with the amplitude. Where it
+does not (paper_b's pairs at 1.5 ms), the recorded bracket is whichever switch the device's
+bisection met; such an observation is found by a scan before a fit (:func:`non_monotone`) and
+left out.
 
 Cost, measured on one core (`calibrated` and paper_b's twelve brackets, each from its recorded
 rest): the rest state 0.1 s, one pulse 0.05 s (not pulled in) to 0.1 s (pulled in). All twelve
@@ -25,6 +28,7 @@ thresholds of the points it searched before (:func:`predicted_thresholds_v`).
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 import time
 from collections import OrderedDict
@@ -44,6 +48,7 @@ from sphere_sim.fitting.protocol import (
 )
 from sphere_sim.integrate.tolerances import FIT_RTOL
 from sphere_sim.kicks.design import KICK_RELAXATION, cardan_of_normal, final_normal
+from sphere_sim.kicks.engine import SerialEngine
 from sphere_sim.kicks.process_models import process_model
 from sphere_sim.kicks.table_build import BLAS_THREADS_PER_KICK
 from sphere_sim.model.initial_state import rest_state
@@ -246,6 +251,64 @@ def _search(probe: _Probe, guess_v: float, resolution_v: float, origin_v: float 
         middle = (low + high) // 2
         low, high = (low, middle) if pulls_in(middle) else (middle, high)
     return origin_v + (low + 0.5) * resolution_v
+
+
+# --- thresholds a bisection does not define ------------------------------------------------------
+
+# A recorded threshold is what a bisection found. Where the pulses' outcome does not rise with
+# the amplitude, which switch that is turns on the bisection's path, and the model's search
+# (from a guess, galloping) finds the switch nearest its guess: the misfit then has steps.
+# paper_b's pair of beams 1+2 at 1.5 ms, at the truth, pulls in from 47.9 to 51.4 V, not
+# again until 54.4 V; the device's bisection from (30, 78] V found the upper switch, that of
+# beams 3+4 (47.7 to 51.2 V, then from 53.2 V) the lower. Such an observation is scanned
+# for before a fit, at the start values, on this window either side of the recorded bracket
+# at this step (its gaps are 2-3 V wide, 3-5 V from a switch), and left out.
+OUTCOME_WINDOW_V = 8.0
+OUTCOME_STEP_V = 0.5
+
+
+def pulse_outcomes(params: ParameterSet, observation: ThresholdObservation,
+                   rtol: float = FIT_RTOL) -> tuple[tuple[float, bool], ...]:
+    """(amplitude V, pulled in) of one pulse from rest at the recorded normal, at every
+    :data:`OUTCOME_STEP_V` from :data:`OUTCOME_WINDOW_V` below the recorded bracket's middle
+    to as far above it (within 0 V and the device's limit)."""
+    with threadpool_limits(limits=BLAS_THREADS_PER_KICK):
+        probe = _Probe(params, observation.beams, observation.width_s,
+                       observation.normal_before, rtol)
+        steps = round(2 * OUTCOME_WINDOW_V / OUTCOME_STEP_V)
+        amplitudes = [observation.middle_v - OUTCOME_WINDOW_V + k * OUTCOME_STEP_V
+                      for k in range(steps + 1)]
+        return tuple((a, probe.pulls_in(a)) for a in amplitudes if 0.0 < a <= VOLTAGE_LIMIT_V)
+
+
+def rises_once(outcomes: Sequence[tuple[float, bool]]) -> bool:
+    """True when no pulse pulls in below one that does not: a bisection then finds the one
+    switch whatever its path."""
+    pulled = [p for _, p in sorted(outcomes)]
+    return all(b or not a for a, b in itertools.pairwise(pulled))
+
+
+def switches_text(outcomes: Sequence[tuple[float, bool]]) -> str:
+    """Where the outcome changes, as 'pulls in at 47.9 V, not at 51.4 V, ...'."""
+    ordered = sorted(outcomes)
+    parts = [f'{"pulls in" if b else "not"} at {a_v:.2f} V' for (_, a), (a_v, b) in
+             itertools.pairwise(ordered) if a != b]
+    return ', '.join(parts)
+
+
+def _outcomes_task(task: tuple[ParameterSet, ThresholdObservation, float]
+                   ) -> tuple[tuple[float, bool], ...]:
+    params, observation, rtol = task
+    return pulse_outcomes(params, observation, rtol)
+
+
+def non_monotone(params: ParameterSet, observations: Sequence[ThresholdObservation],
+                 engine: SerialEngine, rtol: float = FIT_RTOL
+                 ) -> dict[int, tuple[tuple[float, bool], ...]]:
+    """The observations whose pulses, at ``params``, do not rise once with the amplitude
+    around the recorded bracket (:func:`rises_once`): index -> the outcomes scanned."""
+    scans = engine(_outcomes_task, [(params, o, rtol) for o in observations])
+    return {i: scan for i, scan in enumerate(scans) if not rises_once(scan)}
 
 
 @dataclasses.dataclass(frozen=True)

@@ -245,7 +245,7 @@ def run_joint(args: argparse.Namespace, bags: Sequence[BagLocation],
     alone) in one misfit, with profile intervals (sphere_sim.fitting.joint_fit)."""
     from sphere_sim.fitting.joint_fit import fit_jointly, thresholds_checkpoint
     from sphere_sim.fitting.observations import IdentificationError
-    from sphere_sim.fitting.thresholds import ThresholdError
+    from sphere_sim.fitting.thresholds import OUTCOME_STEP_V, OUTCOME_WINDOW_V, ThresholdError
     from sphere_sim.model.parameters import load_parameter_set
 
     limit = args.max_evaluations or JOINT_EVALUATIONS
@@ -254,6 +254,11 @@ def run_joint(args: argparse.Namespace, bags: Sequence[BagLocation],
           f'parameter\'s 95 % profile interval (cost limit {limit} evaluations, each every '
           'threshold, some 0.3 s apiece near points already searched and up to 1.7 s where the '
           'model lies volts off the recording, and every kick)')
+    if thresholds:
+        say(f'first: {len(thresholds)} scans of {round(2 * OUTCOME_WINDOW_V / OUTCOME_STEP_V) + 1} '
+            f'pulses (each threshold at the start values, every {OUTCOME_STEP_V:g} V within '
+            f'{OUTCOME_WINDOW_V:g} V of its bracket, to leave out those whose pulses switch '
+            'more than once)')
     say(f'on {args.workers} local process(es)' if args.scheduler is None
         else f'on the Dask cluster at {args.scheduler}')
     started = time.perf_counter()
@@ -301,6 +306,10 @@ def print_joint_result(result: JointFitResult, wall_s: float) -> None:
         print(f'{len(result.undetermined)} kick(s) left out: the model does not determine '
               'their end (a tenth of the tolerance moves it by more than the residual\'s '
               'noise)')
+    for obs, switches in result.non_monotone:
+        print(f'left out {obs.label} (recorded {obs.low_v:.2f}-{obs.high_v:.2f} V): at the '
+              f'start values its pulses switch more than once around it ({switches}), so '
+              'which switch a bisection finds turns on its path')
     if result.kicks.kicks:
         print(f'per-kick residual RMS: {_rms(np.hypot(*result.kick_vectors_start.T)):.3g} rad '
               f'at the start, {_rms(np.hypot(*result.kick_vectors_fitted.T)):.3g} rad fitted')
@@ -352,6 +361,9 @@ def write_joint_fitted(path: Path, params: ParameterSet, fits: Sequence[FitParam
                             'status': 'determined' if e.determined else 'undetermined',
                             'note': e.note}
                            for fp, e in zip(fits, result.estimates, strict=True)],
+            'left_out_thresholds': [{'step': o.label, 'recorded_v': [o.low_v, o.high_v],
+                                     'switches': switches}
+                                    for o, switches in result.non_monotone],
             'per_threshold': [{'step': o.label, 'recorded_v': [o.low_v, o.high_v],
                                'model_v': float(m), 'residual_sd': float(r)}
                               for o, m, r in zip(result.thresholds,
