@@ -291,6 +291,13 @@ def run_joint(args: argparse.Namespace, bags: Sequence[BagLocation],
     return 0
 
 
+def undetermined_kicks_line(count: int) -> str:
+    """What both printers say of the kicks ``undetermined_kicks`` left out, by its two rules."""
+    return (f'{count} kick(s) left out: the model does not determine their end (at a tenth of '
+            'the tolerance it ends further off than the residual\'s noise, or, started that far '
+            'off along x or y, further than that from where the shift alone would put it)')
+
+
 def print_joint_result(result: JointFitResult, wall_s: float) -> None:
     from sphere_sim.fitting.protocol import missing_experiment
 
@@ -303,9 +310,7 @@ def print_joint_result(result: JointFitResult, wall_s: float) -> None:
              if result.kicks.kicks else '')
           + (' (stopped by the cost limit)' if result.profile.cost_limited else ''))
     if result.undetermined:
-        print(f'{len(result.undetermined)} kick(s) left out: the model does not determine '
-              'their end (a tenth of the tolerance moves it by more than the residual\'s '
-              'noise)')
+        print(undetermined_kicks_line(len(result.undetermined)))
     for obs, switches in result.non_monotone:
         print(f'left out {obs.label} (recorded {obs.low_v:.2f}-{obs.high_v:.2f} V): at the '
               f'start values its pulses switch more than once around it ({switches}), so '
@@ -428,9 +433,7 @@ def print_result(result: IdentificationResult, wall_s: float) -> None:
           f'({result.resumed_evaluations} evaluations read back from the checkpoint) in '
           f'{wall_s:.1f} s; optimiser: {result.converged}')
     if result.undetermined:
-        print(f'{len(result.undetermined)} kick(s) left out: the model does not determine '
-              'their end (a tenth of the tolerance moves it by more than the residual\'s '
-              'noise)')
+        print(undetermined_kicks_line(len(result.undetermined)))
     print(f'per-kick residual RMS: {_rms(result.residuals_before):.3g} rad at the start, '
           f'{_rms(result.residuals_after):.3g} rad fitted; sum of squares '
           f'{result.cost_ratio:.2f} x what the sensor noise explains')
