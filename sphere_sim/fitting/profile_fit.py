@@ -114,7 +114,8 @@ class _Counted:
         room = max(self.limit - len(self.cache), 0)
         batch = getattr(self.fun, 'many', None)
         todo = [np.array(k) for k in new[:room]]
-        values = batch(todo) if batch is not None else [self.fun(u) for u in todo]
+        # Nothing new (all cached) asks the residuals for nothing, not for an empty batch.
+        values = batch(todo) if batch is not None and todo else [self.fun(u) for u in todo]
         for key, value in zip(new[:room], values, strict=True):
             self.cache[key] = np.asarray(value, dtype=float)
         if len(new) > room:

@@ -265,6 +265,8 @@ def _search(probe: _Probe, guess_v: float, resolution_v: float, origin_v: float 
 # at this step (its gaps are 2-3 V wide, 3-5 V from a switch), and left out.
 OUTCOME_WINDOW_V = 8.0
 OUTCOME_STEP_V = 0.5
+# Pulses in one scan, both ends of the window included.
+OUTCOME_PULSES = round(2 * OUTCOME_WINDOW_V / OUTCOME_STEP_V) + 1
 
 
 def pulse_outcomes(params: ParameterSet, observation: ThresholdObservation,
@@ -275,9 +277,8 @@ def pulse_outcomes(params: ParameterSet, observation: ThresholdObservation,
     with threadpool_limits(limits=BLAS_THREADS_PER_KICK):
         probe = _Probe(params, observation.beams, observation.width_s,
                        observation.normal_before, rtol)
-        steps = round(2 * OUTCOME_WINDOW_V / OUTCOME_STEP_V)
         amplitudes = [observation.middle_v - OUTCOME_WINDOW_V + k * OUTCOME_STEP_V
-                      for k in range(steps + 1)]
+                      for k in range(OUTCOME_PULSES)]
         return tuple((a, probe.pulls_in(a)) for a in amplitudes if 0.0 < a <= VOLTAGE_LIMIT_V)
 
 

@@ -245,7 +245,12 @@ def run_joint(args: argparse.Namespace, bags: Sequence[BagLocation],
     alone) in one misfit, with profile intervals (sphere_sim.fitting.joint_fit)."""
     from sphere_sim.fitting.joint_fit import fit_jointly, thresholds_checkpoint
     from sphere_sim.fitting.observations import IdentificationError
-    from sphere_sim.fitting.thresholds import OUTCOME_STEP_V, OUTCOME_WINDOW_V, ThresholdError
+    from sphere_sim.fitting.thresholds import (
+        OUTCOME_PULSES,
+        OUTCOME_STEP_V,
+        OUTCOME_WINDOW_V,
+        ThresholdError,
+    )
     from sphere_sim.model.parameters import load_parameter_set
 
     limit = args.max_evaluations or JOINT_EVALUATIONS
@@ -255,7 +260,7 @@ def run_joint(args: argparse.Namespace, bags: Sequence[BagLocation],
           'threshold, some 0.3 s apiece near points already searched and up to 1.7 s where the '
           'model lies volts off the recording, and every kick)')
     if thresholds:
-        say(f'first: {len(thresholds)} scans of {round(2 * OUTCOME_WINDOW_V / OUTCOME_STEP_V) + 1} '
+        say(f'first: {len(thresholds)} scans of {OUTCOME_PULSES} '
             f'pulses (each threshold at the start values, every {OUTCOME_STEP_V:g} V within '
             f'{OUTCOME_WINDOW_V:g} V of its bracket, to leave out those whose pulses switch '
             'more than once)')
