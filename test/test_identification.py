@@ -16,7 +16,8 @@ from sphere_sim.fitting import identification as idf
 from sphere_sim.fitting import observations as kobs
 from sphere_sim.model.parameters import load_parameter_set
 
-BASE = load_parameter_set(idf.START_PARAMETER_SET)
+# The dry contact's devices (device_a to device_e) are what these tests record and fit.
+BASE = load_parameter_set('dry_contact')
 SIGMA = 1e-3
 
 
@@ -264,8 +265,9 @@ def test_a_synthetic_device_is_identified_from_its_bag(device_bag, tmp_path, mon
 
     monkeypatch.setattr(run_analysis, 'read_messages', spy)
     out = tmp_path / 'fitted.yaml'
-    status = cli.main(['identify', str(device_bag), '--fit', 'friction.coulomb',
-                       'beam.damping_phi_nms_per_rad', 'beam.stiffness_phi_nm_per_rad',
+    status = cli.main(['identify', str(device_bag), '--params', 'dry_contact',
+                       '--fit', 'friction.coulomb', 'beam.damping_phi_nms_per_rad',
+                       'beam.stiffness_phi_nm_per_rad',
                        '--out', str(out), '--workers', '2'])
     lines = capsys.readouterr().out.strip().splitlines()
     assert status == 0
@@ -347,7 +349,7 @@ def test_a_start_set_given_as_a_file_is_kept_beside_the_fitted_one(tmp_path):
     from sphere_twin.commands.identify import write_fitted
 
     start_file = tmp_path / 'stiffer.yaml'
-    start_file.write_text(f'base: {idf.START_PARAMETER_SET}\nname: stiffer\n'
+    start_file.write_text('base: dry_contact\nname: stiffer\n'
                           'overrides:\n  beam.stiffness_z_n_per_m: 40.0\n')
     start = load_parameter_set(str(start_file))
     fits = idf.fit_parameters(start, ['friction.coulomb'])
@@ -685,8 +687,8 @@ def test_identify_says_each_set_up_step_before_its_first_batch(device_bag, tmp_p
 
     monkeypatch.setattr(idf, 'identify', stop_before_fitting)
     bag = device_bag
-    status = cli.main(['identify', str(bag), '--fit', 'friction.coulomb',
-                       '--out', str(tmp_path / 'fitted.yaml')])
+    status = cli.main(['identify', str(bag), '--params', 'dry_contact', '--fit',
+                       'friction.coulomb', '--out', str(tmp_path / 'fitted.yaml')])
     said = [line for line in capsys.readouterr().err.splitlines()
             if line.startswith('identify: ')]
     assert status == 2

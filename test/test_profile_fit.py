@@ -139,8 +139,14 @@ def test_the_search_alone_returns_the_lowest_point_it_saw_when_the_limit_stops_i
 
 def test_the_cost_limit_stops_a_profile_and_marks_it_undetermined():
     matrix = np.array([[40.0, 0.0], [25.0, 30.0]])
-    fit = fit_profiles(linear_residuals(matrix, [0.4, 0.55]), 2, max_evaluations=40)
-    assert fit.evaluations <= 40 and fit.cost_limited
+    residuals = linear_residuals(matrix, [0.4, 0.55])
+    whole = fit_profiles(residuals, 2, max_evaluations=400)
+    assert not whole.cost_limited and all(i.complete for i in whole.intervals)
+    # A limit a few evaluations short of what the whole fit took stops its last profile.
+    limit = whole.evaluations - 4
+    fit = fit_profiles(residuals, 2, max_evaluations=limit)
+    assert fit.evaluations <= limit and fit.cost_limited
+    assert not all(i.complete for i in fit.intervals)
     assert not all(i.determined for i in fit.intervals)
 
 
@@ -187,3 +193,25 @@ def test_a_batch_over_the_cost_limit_evaluates_up_to_it_and_stops():
     assert evaluations == 5 and batched.batches == [5]  # the start and four of the eight
     # The lowest of the five evaluated is kept (no descent was reached).
     assert chi == float((u[0] - 0.5) ** 2) <= float((0.2 - 0.5) ** 2)
+
+
+def test_a_profile_started_far_too_short_reaches_its_exact_end_in_a_few_steps():
+    # A quadratic whose 95 % half-width is 0.05, walked from a first step of 1e-3 (a curvature
+    # read fifty times too steep): each step aims past where the rise so far says the
+    # crossing is, at most four times the last, so the end comes within five steps a side
+    # where doubling takes seven, and it is still the closed form's.
+    from sphere_sim.fitting.profile_fit import MAX_GROWTH, _Counted, next_step, profile
+
+    half = 0.05
+    residuals = linear_residuals([[math.sqrt(CHI2_95) / half]], [0.5])
+    fun = _Counted(residuals, 100)
+    interval = profile(fun, np.array([0.5]), 0.0, 0, 1e-3, np.array([[math.sqrt(CHI2_95) / half]]))
+    assert interval.low_u == pytest.approx(0.5 - half, abs=1e-6)
+    assert interval.high_u == pytest.approx(0.5 + half, abs=1e-6)
+    assert len(interval.points) <= 2 * 5
+    # The rule itself: a rise of a quarter of CHI2_95 aims at 1.2 x 2 = 2.4 steps; no rise, or
+    # a jitter below zero, the longest.
+    assert next_step(0.01, CHI2_95 / 4) == pytest.approx(0.024)
+    assert next_step(0.01, -0.3) == next_step(0.01, 0.0) == MAX_GROWTH * 0.01
+    assert next_step(0.01, 0.9 * CHI2_95) == pytest.approx(0.015)  # at least 1.5 times
+

@@ -80,10 +80,11 @@ SetAside = tuple[str, int | None, float]
 # by 2 to 4 within a standard error of the optimum (device_a): local dips deeper than the
 # interval's rise of 4, which the optimiser stopped in and the scan read as curvature. At 3e-5
 # the same line is a smooth parabola, equal to 3e-6's within 0.05, for 14 % more work.
-# The set identification starts from and the synthetic devices vary: the dry, holding contact
-# (docs/parameters.md), the physical reading a hardware device is identified towards. The
-# paper's device (`calibrated`) keeps Table A1's friction, which the paper gives as fixed.
-START_PARAMETER_SET = 'dry_contact'
+# The set `identify` starts from unless told: the paper's device (`calibrated`), the default
+# set of every command, whose experiment protocol determines the beams' parameters
+# (docs/identification.md, "An experiment protocol"). A device of the dry, holding contact
+# (`dry_contact`, device_a to device_e) is identified from that set with `--params dry_contact`.
+START_PARAMETER_SET = 'calibrated'
 # A kick whose end the model does not determine tells nothing of the parameters, and its jumps
 # as they move make the misfit rough. On the paper's device some kicks land so: paper_a's first
 # (intensity 0.75, the high pair 4.2 ms) ends 3e-4 rad apart at rtol 1e-5, 1e-6 and 1e-7

@@ -67,12 +67,19 @@ MAX_PROFILE_STEP_EVALUATIONS = 10
 FIRST_DAMPING = 1e-2
 DAMPING_FACTOR = 10.0
 # The profile's first step is this share of the 95 % half-width the local curvature predicts
-# (so that a quadratic misfit is bracketed by the second step), kept within [MIN_STEP, MAX_STEP];
-# each further step is PROFILE_GROWTH times the last, at most MAX_PROFILE_STEPS per side.
+# (so that a quadratic misfit is bracketed by the second step), kept within [MIN_STEP, MAX_STEP].
+# Each further step aims OVERSHOOT beyond where a quadratic through the optimum and the last
+# step would reach CHI2_95 (so that it brackets the crossing rather than falls short of it),
+# at least MIN_GROWTH and at most MAX_GROWTH times the last, at most MAX_PROFILE_STEPS per side.
+# Where the curvature misleads (paper_b's d_B,phi: a Jacobian that took a step onto a kick's
+# sheet read it far steeper than its profile), a first step that rises by a tenth of CHI2_95
+# is followed by one four times as long, not by two doublings.
 FIRST_STEP_SHARE = 0.7
 MIN_STEP = 1e-3
 MAX_STEP = 0.25
-PROFILE_GROWTH = 2.0
+OVERSHOOT = 1.2
+MIN_GROWTH = 1.5
+MAX_GROWTH = 4.0
 MAX_PROFILE_STEPS = 12
 # Ridge added to J^T J before inverting it for the first step: a direction the residuals do not
 # see gets a large step (clipped to MAX_STEP) instead of none.
@@ -327,7 +334,7 @@ def profile(fun: _Counted, u_opt: NDArray[np.float64], chi_opt: float, j: int,
                     end, at_bound = target, True
                     break
                 t_prev, rise_prev, u_prev, jac_prev = t, rise, u, jac_step
-                t *= PROFILE_GROWTH
+                t = next_step(t, rise)
         except CostLimitError:
             complete = False
         if end is None:  # out of steps or of budget: as far as it got, and not determined
@@ -337,6 +344,17 @@ def profile(fun: _Counted, u_opt: NDArray[np.float64], chi_opt: float, j: int,
         bounded.append(at_bound)
     return ProfileInterval(j, ends[0], ends[1], bounded[0], bounded[1], complete,
                            tuple(sorted(points)))
+
+
+def next_step(t: float, rise: float) -> float:
+    """The profile's next step after one of ``t`` whose sum of squares rose by ``rise``
+    (below :data:`CHI2_95`): :data:`OVERSHOOT` times where a quadratic misfit would cross,
+    ``t sqrt(CHI2_95 / rise)``, kept within [:data:`MIN_GROWTH`, :data:`MAX_GROWTH`] times
+    ``t``; a rise at or below zero (the misfit's jitter) takes the longest."""
+    if rise <= 0.0:
+        return MAX_GROWTH * t
+    aimed = OVERSHOOT * t * math.sqrt(CHI2_95 / rise)
+    return min(max(aimed, MIN_GROWTH * t), MAX_GROWTH * t)
 
 
 def _along(u: NDArray[np.float64], j: int, u_j: float, valley: NDArray[np.float64]

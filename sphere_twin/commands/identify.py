@@ -74,8 +74,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     parser.add_argument('bags', nargs='+', metavar='BAG', help=BAG_HELP)
     add_params_option(parser, default=START_PARAMETER_SET,
                       help='the start, and every parameter not fitted: a set\'s name or a YAML '
-                           f'file (default {START_PARAMETER_SET}, the dry holding contact a '
-                           'device is identified towards)')
+                           f'file (default {START_PARAMETER_SET}, the paper\'s device; '
+                           'dry_contact for a device of the dry holding contact)')
     parser.add_argument('--fit', nargs='+', metavar='NAME', default=None,
                         help='parameter paths to fit (default: those the set declares '
                              'uncertain), e.g. beam.damping_phi_nms_per_rad')
