@@ -73,7 +73,7 @@ DAMPING_FACTOR = 10.0
 # at least MIN_GROWTH and at most MAX_GROWTH times the last, at most MAX_PROFILE_STEPS per side.
 # Where the curvature misleads (paper_b's d_B,phi: a Jacobian that took a step onto a kick's
 # sheet read it far steeper than its profile), a first step that rises by a tenth of CHI2_95
-# is followed by one four times as long, not by two doublings.
+# is followed by one nearly four times as long, not by two doublings.
 FIRST_STEP_SHARE = 0.7
 MIN_STEP = 1e-3
 MAX_STEP = 0.25
