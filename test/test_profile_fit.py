@@ -214,4 +214,3 @@ def test_a_profile_started_far_too_short_reaches_its_exact_end_in_a_few_steps():
     assert next_step(0.01, CHI2_95 / 4) == pytest.approx(0.024)
     assert next_step(0.01, -0.3) == next_step(0.01, 0.0) == MAX_GROWTH * 0.01
     assert next_step(0.01, 0.9 * CHI2_95) == pytest.approx(0.015)  # at least 1.5 times
-
