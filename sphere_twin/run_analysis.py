@@ -63,6 +63,7 @@ if TYPE_CHECKING:
 
     from msg_defs.programme_events import ProgrammeEvent
     from sphere_sim.kicks.lookup_table import CombinedKickPlant, LookupTable
+    from sphere_sim.model.initial_state import Relaxation
     from sphere_sim.model.parameters import ParameterSet
     from sphere_sim.twin.plants import TwinPlant
 
@@ -472,7 +473,7 @@ def recorded_integration_method(bag_dir: str | os.PathLike[str]) -> str:
 
 def build_replay_plant(kind: str, normal0: NDArray[np.float64], time0_s: float,
                        params: ParameterSet, tables: Iterable[str | Path] = (),
-                       relaxation: str = 'radau',
+                       relaxation: Relaxation | None = None,
                        truth: TruthSample | None = None,
                        method: str = UNSTATED_INTEGRATION_METHOD) -> TwinPlant:
     """A plant of parameter set ``params`` resting at ``normal0`` at ``time0_s``: the kick

@@ -102,13 +102,14 @@ def _continuous_plant():
     relaxes its start)."""
     from sphere_sim.kicks.discrete import kick_period_s
     from sphere_sim.kicks.lookup_table import load_kick_model
+    from sphere_sim.kicks.design import KICK_RELAXATION
     from sphere_sim.kicks.process_models import process_model
     from sphere_sim.model.initial_state import rest_state
     from sphere_sim.model.parameters import load_parameter_set
     from sphere_sim.twin.plants import ContinuousPlant
 
     model = process_model(load_parameter_set('calibrated'))
-    return ContinuousPlant(model, rest_state(model, (*TILT_DEG, 0.0), relaxation='odeint'),
+    return ContinuousPlant(model, rest_state(model, (*TILT_DEG, 0.0), relaxation=KICK_RELAXATION),
                            kick_period_s=kick_period_s(load_kick_model()))
 
 

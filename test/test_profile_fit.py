@@ -117,15 +117,16 @@ def double_well(u):
 
 
 def test_a_search_started_only_where_another_fit_ended_descends_into_that_basin():
-    # No Latin hypercube: the start values alone stay in the shallow basin, a further start in
-    # the deep one (as the thresholds' optimum is for the joint fit) reaches it.
-    shallow = fit_profiles(double_well, 1, start=[0.2], starts=0, descents=1,
-                           max_evaluations=300)
-    assert shallow.u[0] < 0.5
+    # No Latin hypercube: the search from the start values alone stays in the shallow basin
+    # (the profiles would then find the deep one: the test below), a further start in the deep
+    # one (as the thresholds' optimum is for the joint fit) reaches it.
+    shallow_u, shallow_chi2, _ = search_minimum(double_well, 1, start=[0.2], starts=0,
+                                                descents=1, max_evaluations=300)
+    assert shallow_u[0] < 0.5
     deep = fit_profiles(double_well, 1, start=[0.2], starts=0, descents=2,
                         max_evaluations=300, extra_starts=[[0.75]])
     assert deep.u[0] == pytest.approx(0.8, abs=1e-3)
-    assert deep.chi2 < shallow.chi2 - 1.0
+    assert deep.chi2 < shallow_chi2 - 1.0
 
 
 def test_the_search_alone_returns_the_lowest_point_it_saw_when_the_limit_stops_it():
@@ -214,3 +215,30 @@ def test_a_profile_started_far_too_short_reaches_its_exact_end_in_a_few_steps():
     assert next_step(0.01, CHI2_95 / 4) == pytest.approx(0.024)
     assert next_step(0.01, -0.3) == next_step(0.01, 0.0) == MAX_GROWTH * 0.01
     assert next_step(0.01, 0.9 * CHI2_95) == pytest.approx(0.015)  # at least 1.5 times
+
+
+def two_basins(u):
+    """u_0's misfit has a shallow basin at 0.31 (sum of squares 0.96) and, past a ridge 0.85
+    above it, the lowest at 0.55 (zero); u_1 is a plain parabola about 0.5."""
+    u = np.asarray(u, float)
+    return np.array([20.0 * (u[0] - 0.3) * (u[0] - 0.55) / 0.25, (0.55 - u[0]) / 0.25,
+                     10.0 * (u[1] - 0.5)])
+
+
+def test_a_profile_that_finds_a_lower_basin_restarts_the_descent_there(monkeypatch):
+    import sphere_sim.fitting.profile_fit as pf
+
+    # Started in the shallow basin, the descent ends there, and u_0's profile crosses the ridge
+    # (a rise of 0.85, under the 3.84 it stops at) into the lower one.
+    fit = fit_profiles(two_basins, 2, start=[0.3, 0.5], starts=0, descents=1)
+    assert fit.u[0] == pytest.approx(0.55, abs=1e-3) and fit.chi2 < 1e-6
+    assert not fit.lower_found
+    # Its interval is read about the lowest point: the ridge and the shallow basin lie within
+    # 3.84 of zero, so the interval reaches past them.
+    assert fit.intervals[0].low_u < 0.3 < 0.55 < fit.intervals[0].high_u
+    assert fit.intervals[1].low_u == pytest.approx(0.5 - math.sqrt(CHI2_95) / 10.0, abs=1e-3)
+
+    monkeypatch.setattr(pf, 'PROFILE_RESTARTS', 0)
+    unrestarted = fit_profiles(two_basins, 2, start=[0.3, 0.5], starts=0, descents=1)
+    assert unrestarted.u[0] == pytest.approx(0.31, abs=0.01) and unrestarted.lower_found
+    assert fit.evaluations > unrestarted.evaluations

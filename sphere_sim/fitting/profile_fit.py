@@ -86,6 +86,10 @@ MAX_PROFILE_STEPS = 12
 RIDGE = 1e-6
 # A profile point lower than the optimum by this much means the optimum was not the global one.
 LOWER_BY = 0.5
+# Then the descent starts again from the lowest point seen and the profiles are read about its
+# end, this many times at most: intervals read about a point that is not the lowest are too
+# narrow where the misfit falls.
+PROFILE_RESTARTS = 1
 
 
 class CostLimitError(RuntimeError):
@@ -167,7 +171,7 @@ class ProfileFit:
     intervals: tuple[ProfileInterval, ...]
     evaluations: int
     cost_limited: bool  # the limit stopped the search or a profile
-    lower_found: bool  # a profile went lower than the optimum (the search missed a basin)
+    lower_found: bool  # a profile went lower than the optimum, still after PROFILE_RESTARTS
 
 
 def local_minimum(fun: _Counted, u0: ArrayLike,
@@ -403,6 +407,11 @@ def fit_profiles(residuals: Residuals, dim: int, start: ArrayLike | None = None,
         The cost limit: distinct points evaluated, search and profiles together. A profile the
         limit stops is reported incomplete (so undetermined), the search's best point so far
         is kept.
+
+    Where a profile finds a point :data:`LOWER_BY` lower than the optimum, the search missed
+    that basin: the descent starts again from the lowest point seen and the profiles are read
+    about its end, at most :data:`PROFILE_RESTARTS` times (``lower_found`` says one still
+    went lower).
     """
     fun = _Counted(residuals, max_evaluations)
     extra = ([] if start is None else [np.asarray(start, dtype=float)]) + [
@@ -414,17 +423,30 @@ def fit_profiles(residuals: Residuals, dim: int, start: ArrayLike | None = None,
         return ProfileFit(u_opt, chi_opt, tuple(
             ProfileInterval(j, 0.0, 1.0, True, True, False, ()) for j in range(dim)),
             fun.evaluations, True, False)
+    for restart in range(PROFILE_RESTARTS + 1):
+        intervals = _profiles(fun, u_opt, chi_opt)
+        u_low, chi_low = fun.lowest()
+        if chi_low >= chi_opt - LOWER_BY or restart == PROFILE_RESTARTS:
+            break
+        try:
+            u_new, chi_new, _ = local_minimum(fun, u_low, range(dim))
+        except CostLimitError:  # the intervals about the optimum before, said to be so
+            break
+        u_opt, chi_opt = (u_new, chi_new) if chi_new <= chi_low else (u_low, chi_low)
+    return ProfileFit(u_opt, chi_opt, intervals, fun.evaluations,
+                      not all(i.complete for i in intervals), chi_low < chi_opt - LOWER_BY)
+
+
+def _profiles(fun: _Counted, u_opt: NDArray[np.float64],
+              chi_opt: float) -> tuple[ProfileInterval, ...]:
+    """Each coordinate's profile interval about ``u_opt``, first steps from its Jacobian."""
     try:
         jac = _jacobian(fun, u_opt)
     except CostLimitError:
-        jac = np.zeros((fun(u_opt).size, dim))
+        jac = np.zeros((fun(u_opt).size, u_opt.size))
     steps = first_steps(jac)
-    intervals = tuple(profile(fun, u_opt, chi_opt, j, float(steps[j]), jac)
-                      for j in range(dim))
-    lowest = min(c for i in intervals for _, c in i.points) if any(
-        i.points for i in intervals) else chi_opt
-    return ProfileFit(u_opt, chi_opt, intervals, fun.evaluations,
-                      not all(i.complete for i in intervals), lowest < chi_opt - LOWER_BY)
+    return tuple(profile(fun, u_opt, chi_opt, j, float(steps[j]), jac)
+                 for j in range(u_opt.size))
 
 
 def _jacobian(fun: _Counted, u: NDArray[np.float64]) -> NDArray[np.float64]:

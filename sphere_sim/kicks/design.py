@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from msg_defs.device import KICK_WINDOW_S, VOLTAGE_LIMIT_V
+from sphere_sim.integrate.relaxation import compiled_relaxation
 from sphere_sim.integrate.solve import Trajectory, simulate
 from sphere_sim.integrate.tolerances import DEFAULT_RTOL
 from sphere_sim.kicks.discrete import KickResult
@@ -28,10 +29,11 @@ from sphere_sim.model.programme import Pulse, PulseProgramme
 from sphere_sim.model.rotations import angle_between
 
 SETTLE_BAND_RAD = math.radians(0.005)  # "settled": within 0.005 deg of the final normal
-# The rest states of the kick workloads (table nodes, the tables' direct checks, optimisations):
-# odeint's relaxation, a third of the reference's time and within 1.1e-6 of its state scale; a
-# kick from either ends within 2.3e-9 rad (test_throughput).
-KICK_RELAXATION = 'odeint'
+# The rest states of the kick workloads (table nodes, the tables' direct checks, optimisations,
+# the fits' kicks and thresholds): the reference's method and tolerance, compiled, in under a
+# sixth of its time (docs/numerics.md, "The rest state's relaxation"); test_throughput bounds
+# how far its rests and the kicks from them lie from the reference's.
+KICK_RELAXATION = compiled_relaxation
 KICK_SAMPLE_PERIOD_S = 2e-4
 
 

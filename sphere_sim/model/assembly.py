@@ -94,6 +94,14 @@ class Model:
     def n_beams(self) -> int:
         return len(self.beams)
 
+    def with_orientation_held(self) -> 'Model':
+        """The same model with the sphere's orientation held (``F_ORIENTATION_HELD``): every
+        other state moves as before, so a compiled integrator relaxes a tilted sphere onto its
+        tips without letting it turn."""
+        flags = self.flags.copy()
+        flags[dyn.F_ORIENTATION_HELD] = 1
+        return dataclasses.replace(self, flags=flags)
+
     @property
     def has_bristles(self) -> bool:
         """True when each tip carries a friction bristle (``paper`` and ``stiction`` readings)."""

@@ -60,7 +60,10 @@ F_COULOMB = 11
 F_STRIBECK = 12
 F_FRICTION_READING = 13  # a code of sphere_sim.model.friction.READINGS
 F_STICTION = 14  # the model carries a bristle per tip (readings ``paper`` and ``stiction``)
-N_FLAGS = 15
+# The sphere's orientation is held: its quaternion's and angular velocity's rates are zero. Not
+# a part of the device: rest_state relaxes a tilted sphere so, with every other state free.
+F_ORIENTATION_HELD = 15
+N_FLAGS = 16
 
 SPHERE_STATES = 13
 BRISTLE_STATES = 3  # per beam
@@ -389,6 +392,11 @@ def rhs_kernel(t, x, u, p, flags, directions, rbf_cz, rbf_cphi, rbf_w, dxdt, dia
         dxdt[o + 4] = 0.5 * (w * wx + qy * wz - qz * wy) + stab * qx
         dxdt[o + 5] = 0.5 * (w * wy - qx * wz + qz * wx) + stab * qy
         dxdt[o + 6] = 0.5 * (w * wz + qx * wy - qy * wx) + stab * qz
+        if flags[F_ORIENTATION_HELD]:
+            for i in range(4):
+                dxdt[o + 3 + i] = 0.0
+            for i in range(3):
+                dxdt[o + 10 + i] = 0.0
 
 
 # Difference steps of the Jacobian: JACOBIAN_STEP times each state's characteristic scale

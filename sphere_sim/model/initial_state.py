@@ -2,14 +2,13 @@
 
 import dataclasses
 import math
-import warnings
 from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.integrate import ODEintWarning, odeint, solve_ivp
+from scipy.integrate import solve_ivp
 
-from sphere_sim.model.assembly import JacobianFunction, Model, RhsFunction, assemble
+from sphere_sim.model.assembly import Model, assemble
 from sphere_sim.model.rotations import cardan_to_quat, quat_to_matrix
 from sphere_sim.model.scaling import state_scale
 from sphere_sim.model.sphere_geometry import mass_properties
@@ -19,17 +18,20 @@ NEWTON_ITERATIONS = 40
 NEWTON_BACKTRACKS = 30
 NEWTON_FD_STEP = 1e-6  # in the scaled coordinates (um, mrad)
 RELAX_TIME_S = 0.06  # several decay times of the sphere's bounce on the tips
-# The ``odeint`` relaxation runs LSODA in Fortran, calling back only for f and J, at this rtol:
-# it ends within 1.1e-6 (scaled) of where the default, scipy's Radau at 1e-6 stepped from
-# Python, ends (that Radau's own error: it moves by 9e-7 at 1e-8), in a third of the time. At
-# odeint's 1e-6 it is 3e-4 off: a tilted sphere's rest is a family held by the bristles, and
-# the relaxation's path picks the member.
-ODEINT_RELAX_RTOL = 1e-8
-ODEINT_RELAX_MAX_STEPS = 60_000  # four times the 1.5e4 of a relaxation: beyond, LSODA has stalled
+# The relaxation's tolerance, the reference's (scipy's Radau stepped from Python) and the
+# compiled one's (sphere_sim.integrate.relaxation): a tilted sphere's rest is a family held by
+# the bristles, and the relaxation's path picks the member. The reference moves by 9e-7 of the
+# state scale from here to 1e-8.
 RADAU_RELAX_RTOL = 1e-6
-RELAXATIONS = ('radau', 'odeint')
 REST_SCALE_Z_M = 1e-6  # Newton works on positions in um and angles in mrad
 REST_SCALE_PHI_RAD = 1e-3
+
+
+# A relaxation a higher layer supplies (sphere_sim.integrate.relaxation.compiled_relaxation):
+# the state RELAX_TIME_S after ``x`` of the model given (its orientation already held) under the
+# voltages ``u``, or None where it fails and the reference takes over.
+Relaxation = Callable[[Model, NDArray[np.float64], NDArray[np.float64]],
+                      NDArray[np.float64] | None]
 
 
 class RestError(RuntimeError):
@@ -67,7 +69,7 @@ def _touching_position(model: Model, x: NDArray[np.float64]) -> NDArray[np.float
 
 
 def rest_state(model: Model, sphere_angles_deg: Sequence[float] | None = None,
-               relaxation: str = 'radau') -> NDArray[np.float64]:
+               relaxation: Relaxation | None = None) -> NDArray[np.float64]:
     """Static equilibrium of beams and sphere position for a fixed sphere orientation.
 
     The sphere is first let down onto the tips and relaxed by integrating the model with its
@@ -75,10 +77,11 @@ def rest_state(model: Model, sphere_angles_deg: Sequence[float] | None = None,
     method polishes the positions until the accelerations vanish. For a tilted sphere the
     orientation stays as given: the remaining torque is what friction and the kicks act on.
 
-    ``relaxation`` is ``'radau'`` (scipy's, the reference) or ``'odeint'``, three times faster
-    and within 1.1e-6 of its state scale (measured on the rest scene; where LSODA stalls, as
-    with a stiffened contact, Radau takes over). The kick workloads, which relax one state per
-    table node, use ``'odeint'``; every other caller keeps the reference.
+    ``relaxation`` integrates the held model instead of the reference, scipy's Radau stepped
+    from Python (None), which takes over where it fails. The kick workloads, which relax one
+    state per kick or table node, use the same method compiled
+    (:func:`sphere_sim.integrate.relaxation.compiled_relaxation`, ``KICK_RELAXATION``); every
+    other caller keeps the reference.
 
     Returns
     -------
@@ -96,8 +99,6 @@ def rest_state(model: Model, sphere_angles_deg: Sequence[float] | None = None,
         o = model.sphere_offset
         x[o + 3:o + 7] = cardan_to_quat(*np.radians(sphere_angles_deg))
         x[o:o + 3] = _touching_position(model, x)
-    if relaxation not in RELAXATIONS:
-        raise ValueError(f'relaxation must be one of {RELAXATIONS}, got {relaxation!r}')
     return polish_equilibrium(model, _relax(_dissipative_twin(model), x, relaxation),
                               np.zeros(n))
 
@@ -268,57 +269,31 @@ def _generalised_masses(model: Model, free: NDArray[np.intp]) -> NDArray[np.floa
     return np.array(out)
 
 
-def _relax(model: Model, x: NDArray[np.float64], relaxation: str = 'radau',
+def _relax(model: Model, x: NDArray[np.float64], relaxation: Relaxation | None = None,
            voltages: ArrayLike | None = None, hold_orientation: bool = True) -> NDArray[np.float64]:
-    """Integrate with all rates damped out and the sphere's orientation held (or free)."""
-    frozen = np.zeros(model.n_states, dtype=bool)
+    """Integrate with all rates damped out and the sphere's orientation held (or free), by
+    ``relaxation`` or, where it fails or is None, the reference."""
     if model.has_sphere and hold_orientation:
-        o = model.sphere_offset
-        frozen[o + 3:o + 7] = True
-        frozen[o + 10:o + 13] = True
-    # The kernels bound once (the same numbers as model.rhs and model.jacobian give).
+        model = model.with_orientation_held()
     u = np.zeros(model.n_beams) if voltages is None else np.asarray(voltages, dtype=float)
-    rhs, jacobian = model.at_voltages(u)
-
-    def fun(t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
-        dydt = rhs(t, y)
-        dydt[frozen] = 0.0
-        return dydt
-
-    def jac(t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
-        dfdy = jacobian(t, y)
-        dfdy[frozen] = 0.0
-        return dfdy
-
-    y = _relax_odeint(model, x, fun, jac) if relaxation == 'odeint' else None
+    y = None if relaxation is None else relaxation(model, x, u)
     if y is None:
-        y = _relax_radau(model, x, fun, jac)
+        y = _relax_radau(model, x, u)
     y[2 * model.n_beams:4 * model.n_beams] = 0.0
     if model.has_sphere:
         y[model.sphere_offset + 7:model.sphere_offset + 13] = 0.0
     return y
 
 
-def _relax_radau(model: Model, x: NDArray[np.float64], fun: RhsFunction,
-                 jac: JacobianFunction) -> NDArray[np.float64]:
+def _relax_radau(model: Model, x: NDArray[np.float64],
+                 u: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The reference relaxation: scipy's Radau under the voltages ``u``, stepped from Python."""
+    fun, jac = model.at_voltages(u)  # the kernels bound once (as model.rhs and .jacobian give)
     sol = solve_ivp(fun, (0.0, RELAX_TIME_S), x, method='Radau', rtol=RADAU_RELAX_RTOL,
                     atol=RADAU_RELAX_RTOL * state_scale(model), jac=jac)
     if not sol.success:
         raise RestError(f'relaxation towards rest failed: {sol.message}')
     return sol.y[:, -1].copy()
-
-
-def _relax_odeint(model: Model, x: NDArray[np.float64], fun: RhsFunction,
-                  jac: JacobianFunction) -> NDArray[np.float64] | None:
-    """The relaxed state by odeint, or None where LSODA gave up."""
-    with warnings.catch_warnings():
-        warnings.simplefilter('ignore', ODEintWarning)  # a stall falls back to Radau
-        ys, info = odeint(fun, x, [0.0, RELAX_TIME_S], Dfun=jac, rtol=ODEINT_RELAX_RTOL,
-                          atol=ODEINT_RELAX_RTOL * state_scale(model),
-                          mxstep=ODEINT_RELAX_MAX_STEPS, full_output=True, tfirst=True)
-    if info['message'] != 'Integration successful.' or not np.all(np.isfinite(ys[-1])):
-        return None
-    return ys[-1].copy()
 
 
 def _acceleration_index(model: Model, free: NDArray[np.intp]) -> NDArray[np.intp]:
@@ -333,7 +308,7 @@ def _acceleration_index(model: Model, free: NDArray[np.intp]) -> NDArray[np.intp
     return np.array(index)
 
 
-def initial_state(model: Model, relaxation: str = 'radau') -> NDArray[np.float64]:
+def initial_state(model: Model, relaxation: Relaxation | None = None) -> NDArray[np.float64]:
     """The scene's initial state, shape (n_states,); a rest state is relaxed with
     ``relaxation`` (:func:`rest_state`)."""
     init = model.scene.initial

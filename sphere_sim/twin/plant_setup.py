@@ -84,6 +84,7 @@ def build_plant(kind: str = '', scene_name: str = 'rest', table_paths: Iterable[
     FidelityError
         For a rung that leaves out a mechanism the scene does not have.
     """
+    from sphere_sim.kicks.design import KICK_RELAXATION
     from sphere_sim.kicks.discrete import kick_period_s, normal_from_cardan
     from sphere_sim.kicks.lookup_table import load_kick_model
     from sphere_sim.model.assembly import assemble
@@ -101,10 +102,8 @@ def build_plant(kind: str = '', scene_name: str = 'rest', table_paths: Iterable[
     # refused before the seconds of the rest below.
     kicks = load_kick_model(table_paths, params if kind == 'discrete' else None)
     model = assemble(scene, params)
-    # A node's start waits for this: relaxed as the tables relax their nodes (odeint, 0.9 s on
-    # the rest scene against 4 s for Radau; the two rests lie 2e-10 m apart, where the
-    # bristles' elastic zone leaves the equilibrium free).
-    x0 = initial_state(model, relaxation='odeint')
+    # A node's start waits for this: relaxed as the tables relax their nodes (KICK_RELAXATION).
+    x0 = initial_state(model, relaxation=KICK_RELAXATION)
     if rung_scene is not None:
         rung_model = model if rung_scene is scene else assemble(rung_scene, params)
         return ContinuousPlant(rung_model, carried_state(model, rung_model, x0),
