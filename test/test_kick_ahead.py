@@ -100,9 +100,9 @@ def _discrete_plant():
 def _continuous_plant():
     """The physics at the live tolerance, resting at the tilt (relaxed as the simulator
     relaxes its start)."""
+    from sphere_sim.kicks.design import KICK_RELAXATION
     from sphere_sim.kicks.discrete import kick_period_s
     from sphere_sim.kicks.lookup_table import load_kick_model
-    from sphere_sim.kicks.design import KICK_RELAXATION
     from sphere_sim.kicks.process_models import process_model
     from sphere_sim.model.initial_state import rest_state
     from sphere_sim.model.parameters import load_parameter_set

@@ -32,11 +32,12 @@ from sphere_twin.commands import bench
 # 1e-8); the two step differently (the compiled one checks contact onsets and does not grow a
 # step after a retry).
 REST_TOLERANCE_SCALED = 5e-6
-# The full kick from either rest state: measured (with LSODA's relaxation, the one before) 2.8e-6
-# rad apart from level (a kick of 3.6e-3 rad) and 2.1e-5 rad at (-0.4, 0.4), which lies on the
-# kick's mirror line: there the two rest states' bristles (1.1e-6 of their scale apart) tip the
-# landing to either side of the line by 2 % of that kick. The paper's friction makes a landing sensitive to where the
-# bristles start; the table's interpolation error is of the same order (docs/motion_primitives).
+# The full kick from either rest state: measured (with LSODA's relaxation, the one before)
+# 2.8e-6 rad apart from level (a kick of 3.6e-3 rad) and 2.1e-5 rad at (-0.4, 0.4), which lies
+# on the kick's mirror line: there the two rest states' bristles (1.1e-6 of their scale apart)
+# tip the landing to either side of the line by 2 % of that kick. The paper's friction makes a
+# landing sensitive to where the bristles start; the table's interpolation error is of the same
+# order (docs/motion_primitives).
 KICK_TOLERANCE_RAD = 3e-5
 TILTS_XY = ((0.0, 0.0), (0.2, -0.2), (-0.4, 0.4))
 
