@@ -15,7 +15,6 @@ from sphere_sim.integrate.fast_segment import segment_fast
 from sphere_sim.integrate.segment import Budget, Segment, SolverError, SolverStats
 from sphere_sim.integrate.solve import default_onset_depth_m
 from sphere_sim.model.assembly import Model
-from sphere_sim.model.dynamics import F_ORIENTATION_HELD
 from sphere_sim.model.initial_state import RADAU_RELAX_RTOL, RELAX_TIME_S
 from sphere_sim.model.scaling import state_scale
 
@@ -40,11 +39,4 @@ def compiled_relaxation(model: Model, x: NDArray[np.float64],
     except SolverError:
         return None
     y = samples[:, -1].copy()
-    if not np.all(np.isfinite(y)):
-        return None
-    if model.has_sphere and model.flags[F_ORIENTATION_HELD]:
-        # Held, its rates are zero, but the LU's row exchanges leave rounding (1e-29) in its
-        # Newton increments: the orientation given is the one returned.
-        o = model.sphere_offset
-        y[o + 3:o + 7] = x[o + 3:o + 7]
-    return y
+    return y if np.all(np.isfinite(y)) else None

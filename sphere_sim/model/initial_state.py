@@ -281,7 +281,12 @@ def _relax(model: Model, x: NDArray[np.float64], relaxation: Relaxation | None =
         y = _relax_radau(model, x, u)
     y[2 * model.n_beams:4 * model.n_beams] = 0.0
     if model.has_sphere:
-        y[model.sphere_offset + 7:model.sphere_offset + 13] = 0.0
+        o = model.sphere_offset
+        y[o + 7:o + 13] = 0.0
+        if hold_orientation:
+            # Held, its rates are zero, but a solver's row exchanges can leave rounding (1e-29,
+            # the compiled Radau's) in its increments: the orientation given is the one returned.
+            y[o + 3:o + 7] = x[o + 3:o + 7]
     return y
 
 
