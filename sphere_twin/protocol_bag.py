@@ -14,6 +14,7 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
     from sphere_sim.fitting.protocol import ProbeBracket, RampPullIn
+    from sphere_sim.fitting.ramps import RampObservation
     from sphere_twin.run_analysis import RecordedRun
 
 
@@ -22,6 +23,8 @@ class ProtocolResults:
     brackets: tuple[ProbeBracket, ...]
     ramps: tuple[RampPullIn, ...]
     noise_std_rad: float  # per axis, from the resting stretches
+    # the ramps whose jump was seen and the sphere rested before, as observations to fit
+    ramp_observations: tuple[RampObservation, ...] = ()
 
 
 def read_protocol(bag_dir: str | os.PathLike[str]) -> ProtocolResults:
@@ -33,13 +36,24 @@ def read_protocol(bag_dir: str | os.PathLike[str]) -> ProtocolResults:
 def protocol_of(run: RecordedRun) -> ProtocolResults:
     """The protocol's brackets and ramps in a loaded recording of the device's topics."""
     from sphere_sim.fitting.protocol import probe_brackets, ramp_pull_in, resting_around
+    from sphere_sim.fitting.ramps import RampObservation
 
     t_s, normals = distinct_samples(run)
     observations, noise = resting_around(t_s, normals, run.kicks)
-    ramps = [ramp_pull_in(t_s, normals, start, times, volts)
-             for start, times, volts in run.kicks]
-    return ProtocolResults(tuple(probe_brackets(observations, noise)),
-                           tuple(r for r in ramps if r is not None), noise)
+    rested = {o.time_s: o for o in observations}
+    ramps, fitted = [], []
+    for start, times, volts in run.kicks:
+        ramp = ramp_pull_in(t_s, normals, start, times, volts)
+        if ramp is None:
+            continue
+        ramps.append(ramp)
+        before = rested.get(float(start))
+        observation = None if before is None else RampObservation.from_pull_in(
+            ramp, times, volts, before.normal_before, noise)
+        if observation is not None:
+            fitted.append(observation)
+    return ProtocolResults(tuple(probe_brackets(observations, noise)), tuple(ramps), noise,
+                           tuple(fitted))
 
 
 def distinct_samples(run: RecordedRun) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

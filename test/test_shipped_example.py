@@ -60,3 +60,34 @@ def test_the_truths_single_beams_at_5_ms_pull_in_within_their_recorded_brackets(
     shipped = model_threshold_v(calibrated, o.beams, o.width_s, o.normal_before, o.middle_v,
                                 origin_v=o.low_v, first_step_v=0.5)
     assert abs(shipped - o.middle_v) > 10.0 * o.std_v, shipped
+
+
+def test_the_four_slow_ramps_are_read_as_observations_with_their_jump(recording):
+    assert [r.beams for r in recording.ramps] == [(1,), (2,), (3,), (4,)]
+    for ramp in recording.ramps:
+        # the jump lies between two samples of the 100 Hz sensor: 10 ms of a 20 V/s ramp
+        assert ramp.high_v - ramp.low_v == pytest.approx(0.2, abs=1e-6)
+        assert 40.0 < ramp.low_v < 50.0
+    assert recording.pull_ins[:SEARCHES] == recording.thresholds
+
+
+def test_the_truths_ramps_jump_where_recorded_and_the_thresholds_valley_does_not(recording):
+    # The thresholds alone fit the truth and a point along their valley (k_z 16 % low, d_B,phi
+    # 46 % low) equally; a slow ramp is static and tells them apart (sphere_sim.fitting.ramps).
+    from sphere_sim.fitting.identification import fit_parameters, params_at
+    from sphere_sim.fitting.ramps import model_ramp_pull_in_v
+
+    truth = load_parameter_set(str(BAG / 'truth.yaml'))
+    calibrated = load_parameter_set('calibrated')
+    valley = params_at(calibrated, fit_parameters(calibrated), [
+        28.78, 3.844e-06, -1.086e-05, 0.5114, 1.831e+04, 3.355e-09])
+    ramp = recording.ramps[2]
+    at_truth = model_ramp_pull_in_v(truth, ramp)
+    assert abs(at_truth - ramp.middle_v) < 2.0 * ramp.std_v
+    assert model_ramp_pull_in_v(valley, ramp) - at_truth > 0.5
+    # static: the damping moves it little, the stiffness smoothly (no step between lattice cells)
+    damped = params_at(truth, fit_parameters(truth, ['beam.damping_phi_nms_per_rad']), [8e-9])
+    assert abs(model_ramp_pull_in_v(damped, ramp) - at_truth) < 0.1
+    stiff = [model_ramp_pull_in_v(params_at(truth, fit_parameters(
+        truth, ['beam.stiffness_z_n_per_m']), [k]), ramp) for k in (34.17, 34.27, 34.37)]
+    assert 0.02 < stiff[1] - stiff[0] < 0.1 and 0.02 < stiff[2] - stiff[1] < 0.1

@@ -50,6 +50,7 @@ from sphere_sim.fitting.observations import (
     KickObservation,
     Observations,
 )
+from sphere_sim.fitting.ramps import PullInObservation, RampObservation, model_ramp_pull_in_v
 from sphere_sim.fitting.thresholds import (
     MODEL_RESOLUTION_V,
     UNPREDICTED_STEP_V,
@@ -272,13 +273,16 @@ def kick_end_normal(params: ParameterSet, kick: KickObservation,
 # One simulation's inputs: the parameters, the observation, the tolerance, and for a threshold
 # its predicted value, where its search starts (V; None: no prediction, the search starts at the
 # recorded bracket's middle with a wide step).
-ObservationTask = tuple[ParameterSet, KickObservation | ThresholdObservation, float,
+ObservationTask = tuple[ParameterSet, KickObservation | PullInObservation, float,
                         float | None]
 
 
 def _observation_task(task: ObservationTask) -> NDArray[np.float64]:
-    """One simulation of one observation: a kick's end normal, or a threshold (V, one entry)."""
+    """One simulation of one observation: a kick's end normal, or a threshold or a ramp's
+    pull-in (V, one entry)."""
     params, observation, rtol, guess_v = task
+    if isinstance(observation, RampObservation):
+        return np.array([model_ramp_pull_in_v(params, observation, rtol)])
     if isinstance(observation, ThresholdObservation):
         start_v, step_v = ((observation.middle_v, UNPREDICTED_STEP_V) if guess_v is None
                            else (guess_v, MODEL_RESOLUTION_V))
@@ -336,15 +340,16 @@ class Evaluator:
     and appended to a checkpoint file that a rerun reads back.
 
     A vector holds the kicks' residuals (x and y of each, rad) and then, for each of
-    ``thresholds`` (the experiment protocol's searches), the model's threshold (V): every
-    simulation of one parameter vector is one task on the engine, kicks and thresholds alike.
+    ``thresholds`` (the experiment protocol's searches and slow ramps), the model's threshold
+    or ramp pull-in (V): every simulation of one parameter vector is one task on the engine,
+    kicks and thresholds alike.
     """
 
     def __init__(self, params: ParameterSet, observations: Observations,
                  fits: Sequence[FitParameter], engine: SerialEngine, rtol: float = FIT_RTOL,
                  checkpoint: str | Path | None = None,
                  progress: Callable[[Evaluator], object] | None = None,
-                 thresholds: Sequence[ThresholdObservation] = (),
+                 thresholds: Sequence[PullInObservation] = (),
                  predicted_from: Sequence[Evaluator] = ()) -> None:
         self.params, self.obs, self.fits = params, observations, fits
         self.thresholds = tuple(thresholds)

@@ -16,7 +16,8 @@ whichever the joint misfit puts lower.
 The misfit is a plain sum of squares of residuals in units of their standard deviations: the
 kicks' residuals whitened by the sensor noise (with the restart's error,
 :meth:`~sphere_sim.fitting.observations.Observations.whitener`), and each threshold's
-(model - bracket middle) / :attr:`~sphere_sim.fitting.thresholds.ThresholdObservation.std_v`.
+(model - bracket middle) / :attr:`~sphere_sim.fitting.thresholds.ThresholdObservation.std_v`,
+and a slow ramp's the same of its jump (:class:`~sphere_sim.fitting.ramps.RampObservation`).
 No prior: what the intervals say is what the recordings say. Every parameter vector is
 simulated once, kicks and thresholds as one batch of tasks on the engine, and checkpointed
 (:class:`~sphere_sim.fitting.identification.Evaluator`), so an interrupted fit resumes.
@@ -43,6 +44,7 @@ from sphere_sim.fitting.profile_fit import (
     fit_profiles,
     search_minimum,
 )
+from sphere_sim.fitting.ramps import PullInObservation
 from sphere_sim.fitting.thresholds import ThresholdObservation, non_monotone, switches_text
 from sphere_sim.integrate.tolerances import FIT_RTOL
 from sphere_sim.kicks.engine import SerialEngine, engine_for
@@ -86,7 +88,7 @@ class JointFitResult:
     kicks_chi2: float  # the kicks' whitened share of it, over 2 x len(kicks.kicks) residuals
     kicks: Observations  # the kicks fitted (those the model determines)
     undetermined: tuple[int, ...]  # the kicks left out, indices into those given
-    thresholds: tuple[ThresholdObservation, ...]
+    thresholds: tuple[PullInObservation, ...]  # the searches', then the ramps'
     threshold_residuals: NDArray[np.float64]  # at the optimum, in standard deviations
     model_thresholds_v: NDArray[np.float64]  # at the optimum
     kick_vectors_start: NDArray[np.float64]  # (k, 2) model minus recorded, rad, at the start
@@ -136,7 +138,7 @@ class JointMisfit:
 
 
 def fit_jointly(params: ParameterSet, fits: Sequence[FitParameter],
-                kicks: Observations | None, thresholds: Sequence[ThresholdObservation],
+                kicks: Observations | None, thresholds: Sequence[PullInObservation],
                 workers: int | SerialEngine = 1, scheduler: str | None = None,
                 checkpoint: str | Path | None = None,
                 progress: Callable[[Evaluator], object] | None = None,
@@ -152,10 +154,10 @@ def fit_jointly(params: ParameterSet, fits: Sequence[FitParameter],
         The recorded kicks (None: thresholds alone). A kick whose end the model at the start
         values does not determine is left out first
         (:func:`~sphere_sim.fitting.identification.undetermined_kicks`).
-    thresholds : sequence of ThresholdObservation
-        The protocol's recorded brackets (may be empty: kicks alone). One whose pulses at the
-        start values do not rise once with the amplitude around it is left out first
-        (:func:`~sphere_sim.fitting.thresholds.non_monotone`).
+    thresholds : sequence of ThresholdObservation or RampObservation
+        The protocol's recorded brackets and ramps (may be empty: kicks alone). A bracket whose
+        pulses at the start values do not rise once with the amplitude around it is left out
+        first (:func:`~sphere_sim.fitting.thresholds.non_monotone`).
     workers, scheduler
         Local processes, or a started engine (left open), or a Dask scheduler's address.
     checkpoint : path, optional
@@ -176,10 +178,12 @@ def fit_jointly(params: ParameterSet, fits: Sequence[FitParameter],
     with engine_for(workers, scheduler) as engine:
         undetermined = undetermined_kicks(params, kicks, engine, rtol) if kicks.kicks else ()
         kicks = kicks.without(undetermined)
-        scans = non_monotone(params, thresholds, engine, rtol) if thresholds else {}
-        left_out = tuple((t, switches_text(scans[i])) for i, t in enumerate(thresholds)
+        searches = [t for t in thresholds if isinstance(t, ThresholdObservation)]
+        scans = non_monotone(params, searches, engine, rtol) if searches else {}
+        left_out = tuple((t, switches_text(scans[i])) for i, t in enumerate(searches)
                          if i in scans)
-        thresholds = [t for i, t in enumerate(thresholds) if i not in scans]
+        dropped = {id(t) for t, _ in left_out}
+        thresholds = [t for t in thresholds if id(t) not in dropped]
         if not kicks.kicks and not thresholds:
             raise IdentificationError(
                 'nothing left to fit to: every threshold\'s pulses switch more than once '

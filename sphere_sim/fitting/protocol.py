@@ -428,14 +428,17 @@ def probe_brackets(kicks: Iterable[KickObservation],
 
 @dataclasses.dataclass(frozen=True)
 class RampPullIn:
-    """Where a slow ramp pulled in: the voltages held at the samples either side of the jump
-    (None, None: no jump above :data:`RAMP_JUMP_RAD`)."""
+    """Where a slow ramp pulled in: the voltages held at the samples either side of the jump,
+    and those samples' times after the ramp's start (None: no jump above
+    :data:`RAMP_JUMP_RAD`)."""
 
     beams: tuple[int, ...]
     rate_v_per_s: float
     below_v: float | None
     above_v: float | None
     jump_rad: float
+    below_s: float | None = None
+    above_s: float | None = None
 
 
 def ramp_of(times_s: ArrayLike, voltages_v: ArrayLike) -> tuple[tuple[int, ...], float] | None:
@@ -483,7 +486,8 @@ def ramp_pull_in(t_s: ArrayLike, normals: ArrayLike, start_s: float, times_s: Ar
         k = int(np.searchsorted(times, t[sample] - start_s, side='right')) - 1
         return float(volts[max(k, 0), beams[0] - 1])
 
-    return RampPullIn(beams, rate, held(inside[at - 1]), held(inside[at]), best)
+    return RampPullIn(beams, rate, held(inside[at - 1]), held(inside[at]), best,
+                      float(t[inside[at - 1]] - start_s), float(t[inside[at]] - start_s))
 
 
 # The paper's device (`calibrated`): the four beams alone and the two pairs its kicks drive

@@ -43,6 +43,7 @@ if TYPE_CHECKING:
     from sphere_sim.fitting.joint_fit import JointFitResult
     from sphere_sim.fitting.observations import KickObservation, Observations
     from sphere_sim.fitting.protocol import ProbeBracket
+    from sphere_sim.fitting.ramps import PullInObservation, RampObservation
     from sphere_sim.fitting.thresholds import ThresholdObservation
     from sphere_sim.model.parameters import ParameterSet
     from sphere_twin.bag.locate import BagLocation
@@ -107,6 +108,12 @@ class Recording:
     thresholds: list[ThresholdObservation]
     one_sided: list[ProbeBracket]
     no_kicks: str = ''  # why the bag has no kick to fit, if it has none
+    ramps: tuple[RampObservation, ...] = ()  # the slow ramps whose jump was seen
+
+    @property
+    def pull_ins(self) -> list[PullInObservation]:
+        """What the fit takes of the protocol: the threshold searches, then the ramps."""
+        return [*self.thresholds, *self.ramps]
 
 
 def read_recording(bag_dir: str | os.PathLike[str]) -> Recording:
@@ -126,13 +133,15 @@ def read_recording(bag_dir: str | os.PathLike[str]) -> Recording:
 
     run = load_run(bag_dir, DEVICE_TOPICS)
     t_s, normals = distinct_samples(run)
-    thresholds, one_sided = observations_of(protocol_of(run).brackets)
+    protocol = protocol_of(run)
+    thresholds, one_sided = observations_of(protocol.brackets)
     try:
         kicks = friction_kicks(observations_from_samples(t_s, normals, run.kicks, run.holds,
                                                          SETTLE_S))
     except IdentificationError as exc:  # a protocol's thresholds may still be fitted
-        return Recording(Observations((), 0.0), thresholds, one_sided, str(exc))
-    return Recording(kicks, thresholds, one_sided)
+        return Recording(Observations((), 0.0), thresholds, one_sided, str(exc),
+                         protocol.ramp_observations)
+    return Recording(kicks, thresholds, one_sided, ramps=protocol.ramp_observations)
 
 
 def read_observations(bag_dir: str | os.PathLike[str]) -> Observations:
@@ -164,7 +173,7 @@ def run(args: argparse.Namespace) -> int:
         recordings = [_read_saying(b.directory, i, len(bags)) for i, b in enumerate(bags, 1)]
     except IdentificationError as exc:
         raise CommandError(str(exc)) from None
-    thresholds = [t for r in recordings for t in r.thresholds]
+    thresholds = [t for r in recordings for t in r.pull_ins]
     for bracket in (b for r in recordings for b in r.one_sided):
         print(f'left out {bracket.label}: the bracket has a side never seen')
     if args.thresholds and not thresholds:
@@ -240,11 +249,12 @@ def run_kicks(args: argparse.Namespace, bags: Sequence[BagLocation],
 
 def run_joint(args: argparse.Namespace, bags: Sequence[BagLocation],
               fits: Sequence[FitParameter], kicks: Observations | None,
-              thresholds: Sequence[ThresholdObservation], out: Path, checkpoint: Path) -> int:
+              thresholds: Sequence[PullInObservation], out: Path, checkpoint: Path) -> int:
     """A protocol's recordings: its thresholds and its kicks (``kicks`` None: the thresholds
     alone) in one misfit, with profile intervals (sphere_sim.fitting.joint_fit)."""
     from sphere_sim.fitting.joint_fit import fit_jointly, thresholds_checkpoint
     from sphere_sim.fitting.observations import IdentificationError
+    from sphere_sim.fitting.ramps import RampObservation
     from sphere_sim.fitting.thresholds import (
         OUTCOME_PULSES,
         OUTCOME_STEP_V,
@@ -254,13 +264,15 @@ def run_joint(args: argparse.Namespace, bags: Sequence[BagLocation],
     from sphere_sim.model.parameters import load_parameter_set
 
     limit = args.max_evaluations or JOINT_EVALUATIONS
-    what = f'{len(thresholds)} thresholds' + (f' and {len(kicks.kicks)} kicks' if kicks else '')
+    ramps = sum(isinstance(t, RampObservation) for t in thresholds)
+    what = (f'{len(thresholds) - ramps} thresholds, {ramps} ramps'
+            + (f' and {len(kicks.kicks)} kicks' if kicks else ''))
     print(f'{what}, in one misfit; a multi-start over the declared ranges, then each '
           f'parameter\'s 95 % profile interval (cost limit {limit} evaluations, each every '
           'threshold, some 0.3 s apiece near points already searched and up to 1.7 s where the '
           'model lies volts off the recording, and every kick)')
-    if thresholds:
-        say(f'first: {len(thresholds)} scans of {OUTCOME_PULSES} '
+    if len(thresholds) > ramps:
+        say(f'first: {len(thresholds) - ramps} scans of {OUTCOME_PULSES} '
             f'pulses (each threshold at the start values, every {OUTCOME_STEP_V:g} V within '
             f'{OUTCOME_WINDOW_V:g} V of its bracket, to leave out those whose pulses switch '
             'more than once)')
@@ -316,9 +328,9 @@ def print_joint_result(result: JointFitResult, wall_s: float) -> None:
           + (' (stopped by the cost limit)' if result.profile.cost_limited else ''))
     if result.undetermined:
         print(undetermined_kicks_line(len(result.undetermined)))
-    for obs, switches in result.non_monotone:
-        print(f'left out {obs.label} (recorded {obs.low_v:.2f}-{obs.high_v:.2f} V): at the '
-              f'start values its pulses switch more than once around it ({switches}), so '
+    for search, switches in result.non_monotone:
+        print(f'left out {search.label} (recorded {search.low_v:.2f}-{search.high_v:.2f} V): '
+              f'at the start values its pulses switch more than once around it ({switches}), so '
               'which switch a bisection finds turns on its path')
     if result.kicks.kicks:
         print(f'per-kick residual RMS: {_rms(np.hypot(*result.kick_vectors_start.T)):.3g} rad '

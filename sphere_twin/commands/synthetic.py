@@ -234,12 +234,13 @@ def run_protocol_study(args: argparse.Namespace, devices: Sequence[SyntheticDevi
                     bar.n = len(ev.cache)
                     bar.refresh()
 
-                result = fit_jointly(base, fits, recording.kicks, recording.thresholds, eng,
+                result = fit_jointly(base, fits, recording.kicks, recording.pull_ins, eng,
                                      None, checkpoint, progress, max_evaluations=limit)
             truth = device.truth(base)
             rows.append({
                 'device': device.name, 'base': device.base, 'factors': device.factors,
-                'thresholds': len(recording.thresholds), 'kicks': len(result.kicks.kicks),
+                'thresholds': len(recording.thresholds), 'ramps': len(recording.ramps),
+                'kicks': len(result.kicks.kicks),
                 'undetermined': len(result.undetermined),
                 'wall_s': time.perf_counter() - started, 'evaluations': result.evaluations,
                 'threshold_search_evaluations': result.threshold_search_evaluations,
