@@ -4,8 +4,8 @@ it in, for a parameter set, and a recorded ramp's jump as a residual.
 A probe's threshold is dynamic (a short pulse: the beams' inertia and damping), a slow ramp's
 is static (the stiffness and the gap): with the threshold searches alone, the beams' four
 parameters trade along a valley that a ramp cuts across (docs/identification.md, "The slow
-ramps"). On the shipped example the thresholds of paper_b's truth and of a point 20 % off in
-k_z and 46 % off in d_B,phi fit equally well; the ramps of the two points pull in 0.7 V apart.
+ramps"). On the shipped example the thresholds of paper_b's truth and of a point 16 % low in
+k_z and 46 % low in d_B,phi fit equally well; the ramps of the two points pull in 0.7 V apart.
 
 The recorded jump (:func:`~sphere_sim.fitting.protocol.ramp_pull_in`) lies between two samples
 of the normal sensor; the ramp's voltage at a time is read as the ramp's rate says it, from the
