@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from sphere_sim.fitting.ramps import JUMP_LAG_S, JUMP_RAD, jump_time_s
+from sphere_sim.fitting.protocol import RAMP_JUMP_RAD as JUMP_RAD
+from sphere_sim.fitting.ramps import JUMP_LAG_S, jump_time_s
 
 
 def _normals(tilt_rad):

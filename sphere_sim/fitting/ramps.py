@@ -11,8 +11,8 @@ The recorded jump (:func:`~sphere_sim.fitting.protocol.ramp_pull_in`) lies betwe
 of the normal sensor; the ramp's voltage at a time is read as the ramp's rate says it, from the
 programme's first level (the staircase holds each level for one step), so that a jump's time
 and a ramp's voltage are one number. The model simulates the recorded programme from rest at
-the recorded normal and reports the instant its normal moves :data:`JUMP_RAD` within
-:data:`JUMP_LAG_S`, interpolated between output samples: a continuous function of the
+the recorded normal and reports the instant its normal moves
+:data:`~sphere_sim.fitting.protocol.RAMP_JUMP_RAD` within :data:`JUMP_LAG_S`, interpolated between output samples: a continuous function of the
 parameters wherever the jump is a jump, so the misfit has no steps from it.
 """
 
@@ -37,11 +37,10 @@ from sphere_sim.model.initial_state import rest_state
 from sphere_sim.model.parameters import ParameterSet
 from sphere_sim.model.programme import PulseProgramme
 
-# The model's jump: the normal moving this far (rad) within one sample period of the 100 Hz
-# sensor, the recorder's threshold for a jump (RAMP_JUMP_RAD), about half of the jumps seen
-# (2.7e-3 to 4.3e-3 rad on the shipped example): the detector's largest step of window means
-# falls on the first sample past the jump's middle.
-JUMP_RAD = RAMP_JUMP_RAD
+# The model's jump: the normal moving the recorder's threshold for a jump (RAMP_JUMP_RAD, about
+# half of the jumps seen, 2.7e-3 to 4.3e-3 rad on the shipped example: the detector's largest
+# step of window means falls on the first sample past the jump's middle) within one sample
+# period of the 100 Hz sensor.
 JUMP_LAG_S = 0.01
 # The simulated normal's output spacing (s): the jump rises over some 2.5 ms (2.6e-3 to 9.8e-3
 # rad on paper_b's truth, beam 3), resolved by five samples.
@@ -132,20 +131,18 @@ PullInObservation = ThresholdObservation | RampObservation
 
 def jump_time_s(t_s: NDArray[np.float64], normals: NDArray[np.float64]) -> float | None:
     """The first instant at which the normal (samples ``normals`` at ``t_s``) lies
-    :data:`JUMP_RAD` from where it was :data:`JUMP_LAG_S` before, interpolated linearly
-    between samples; None if it never does."""
+    :data:`~sphere_sim.fitting.protocol.RAMP_JUMP_RAD` from where it was :data:`JUMP_LAG_S`
+    before, interpolated linearly between samples; None if it never does."""
     t, first = np.unique(np.asarray(t_s, dtype=float), return_index=True)
     n = np.asarray(normals, dtype=float)[first]
     lagged = np.column_stack([np.interp(t - JUMP_LAG_S, t, n[:, k]) for k in range(3)])
     moved = np.array([moved_rad(a, b) for a, b in zip(lagged, n, strict=True)])
     moved[t < t[0] + JUMP_LAG_S] = 0.0
-    over = np.flatnonzero(moved > JUMP_RAD)
+    over = np.flatnonzero(moved > RAMP_JUMP_RAD)
     if not over.size:
         return None
-    i = int(over[0])
-    if i == 0:  # pragma: no cover - moved is zero for the first lag
-        return float(t[0])
-    share = (JUMP_RAD - moved[i - 1]) / (moved[i] - moved[i - 1])
+    i = int(over[0])  # at least 1: moved is zero for the first lag
+    share = (RAMP_JUMP_RAD - moved[i - 1]) / (moved[i] - moved[i - 1])
     return float(t[i - 1] + share * (t[i] - t[i - 1]))
 
 
