@@ -12,8 +12,9 @@ of the normal sensor; the ramp's voltage at a time is read as the ramp's rate sa
 programme's first level (the staircase holds each level for one step), so that a jump's time
 and a ramp's voltage are one number. The model simulates the recorded programme from rest at
 the recorded normal and reports the instant its normal moves
-:data:`~sphere_sim.fitting.protocol.RAMP_JUMP_RAD` within :data:`JUMP_LAG_S`, interpolated between output samples: a continuous function of the
-parameters wherever the jump is a jump, so the misfit has no steps from it.
+:data:`~sphere_sim.fitting.protocol.RAMP_JUMP_RAD` within :data:`JUMP_LAG_S`, interpolated
+between output samples: a continuous function of the parameters wherever the jump is a jump,
+so the misfit has no steps from it.
 """
 
 from __future__ import annotations
