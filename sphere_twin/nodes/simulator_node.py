@@ -17,7 +17,8 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.event_handler import QoSMessageLostInfo, SubscriptionEventCallbacks
+from rclpy.event_handler import (PublisherEventCallbacks, QoSMessageLostInfo,
+                                 QoSPublisherMatchedInfo, SubscriptionEventCallbacks)
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
@@ -144,7 +145,13 @@ class SimulatorNode(Node):
         self._topic_publishers = {topic.name: self.create_publisher(
             topic.msg_type, topic.name, topic.qos.to_profile())
             for topic in (SURFACE_NORMAL, SPHERE_STATE, BEAM_STATE, BEAM_VOLTAGE, MARKERS,
-                          CLOCK, DIAGNOSTICS, PROGRAMME_STATUS)}
+                          CLOCK, PROGRAMME_STATUS)}
+        # A status for each listener that joins: a recorder whose /diagnostics reader is
+        # matched after simulated time starts (discovery matches each topic on its own) then
+        # still hears how the physics is integrated before the next status period.
+        self._topic_publishers[DIAGNOSTICS.name] = self.create_publisher(
+            DIAGNOSTICS.msg_type, DIAGNOSTICS.name, DIAGNOSTICS.qos.to_profile(),
+            event_callbacks=PublisherEventCallbacks(matched=self.on_diagnostics_matched))
         self._tf_type = tf_message_type()
         self._tf_publisher = (None if self._tf_type is None else
                               self.create_publisher(self._tf_type, TF_TOPIC, TF_QUEUE_DEPTH))
@@ -221,6 +228,11 @@ class SimulatorNode(Node):
         self.get_logger().info(f'{name} set to {value:g}')
 
     # --- commands ----------------------------------------------------------------------
+    def on_diagnostics_matched(self, info: QoSPublisherMatchedInfo) -> None:
+        # Before simulated time starts, the status sent at its start reaches this listener.
+        if info.current_count_change > 0 and self.runner.counters.samples > 0:
+            self._publish_diagnostics(DiagnosticStatus.OK, 'running')
+
     def on_commands_lost(self, info: QoSMessageLostInfo) -> None:
         """Count the commands the transport lost before they reached this node."""
         self.runner.counters.lost += info.total_count_change
