@@ -17,8 +17,12 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.event_handler import (PublisherEventCallbacks, QoSMessageLostInfo,
-                                 QoSPublisherMatchedInfo, SubscriptionEventCallbacks)
+from rclpy.event_handler import (
+    PublisherEventCallbacks,
+    QoSMessageLostInfo,
+    QoSPublisherMatchedInfo,
+    SubscriptionEventCallbacks,
+)
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
