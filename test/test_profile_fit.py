@@ -9,9 +9,13 @@ import pytest
 from sphere_sim.fitting.profile_fit import (
     CHI2_95,
     DETERMINED_SHARE,
+    SEEN_RESIDUAL,
+    SEEN_STEP_UNIT,
     ProfileInterval,
     fit_profiles,
+    search_coordinates,
     search_minimum,
+    seen_coordinates,
 )
 
 
@@ -34,6 +38,27 @@ def test_the_profile_interval_of_a_quadratic_misfit_is_its_closed_form():
         assert half > math.sqrt(CHI2_95 / (matrix.T @ matrix)[j, j])  # not the conditional one
         assert interval.complete and not (interval.low_at_bound or interval.high_at_bound)
     assert not fit.cost_limited and not fit.lower_found
+
+
+def test_a_polished_start_reaches_the_minimum_of_a_quadratic_misfit_for_fewer_evaluations():
+    # From a start a search brought near (as the joint fit's staged searches do), Levenberg-
+    # Marquardt on one difference Jacobian lands on a quadratic's minimum at its first step,
+    # and its intervals are the closed form's, as after a descent by least squares.
+    matrix = np.array([[40.0, 0.0, 5.0], [25.0, 30.0, 0.0], [3.0, -2.0, 20.0]])
+    centre = np.array([0.4, 0.55, 0.3])
+    near = centre + np.array([0.02, -0.03, 0.01])
+    fits = {polish: fit_profiles(linear_residuals(matrix, centre), 3, starts=0,
+                                 descents=0 if polish else 1, extra_starts=[near],
+                                 polish=polish, max_evaluations=400)
+            for polish in (False, True)}
+    cov = np.linalg.inv(matrix.T @ matrix)
+    for fit in fits.values():
+        assert fit.u == pytest.approx(centre, abs=1e-6)
+        for j, interval in enumerate(fit.intervals):
+            half = math.sqrt(CHI2_95 * cov[j, j])
+            assert interval.low_u == pytest.approx(centre[j] - half, abs=1e-4)
+            assert interval.high_u == pytest.approx(centre[j] + half, abs=1e-4)
+    assert fits[True].evaluations < fits[False].evaluations
 
 
 def bent_valley(u):
@@ -127,6 +152,38 @@ def test_a_search_started_only_where_another_fit_ended_descends_into_that_basin(
                         max_evaluations=300, extra_starts=[[0.75]])
     assert deep.u[0] == pytest.approx(0.8, abs=1e-3)
     assert deep.chi2 < shallow_chi2 - 1.0
+
+
+def test_the_coordinates_seen_are_those_a_tenth_of_the_range_moves_by_a_standard_deviation():
+    # Slopes in standard deviations per unit: a tenth of the range moves the first residual by
+    # 20, the second by 10.5 (once shifted downward, from the top), the third by 0.95: unseen.
+    slopes = np.array([200.0, 105.0, 0.95 / SEEN_STEP_UNIT])
+    assert seen_coordinates(lambda u: slopes * u, [0.5, 1.0, 0.3]) == (0, 1)
+    # Seen through any residual, not just through one of its own.
+    mixed = np.array([[0.0, 0.0], [0.0, 2.0 * SEEN_RESIDUAL / SEEN_STEP_UNIT]])
+    assert seen_coordinates(lambda u: mixed @ u, [0.5, 0.5]) == (1,)
+
+
+def test_a_search_over_some_coordinates_holds_the_others_and_finds_the_deeper_basin():
+    # The double well along the second coordinate; the first, held at 0.3, would pull the
+    # search to 0.9 if it were free.
+    def residuals(u):
+        return np.concatenate([[10.0 * (u[0] - 0.9)], double_well(u[1:])])
+
+    calls = []
+
+    def counted(u):
+        calls.append(np.array(u))
+        return residuals(u)
+
+    u, chi, evaluations = search_coordinates(counted, [0.3, 0.2], [1], max_evaluations=300)
+    assert u[0] == 0.3 and u[1] == pytest.approx(0.8, abs=1e-3)
+    assert chi == pytest.approx(float(np.sum(residuals(u) ** 2)))
+    assert all(c[0] == 0.3 for c in calls) and evaluations <= len(calls)
+    # Nothing free: the point itself, evaluated once.
+    u, chi, evaluations = search_coordinates(residuals, [0.3, 0.2], [])
+    assert list(u) == [0.3, 0.2] and evaluations == 1
+    assert chi == pytest.approx(float(np.sum(residuals(u) ** 2)))
 
 
 def test_the_search_alone_returns_the_lowest_point_it_saw_when_the_limit_stops_it():

@@ -84,6 +84,13 @@ MAX_PROFILE_STEPS = 12
 # Ridge added to J^T J before inverting it for the first step: a direction the residuals do not
 # see gets a large step (clipped to MAX_STEP) instead of none.
 RIDGE = 1e-6
+# A coordinate the residuals see: moved by SEEN_STEP_UNIT of its scaled range from a point, it
+# moves some residual by at least SEEN_RESIDUAL standard deviations. A tenth of the range is far
+# beyond any interval called determined, and a residual's standard deviation is what a fit
+# can tell apart: a coordinate that moves none by one over a tenth of its range is one those
+# residuals cannot pin, and a search over it on them alone ends wherever its starts fell.
+SEEN_STEP_UNIT = 0.1
+SEEN_RESIDUAL = 1.0
 # A profile point lower than the optimum by this much means the optimum was not the global one.
 LOWER_BY = 0.5
 # Then the descent starts again from the lowest point seen and the profiles are read about its
@@ -386,10 +393,64 @@ def search_minimum(residuals: Residuals, dim: int, start: ArrayLike | None = Non
     return u, chi, fun.evaluations
 
 
+class _Subspace:
+    """The residuals over the ``free`` coordinates of a point, the others held at ``base``."""
+
+    def __init__(self, fun: Residuals, base: ArrayLike, free: Sequence[int]) -> None:
+        self.fun = fun
+        self.base = np.asarray(base, dtype=float)
+        self.free = list(free)
+
+    def full(self, x: ArrayLike) -> NDArray[np.float64]:
+        u = self.base.copy()
+        u[self.free] = x
+        return u
+
+    def __call__(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        return self.fun(self.full(x))
+
+    def many(self, points: Sequence[ArrayLike]) -> list[NDArray[np.float64]]:
+        return _batch(self.fun, [self.full(x) for x in points])
+
+
+def _batch(fun: Residuals, points: Sequence[NDArray[np.float64]]) -> list[NDArray[np.float64]]:
+    batch = getattr(fun, 'many', None)
+    return list(batch(points)) if batch is not None else [fun(u) for u in points]
+
+
+def seen_coordinates(residuals: Residuals, u: ArrayLike) -> tuple[int, ...]:
+    """The coordinates ``residuals`` see about ``u`` (:data:`SEEN_STEP_UNIT`,
+    :data:`SEEN_RESIDUAL`), each shifted towards the cube's inside; the points come as one
+    batch."""
+    u = np.asarray(u, dtype=float)
+    points = [u]
+    for j in range(u.size):
+        shifted = u.copy()
+        shifted[j] += SEEN_STEP_UNIT if u[j] + SEEN_STEP_UNIT <= 1.0 else -SEEN_STEP_UNIT
+        points.append(shifted)
+    r0, *rs = _batch(residuals, points)
+    return tuple(j for j, r in enumerate(rs)
+                 if float(np.max(np.abs(np.asarray(r) - r0), initial=0.0)) >= SEEN_RESIDUAL)
+
+
+def search_coordinates(residuals: Residuals, base: ArrayLike, free: Sequence[int],
+                       starts_per_coordinate: int = 3, descents: int = 2, seed: int = 0,
+                       max_evaluations: int = 400) -> tuple[NDArray[np.float64], float, int]:
+    """:func:`search_minimum` over the ``free`` coordinates of ``base`` (the point is also a
+    start), the others held: (the whole lowest point, its sum of squares, evaluations)."""
+    sub = _Subspace(residuals, base, free)
+    if not sub.free:
+        return sub.base, float(np.sum(residuals(sub.base) ** 2)), 1
+    x, chi, evaluations = search_minimum(
+        sub, len(sub.free), sub.base[sub.free], starts=starts_per_coordinate * len(sub.free),
+        descents=descents, seed=seed, max_evaluations=max_evaluations)
+    return sub.full(x), chi, evaluations
+
+
 def fit_profiles(residuals: Residuals, dim: int, start: ArrayLike | None = None,
                  starts: int = 8, descents: int = 2, seed: int = 0,
                  max_evaluations: int = 400,
-                 extra_starts: Sequence[ArrayLike] = ()) -> ProfileFit:
+                 extra_starts: Sequence[ArrayLike] = (), polish: bool = False) -> ProfileFit:
     """Global minimum of ``sum(residuals(u)**2)`` over the unit cube by multi-start, then each
     coordinate's 95 % profile interval.
 
@@ -401,6 +462,13 @@ def fit_profiles(residuals: Residuals, dim: int, start: ArrayLike | None = None,
         A point the search also starts from (the start values).
     extra_starts : sequence of arrays
         Further points the search starts from (another fit's optimum, say).
+    polish : bool
+        The lowest point of the search (with ``descents`` 0: the lowest start) goes on by
+        Levenberg-Marquardt on one difference Jacobian carried by Broyden's rule
+        (:func:`carried_minimum`), and so does a restart: for starts a search has already
+        brought near the optimum, where a descent by least squares takes a difference
+        Jacobian at every step (the shipped example's six parameters: 298 evaluations, the
+        whole cost limit, on one descent from such a start).
     starts, descents, seed
         Latin-hypercube points over the cube, and descents from the lowest of them.
     max_evaluations : int
@@ -418,6 +486,8 @@ def fit_profiles(residuals: Residuals, dim: int, start: ArrayLike | None = None,
         np.asarray(p, dtype=float) for p in extra_starts]
     try:
         u_opt, chi_opt = multistart(fun, dim, starts, descents, seed, extra)
+        if polish:
+            u_opt, chi_opt = _polished(fun, u_opt)
     except CostLimitError:
         u_opt, chi_opt = fun.lowest()
         return ProfileFit(u_opt, chi_opt, tuple(
@@ -429,12 +499,18 @@ def fit_profiles(residuals: Residuals, dim: int, start: ArrayLike | None = None,
         if chi_low >= chi_opt - LOWER_BY or restart == PROFILE_RESTARTS:
             break
         try:
-            u_new, chi_new, _ = local_minimum(fun, u_low, range(dim))
+            u_new, chi_new = (_polished(fun, u_low) if polish else
+                              local_minimum(fun, u_low, range(dim))[:2])
         except CostLimitError:  # the intervals about the optimum before, said to be so
             break
         u_opt, chi_opt = (u_new, chi_new) if chi_new <= chi_low else (u_low, chi_low)
     return ProfileFit(u_opt, chi_opt, intervals, fun.evaluations,
                       not all(i.complete for i in intervals), chi_low < chi_opt - LOWER_BY)
+
+
+def _polished(fun: _Counted, u: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
+    u_new, chi_new, _ = carried_minimum(fun, u, range(u.size), _jacobian(fun, u))
+    return u_new, chi_new
 
 
 def _profiles(fun: _Counted, u_opt: NDArray[np.float64],

@@ -326,6 +326,12 @@ def print_joint_result(result: JointFitResult, wall_s: float) -> None:
           + (f', {result.kicks_chi2:.2f} over {2 * len(result.kicks.kicks)} kick residuals'
              if result.kicks.kicks else '')
           + (' (stopped by the cost limit)' if result.profile.cost_limited else ''))
+    if result.threshold_search_evaluations:
+        others = [e.path for e in result.estimates if e.path not in result.seen_by_thresholds]
+        print('searched on the thresholds alone: ' + (', '.join(result.seen_by_thresholds)
+                                                      or 'none, they see no parameter')
+              + ('; on the kicks, the thresholds\' held: ' + ', '.join(others)
+                 if others else ''))
     if result.undetermined:
         print(undetermined_kicks_line(len(result.undetermined)))
     for search, switches in result.non_monotone:
