@@ -130,10 +130,9 @@ class _Counted:
         keys = [tuple(float(v) for v in np.asarray(u, dtype=float)) for u in points]
         new = list(dict.fromkeys(k for k in keys if k not in self.cache))
         room = max(self.limit - len(self.cache), 0)
-        batch = getattr(self.fun, 'many', None)
         todo = [np.array(k) for k in new[:room]]
         # Nothing new (all cached) asks the residuals for nothing, not for an empty batch.
-        values = batch(todo) if batch is not None and todo else [self.fun(u) for u in todo]
+        values = _batch(self.fun, todo) if todo else []
         for key, value in zip(new[:room], values, strict=True):
             self.cache[key] = np.asarray(value, dtype=float)
         if len(new) > room:
@@ -423,12 +422,8 @@ def seen_coordinates(residuals: Residuals, u: ArrayLike) -> tuple[int, ...]:
     :data:`SEEN_RESIDUAL`), each shifted towards the cube's inside; the points come as one
     batch."""
     u = np.asarray(u, dtype=float)
-    points = [u]
-    for j in range(u.size):
-        shifted = u.copy()
-        shifted[j] += SEEN_STEP_UNIT if u[j] + SEEN_STEP_UNIT <= 1.0 else -SEEN_STEP_UNIT
-        points.append(shifted)
-    r0, *rs = _batch(residuals, points)
+    points, _ = _shifted(u, SEEN_STEP_UNIT)
+    r0, *rs = _batch(residuals, [u, *points])
     return tuple(j for j, r in enumerate(rs)
                  if float(np.max(np.abs(np.asarray(r) - r0), initial=0.0)) >= SEEN_RESIDUAL)
 
@@ -528,12 +523,20 @@ def _profiles(fun: _Counted, u_opt: NDArray[np.float64],
 
 def _jacobian(fun: _Counted, u: NDArray[np.float64]) -> NDArray[np.float64]:
     """Forward differences of :data:`FD_STEP_UNIT` (backward at the range's top)."""
-    steps, points = [], [u]
+    points, steps = _shifted(u, FD_STEP_UNIT)
+    r0, *rs = fun.many([u, *points])
+    return np.column_stack([(r - r0) / h for r, h in zip(rs, steps, strict=True)])
+
+
+def _shifted(u: NDArray[np.float64], step: float) -> tuple[list[NDArray[np.float64]],
+                                                          list[float]]:
+    """``u`` with each coordinate in turn moved by ``step`` (by ``-step`` where that would
+    leave the cube), and the steps taken."""
+    points, steps = [], []
     for j in range(u.size):
-        h = FD_STEP_UNIT if u[j] + FD_STEP_UNIT <= 1.0 else -FD_STEP_UNIT
+        h = step if u[j] + step <= 1.0 else -step
         shifted = u.copy()
         shifted[j] += h
-        steps.append(h)
         points.append(shifted)
-    r0, *rs = fun.many(points)
-    return np.column_stack([(r - r0) / h for r, h in zip(rs, steps, strict=True)])
+        steps.append(h)
+    return points, steps
