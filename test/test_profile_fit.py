@@ -61,6 +61,24 @@ def test_a_polished_start_reaches_the_minimum_of_a_quadratic_misfit_for_fewer_ev
     assert fits[True].evaluations < fits[False].evaluations
 
 
+def rosenbrock(u):
+    """Rosenbrock's valley on the cube (its minimum at 0.75, 0.75), whose Jacobian at a start
+    on the valley's far side points the first steps out of the cube."""
+    x = 4.0 * np.asarray(u, float) - 2.0
+    return 5.0 * np.array([10.0 * (x[1] - x[0] ** 2), 1.0 - x[0]])
+
+
+def test_the_polish_reaches_a_curved_valleys_minimum_from_a_far_start():
+    # One Jacobian carried from (0.2, 0.75) stalls at a sum of squares of 75 (the polish on one
+    # had the profiles read about a point 0.6 above the minimum); with a fresh one each time the
+    # carried one stops, the polish ends at the minimum.
+    fit = fit_profiles(rosenbrock, 2, starts=0, descents=0, extra_starts=[[0.2, 0.75]],
+                       polish=True, max_evaluations=400)
+    assert fit.u == pytest.approx([0.75, 0.75], abs=1e-3)
+    assert fit.chi2 < 1e-3
+    assert not fit.lower_found and not fit.cost_limited
+
+
 def bent_valley(u):
     """Three parameters whose valley bends: the minimum of u_1 moves with u_0 squared, and
     u_2's with u_1, so a profile's others must follow a curve, not a line."""

@@ -97,6 +97,11 @@ LOWER_BY = 0.5
 # end, this many times at most: intervals read about a point that is not the lowest are too
 # narrow where the misfit falls.
 PROFILE_RESTARTS = 1
+# The polish takes a fresh difference Jacobian when the carried one stops lowering the misfit,
+# at most this many times: one Jacobian carried from a start far from the optimum stalls (the
+# shipped example's three parameters: from the thresholds' optimum, a sum of squares of 2721,
+# one round ended at 382, and the profiles about it found points 300 lower and started again).
+POLISH_ROUNDS = 6
 
 
 class CostLimitError(RuntimeError):
@@ -244,7 +249,12 @@ def carried_minimum(fun: Callable[[NDArray[np.float64]], NDArray[np.float64]], u
         dx = trial[free] - u[free]
         predicted = chi - float(np.sum((r + jac @ dx) ** 2))
         if predicted < PROFILE_CHI2_TOL:
-            break
+            if np.allclose(dx, step):
+                break
+            # The cube cut the step short of the linearisation's minimum and the cut one gains
+            # nothing: a damped step is shorter and may stay inside.
+            damping = _more_damping(damping)
+            continue
         r_trial = fun(trial)
         chi_trial = float(r_trial @ r_trial)
         if chi_trial < chi:
@@ -256,8 +266,12 @@ def carried_minimum(fun: Callable[[NDArray[np.float64]], NDArray[np.float64]], u
             if gained < PROFILE_CHI2_TOL:
                 break
         else:
-            damping = FIRST_DAMPING if damping < FIRST_DAMPING else damping * DAMPING_FACTOR
+            damping = _more_damping(damping)
     return u, chi, jac
+
+
+def _more_damping(damping: float) -> float:
+    return FIRST_DAMPING if damping < FIRST_DAMPING else damping * DAMPING_FACTOR
 
 
 def latin_starts(dim: int, starts: int, seed: int) -> list[NDArray[np.float64]]:
@@ -459,8 +473,9 @@ def fit_profiles(residuals: Residuals, dim: int, start: ArrayLike | None = None,
         Further points the search starts from (another fit's optimum, say).
     polish : bool
         The lowest point of the search (with ``descents`` 0: the lowest start) goes on by
-        Levenberg-Marquardt on one difference Jacobian carried by Broyden's rule
-        (:func:`carried_minimum`), and so does a restart: for starts a search has already
+        Levenberg-Marquardt on a difference Jacobian carried by Broyden's rule
+        (:func:`carried_minimum`), a fresh one each time the carried one stops
+        (:data:`POLISH_ROUNDS`), and so does a restart: for starts a search has already
         brought near the optimum, where a descent by least squares takes a difference
         Jacobian at every step (the shipped example's six parameters: the search and such a
         descent left the profiles nearly none of the cost limit's 300 evaluations; polished,
@@ -505,8 +520,17 @@ def fit_profiles(residuals: Residuals, dim: int, start: ArrayLike | None = None,
 
 
 def _polished(fun: _Counted, u: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
-    u_new, chi_new, _ = carried_minimum(fun, u, range(u.size), _jacobian(fun, u))
-    return u_new, chi_new
+    """Rounds of :func:`carried_minimum` from ``u``, each on a fresh difference Jacobian,
+    until one lowers the sum of squares by less than :data:`LOWER_BY` (less than a profile
+    restarts for) or after :data:`POLISH_ROUNDS`."""
+    chi = fun.chi2(u)
+    for _ in range(POLISH_ROUNDS):
+        u_new, chi_new, _ = carried_minimum(fun, u, range(u.size), _jacobian(fun, u))
+        gained = chi - chi_new
+        u, chi = u_new, chi_new
+        if gained < LOWER_BY:
+            break
+    return u, chi
 
 
 def _profiles(fun: _Counted, u_opt: NDArray[np.float64],
