@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from sphere_sim.fitting import profile_fit
 from sphere_sim.fitting.profile_fit import (
     CHI2_95,
     DETERMINED_SHARE,
@@ -77,6 +78,29 @@ def test_the_polish_reaches_a_curved_valleys_minimum_from_a_far_start():
     assert fit.u == pytest.approx([0.75, 0.75], abs=1e-3)
     assert fit.chi2 < 1e-3
     assert not fit.lower_found and not fit.cost_limited
+
+
+def sheeted(u):
+    """A quadratic misfit (its minimum at 0.4, 0.55) with a thin sheet beside the start of the
+    test below: over 0.505 < u_0 < 0.515 one more residual is 20 standard deviations off, as
+    a kick on its other branch is."""
+    u = np.asarray(u, float)
+    sheet = 20.0 if 0.505 < u[0] < 0.515 else 0.0
+    return np.append(linear_residuals([[40.0, 0.0], [25.0, 30.0]], [0.4, 0.55])(u), sheet)
+
+
+def test_a_difference_step_onto_a_sheet_does_not_stop_the_polish(monkeypatch):
+    # From (0.5, 0.6) the forward step in u_0 lands on the sheet and reads a column of norm
+    # 2000 where the slope is 47: a polish on it barely moves u_0. The step the other way
+    # reads the slope, and the polish lands on the minimum.
+    def polished():
+        return profile_fit._polished(profile_fit._Counted(sheeted, 400), np.array([0.5, 0.6]))
+    u, chi2 = polished()
+    assert u == pytest.approx([0.4, 0.55], abs=1e-6)
+    assert chi2 < 1e-9
+    monkeypatch.setattr(profile_fit, 'SHEET_RESIDUAL', math.inf)
+    u, chi2 = polished()
+    assert u[0] > 0.45 and chi2 > 10.0  # one way only, the polish stays by the sheet
 
 
 def bent_valley(u):
