@@ -14,6 +14,7 @@ from sphere_sim.fitting.profile_fit import (
     SEEN_STEP_UNIT,
     ProfileInterval,
     fit_profiles,
+    region_draws,
     search_coordinates,
     search_minimum,
     seen_coordinates,
@@ -341,3 +342,48 @@ def test_a_profile_that_finds_a_lower_basin_restarts_the_descent_there(monkeypat
     unrestarted = fit_profiles(two_basins, 2, start=[0.3, 0.5], starts=0, descents=1)
     assert unrestarted.u[0] == pytest.approx(0.31, abs=0.01) and unrestarted.lower_found
     assert fit.evaluations > unrestarted.evaluations
+
+
+def test_draws_from_a_linear_misfits_region_spread_as_its_covariance_and_hold_the_others():
+    # Residuals linear in the two free coordinates (correlated), none in the third: the draws'
+    # covariance is (J^T J)^-1, their mean the minimum, the third coordinate held.
+    matrix = np.array([[60.0, 0.0, 0.0], [30.0, 45.0, 0.0], [5.0, -8.0, 0.0]])
+    centre = np.array([0.4, 0.6, 0.25])
+    draws = np.array(region_draws(linear_residuals(matrix, centre), centre, [0, 1], 2000))
+    assert draws.shape == (2000, 3) and np.all(draws[:, 2] == 0.25)
+    expected = np.linalg.inv(matrix[:, :2].T @ matrix[:, :2])
+    assert np.cov(draws[:, :2].T) == pytest.approx(expected, rel=0.1)
+    assert draws[:, :2].mean(axis=0) == pytest.approx(centre[:2], abs=0.1 * math.sqrt(
+        float(np.max(np.diag(expected)))))
+    assert region_draws(linear_residuals(matrix, centre), centre, [], 5) == []
+
+
+def stepped(u):
+    """Smooth residuals ('thresholds') with their minimum at (0.5, 0.5), whose 95 % region is
+    some 0.03 either way, and a step ('a kick on its other branch', six standard deviations)
+    on the left of 0.51 in the first coordinate: the joint minimum lies just right of it."""
+    u = np.asarray(u, float)
+    smooth = (u - 0.5) / 0.015
+    return np.concatenate([smooth, [6.0 if u[0] < 0.51 else 0.0]])
+
+
+def test_starts_drawn_from_the_smooth_residuals_region_find_the_cell_their_optimum_misses():
+    # Polished from the smooth optimum alone the fit stays on the step's high side (its
+    # difference step across the step is taken the other way); only a profile crossing it
+    # finds the low side, and the descent and the profiles start again there. Drawn starts
+    # cross it at once, for fewer evaluations in all.
+    from sphere_sim.fitting.profile_fit import _Counted, _polished
+
+    def smooth(u):
+        return stepped(u)[:2]
+
+    _, chi_polished = _polished(_Counted(stepped, 100), np.array([0.5, 0.5]))
+    assert chi_polished == pytest.approx(36.0)
+    alone = fit_profiles(stepped, 2, starts=0, descents=0, extra_starts=[[0.5, 0.5]],
+                         polish=True, max_evaluations=300)
+    draws = region_draws(smooth, [0.5, 0.5], [0, 1], 8)
+    fit = fit_profiles(stepped, 2, starts=0, descents=0, extra_starts=[[0.5, 0.5], *draws],
+                       polish=True, max_evaluations=300)
+    for ended in (alone, fit):
+        assert ended.u[0] >= 0.51 and ended.chi2 < 1.0 and not ended.lower_found
+    assert fit.evaluations < alone.evaluations

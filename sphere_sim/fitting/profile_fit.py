@@ -462,6 +462,36 @@ def search_coordinates(residuals: Residuals, base: ArrayLike, free: Sequence[int
     return sub.full(x), chi, evaluations
 
 
+def region_draws(residuals: Residuals, u: ArrayLike, free: Sequence[int], count: int,
+                 seed: int = 0, limit: int = 400) -> list[NDArray[np.float64]]:
+    """``count`` points drawn about ``u``, a minimum of ``residuals`` over the ``free``
+    coordinates, from the linearised posterior those residuals give them (mean ``u``,
+    covariance (J^T J)^-1 of a difference Jacobian there, Latin-hypercube normal draws), the
+    other coordinates held, each kept in the cube. For starts where another misfit has steps
+    that this one's region spans: which kick lands on which branch changes within the
+    thresholds' 95 % region, and a descent stays on the side of a step it starts on.
+    At most ``limit`` evaluations (the Jacobian's, ``len(free)`` beside ``u``'s)."""
+    from scipy.stats import norm
+
+    u = np.asarray(u, dtype=float)
+    free = list(free)
+    if not free or count <= 0:
+        return []
+    sub = _Subspace(residuals, u, free)
+    jac = _jacobian(_Counted(sub, limit), u[free])
+    # The covariance's square root, by its eigenvectors: the draws' spread along each of the
+    # region's axes is that axis's own, however the parameters correlate.
+    values, vectors = np.linalg.eigh(np.linalg.inv(jac.T @ jac + RIDGE * np.eye(len(free))))
+    root = vectors * np.sqrt(np.clip(values, 0.0, None))
+    uniform = np.clip(np.array(latin_starts(len(free), count, seed)), 1e-9, 1.0 - 1e-9)
+    draws = []
+    for z in norm.ppf(uniform):
+        point = u.copy()
+        point[free] = np.clip(u[free] + root @ z, 0.0, 1.0)
+        draws.append(point)
+    return draws
+
+
 def fit_profiles(residuals: Residuals, dim: int, start: ArrayLike | None = None,
                  starts: int = 8, descents: int = 2, seed: int = 0,
                  max_evaluations: int = 400,
