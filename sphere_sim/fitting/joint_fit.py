@@ -116,6 +116,8 @@ class JointFitResult:
     # with kicks and thresholds both: the parameters the thresholds see, searched on them alone
     # (the others on the kicks)
     seen_by_thresholds: tuple[str, ...] = ()
+    # with kicks and thresholds both: the joint fit's starts drawn over the thresholds' region
+    region_draws: int = 0
 
     @property
     def threshold_chi2(self) -> float:
@@ -216,6 +218,7 @@ def fit_jointly(params: ParameterSet, fits: Sequence[FitParameter],
         misfit = JointMisfit(evaluator)
         searched = used = 0
         seen: tuple[int, ...] = ()
+        draws: list[NDArray[np.float64]] = []
         if alone is not None:
             # The thresholds' misfit is smooth in the beams' parameters where the kicks'
             # landings move in steps (paper_b: a multi-start of the two together ended at a sum
@@ -265,7 +268,7 @@ def fit_jointly(params: ParameterSet, fits: Sequence[FitParameter],
             evaluations=len(evaluator.cache), profile=fit,
             threshold_search_evaluations=searched, kick_search_evaluations=used,
             non_monotone=left_out,
-            seen_by_thresholds=tuple(fits[j].path for j in seen))
+            seen_by_thresholds=tuple(fits[j].path for j in seen), region_draws=len(draws))
     return result
 
 

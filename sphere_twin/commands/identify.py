@@ -320,7 +320,8 @@ def print_joint_result(result: JointFitResult, wall_s: float) -> None:
 
     count = (f'{result.threshold_search_evaluations} evaluations of the thresholds alone, then '
              f'{result.evaluations} of the thresholds and kicks together ('
-             f'{result.kick_search_evaluations} searching on the kicks),'
+             f'{result.kick_search_evaluations} searching on the kicks, '
+             f'{result.region_draws} starts drawn over the thresholds\' region),'
              if result.threshold_search_evaluations else f'{result.evaluations} evaluations')
     print(f'{count} in {wall_s:.0f} s; sum of squares '
           f'{result.chi2:.2f}: {result.threshold_chi2:.2f} over {len(result.thresholds)} thresholds'
