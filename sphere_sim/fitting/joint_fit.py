@@ -233,7 +233,7 @@ def fit_jointly(params: ParameterSet, fits: Sequence[FitParameter],
             seen = seen_coordinates(thresholds_misfit, start)
             u_thresholds, _, _ = search_coordinates(
                 thresholds_misfit, start, seen, starts_per_parameter, descents, seed,
-                max_evaluations)
+                max_evaluations, polish=True)
             unseen = [j for j in range(len(fits)) if j not in seen]
             # Only the starts on the kicks, and the polish below descends from the lowest:
             # on the shipped example's six, two descents over the bristle stiffness alone
