@@ -229,35 +229,6 @@ def test_a_search_over_some_coordinates_holds_the_others_and_finds_the_deeper_ba
     assert chi == pytest.approx(float(np.sum(residuals(u) ** 2)))
 
 
-def test_polished_descents_reach_a_smooth_misfits_minimum_for_fewer_evaluations():
-    # Smooth and far from quadratic where the starts fall (residuals of hundreds of standard
-    # deviations), as the thresholds' misfit is over the declared ranges: the descents by
-    # Levenberg-Marquardt on carried Jacobians end within a small share of the 95 % interval
-    # of where least squares ends, for fewer evaluations (a Jacobian per round, not per step).
-    rng = np.random.default_rng(1)
-    mixing = 30.0 * rng.normal(size=(16, 8))
-    centre = np.array([0.3, 0.6, 0.45, 0.7, 0.2])
-
-    def features(u):
-        u = np.asarray(u, float)
-        return np.concatenate([u + 0.8 * u ** 2, np.exp(u[:3])])
-
-    def residuals(u):
-        return mixing @ (features(u) - features(centre))
-
-    ends = {polish: search_minimum(residuals, 5, start=[0.5] * 5, starts=15, descents=2,
-                                   max_evaluations=400, polish=polish)
-            for polish in (False, True)}
-    (u_ls, chi_ls, n_ls), (u_lm, chi_lm, n_lm) = ends[False], ends[True]
-    assert u_ls == pytest.approx(centre, abs=1e-5) and chi_ls < 1e-6
-    jac = np.column_stack([(residuals(centre + h) - residuals(centre)) / 1e-7
-                           for h in 1e-7 * np.eye(5)])
-    half = np.sqrt(CHI2_95 * np.diag(np.linalg.inv(jac.T @ jac)))
-    assert np.all(np.abs(u_lm - centre) < 0.1 * half)
-    assert chi_lm < profile_fit.PROFILE_CHI2_TOL
-    assert n_lm < n_ls
-
-
 def test_the_search_alone_returns_the_lowest_point_it_saw_when_the_limit_stops_it():
     u, chi, evaluations = search_minimum(double_well, 1, start=[0.2], max_evaluations=300)
     assert u[0] == pytest.approx(0.8, abs=1e-3) and evaluations <= 300

@@ -237,7 +237,7 @@ def fit_jointly(params: ParameterSet, fits: Sequence[FitParameter],
             # before, each within its interval of the truth.
             u_thresholds, _, _ = search_coordinates(
                 thresholds_misfit, start, seen, starts_per_parameter, descents, seed,
-                max_evaluations, polish=True)
+                max_evaluations)
             unseen = [j for j in range(len(fits)) if j not in seen]
             # Only the starts on the kicks, and the polish below descends from the lowest:
             # on the shipped example's six, two descents over the bristle stiffness alone

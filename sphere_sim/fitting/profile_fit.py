@@ -287,17 +287,14 @@ def latin_starts(dim: int, starts: int, seed: int) -> list[NDArray[np.float64]]:
 
 
 def multistart(fun: _Counted, dim: int, starts: int, descents: int, seed: int,
-               extra: Sequence[ArrayLike] = (), polish: bool = False
-               ) -> tuple[NDArray[np.float64], float]:
+               extra: Sequence[ArrayLike] = ()) -> tuple[NDArray[np.float64], float]:
     """The lowest of local descents from the ``descents`` lowest of ``starts`` Latin-hypercube
-    points over the cube (and ``extra`` points, say the start values): by least squares, or
-    with ``polish`` by :func:`_polished`."""
+    points over the cube (and ``extra`` points, say the start values)."""
     points = [np.asarray(p, dtype=float) for p in extra] + latin_starts(dim, starts, seed)
     chis = [float(np.sum(r ** 2)) for r in fun.many(points)]
     best_u, best_chi = points[int(np.argmin(chis))], float(min(chis))
     for i in np.argsort(chis)[:descents]:
-        u, chi = (_polished(fun, points[int(i)]) if polish
-                  else local_minimum(fun, points[int(i)], range(dim))[:2])
+        u, chi, _ = local_minimum(fun, points[int(i)], range(dim))
         if chi < best_chi:
             best_u, best_chi = u, chi
     return best_u, best_chi
@@ -403,14 +400,13 @@ def _along(u: NDArray[np.float64], j: int, u_j: float, valley: NDArray[np.float6
 
 def search_minimum(residuals: Residuals, dim: int, start: ArrayLike | None = None,
                    starts: int = 8, descents: int = 2, seed: int = 0,
-                   max_evaluations: int = 400, polish: bool = False
-                   ) -> tuple[NDArray[np.float64], float, int]:
+                   max_evaluations: int = 400) -> tuple[NDArray[np.float64], float, int]:
     """The multi-start of :func:`fit_profiles` alone: (lowest point, its sum of squares,
     evaluations). The cost limit ends the search at the lowest point seen so far."""
     fun = _Counted(residuals, max_evaluations)
     extra = [] if start is None else [np.asarray(start, dtype=float)]
     try:
-        u, chi = multistart(fun, dim, starts, descents, seed, extra, polish)
+        u, chi = multistart(fun, dim, starts, descents, seed, extra)
     except CostLimitError:
         u, chi = fun.lowest()
     return u, chi, fun.evaluations
@@ -454,8 +450,7 @@ def seen_coordinates(residuals: Residuals, u: ArrayLike) -> tuple[int, ...]:
 
 def search_coordinates(residuals: Residuals, base: ArrayLike, free: Sequence[int],
                        starts_per_coordinate: int = 3, descents: int = 2, seed: int = 0,
-                       max_evaluations: int = 400, polish: bool = False
-                       ) -> tuple[NDArray[np.float64], float, int]:
+                       max_evaluations: int = 400) -> tuple[NDArray[np.float64], float, int]:
     """:func:`search_minimum` over the ``free`` coordinates of ``base`` (the point is also a
     start), the others held: (the whole lowest point, its sum of squares, evaluations)."""
     sub = _Subspace(residuals, base, free)
@@ -463,7 +458,7 @@ def search_coordinates(residuals: Residuals, base: ArrayLike, free: Sequence[int
         return sub.base, float(np.sum(residuals(sub.base) ** 2)), 1
     x, chi, evaluations = search_minimum(
         sub, len(sub.free), sub.base[sub.free], starts=starts_per_coordinate * len(sub.free),
-        descents=descents, seed=seed, max_evaluations=max_evaluations, polish=polish)
+        descents=descents, seed=seed, max_evaluations=max_evaluations)
     return sub.full(x), chi, evaluations
 
 
@@ -513,7 +508,7 @@ def fit_profiles(residuals: Residuals, dim: int, start: ArrayLike | None = None,
     extra_starts : sequence of arrays
         Further points the search starts from (another fit's optimum, say).
     polish : bool
-        The descents (with ``descents`` 0: one from the lowest start) are by
+        The lowest point of the search (with ``descents`` 0: the lowest start) goes on by
         Levenberg-Marquardt on a difference Jacobian carried by Broyden's rule
         (:func:`carried_minimum`), a fresh one each time the carried one stops
         (:data:`POLISH_ROUNDS`), and so does a restart: for starts a search has already
@@ -537,8 +532,8 @@ def fit_profiles(residuals: Residuals, dim: int, start: ArrayLike | None = None,
     extra = ([] if start is None else [np.asarray(start, dtype=float)]) + [
         np.asarray(p, dtype=float) for p in extra_starts]
     try:
-        u_opt, chi_opt = multistart(fun, dim, starts, descents, seed, extra, polish)
-        if polish and not descents:  # with descents, the lowest start's was polished
+        u_opt, chi_opt = multistart(fun, dim, starts, descents, seed, extra)
+        if polish:
             u_opt, chi_opt = _polished(fun, u_opt)
     except CostLimitError:
         u_opt, chi_opt = fun.lowest()
