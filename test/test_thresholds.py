@@ -206,6 +206,29 @@ def test_the_fit_of_one_threshold_recovers_the_stiffness_that_made_it(calibrated
     assert abs(result.threshold_residuals[0]) < 1.0
 
 
+def test_a_fit_that_does_not_reach_the_noise_determines_nothing(calibrated):
+    """The same threshold recorded twice, 3 V apart: no stiffness meets both brackets, so the
+    fit's residuals are not the noise, and its profile, however narrow, is not an interval."""
+    from sphere_sim.fitting.identification import fit_parameters
+    from sphere_sim.fitting.joint_fit import fit_jointly
+    from sphere_sim.fitting.profile_fit import reaches_the_noise
+
+    device = calibrated.replace(**{K_Z: 0.85 * calibrated.get(K_Z)})
+    low = math.floor(model_threshold_v(device, BEAM, WIDTH_S, LEVEL, 44.5) / 0.2) * 0.2
+    obs = [ThresholdObservation(BEAM, WIDTH_S, low, low + 0.2, LEVEL),
+           ThresholdObservation(BEAM, WIDTH_S, low + 3.0, low + 3.2, LEVEL)]
+    (fit,) = fit_parameters(calibrated, [K_Z])
+    result = fit_jointly(calibrated, [fit], None, obs, max_evaluations=60,
+                         starts_per_parameter=2, descents=1)
+    (estimate,) = result.estimates
+    assert not reaches_the_noise(result.chi2, 2, 1)
+    assert result.profile.intervals[0].determined  # narrow: the profile alone would say so
+    assert not estimate.determined
+    assert 'does not reach the noise' in estimate.note
+    # The closed form: chi-square's 99.9 % point with one degree of freedom is 10.83.
+    assert reaches_the_noise(10.8, 2, 1) and not reaches_the_noise(10.9, 2, 1)
+
+
 def test_identify_thresholds_prints_each_parameters_status_and_writes_the_fitted_file(
         tmp_path, monkeypatch, capsys):
     """The command's wiring, the fit replaced by a known answer: the brackets of the bag are

@@ -47,6 +47,7 @@ from sphere_sim.fitting.profile_fit import (
     ProfileFit,
     ProfileInterval,
     fit_profiles,
+    reaches_the_noise,
     region_draws,
     search_coordinates,
     seen_coordinates,
@@ -260,8 +261,9 @@ def fit_jointly(params: ParameterSet, fits: Sequence[FitParameter],
                                starts=starts_per_parameter * len(fits), descents=descents,
                                seed=seed, max_evaluations=max_evaluations)
         r = misfit(fit.u)
+        noise = reaches_the_noise(fit.chi2, r.size, len(fits))
         result = JointFitResult(
-            estimates=tuple(_estimate(fp, fit.u, interval)
+            estimates=tuple(_estimate(fp, fit.u, interval, noise, fit.chi2, r.size)
                             for fp, interval in zip(fits, fit.intervals, strict=True)),
             chi2=fit.chi2, kicks_chi2=float(np.sum(r[:misfit.kick_rows] ** 2)), kicks=kicks,
             undetermined=tuple(undetermined), thresholds=tuple(thresholds),
@@ -281,10 +283,17 @@ def thresholds_checkpoint(checkpoint: str | Path) -> Path:
     return Path(checkpoint).with_suffix('.thresholds.jsonl')
 
 
-def _estimate(fp: FitParameter, u: NDArray[np.float64],
-              interval: ProfileInterval) -> ProfileEstimate:
+def _estimate(fp: FitParameter, u: NDArray[np.float64], interval: ProfileInterval,
+              noise: bool, chi2: float, residuals: int) -> ProfileEstimate:
+    """``noise``: the fit's sum of squares ``chi2`` over ``residuals`` is one the noise gives
+    (:func:`~sphere_sim.fitting.profile_fit.reaches_the_noise`); if not, no interval is
+    called determined, however narrow."""
     ends = sorted((fp.from_unit(interval.low_u), fp.from_unit(interval.high_u)))
-    if interval.determined:
+    determined = interval.determined and noise
+    if not noise:
+        note = (f'the fit does not reach the noise (a sum of squares of {chi2:.1f} over '
+                f'{residuals} residuals), so its profile bounds nothing')
+    elif interval.determined:
         note = f'95 % interval {interval.width_u:.3f} of the scaled range'
     elif not interval.complete:
         note = 'the cost limit stopped its profile'
@@ -293,4 +302,4 @@ def _estimate(fp: FitParameter, u: NDArray[np.float64],
     else:
         note = f'its 95 % interval spans {interval.width_u:.2f} of the scaled range'
     return ProfileEstimate(fp.path, fp.from_unit(float(u[interval.index])), ends[0], ends[1],
-                           fp.low, fp.high, interval.determined, note)
+                           fp.low, fp.high, determined, note)
