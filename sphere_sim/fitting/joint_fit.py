@@ -261,9 +261,11 @@ def fit_jointly(params: ParameterSet, fits: Sequence[FitParameter],
                                starts=starts_per_parameter * len(fits), descents=descents,
                                seed=seed, max_evaluations=max_evaluations)
         r = misfit(fit.u)
-        noise = reaches_the_noise(fit.chi2, r.size, len(fits))
+        above_noise = None if reaches_the_noise(fit.chi2, r.size, len(fits)) else (
+            f'the fit does not reach the noise (a sum of squares of {fit.chi2:.1f} over '
+            f'{r.size} residuals), so its profile bounds nothing')
         result = JointFitResult(
-            estimates=tuple(_estimate(fp, fit.u, interval, noise, fit.chi2, r.size)
+            estimates=tuple(_estimate(fp, fit.u, interval, above_noise)
                             for fp, interval in zip(fits, fit.intervals, strict=True)),
             chi2=fit.chi2, kicks_chi2=float(np.sum(r[:misfit.kick_rows] ** 2)), kicks=kicks,
             undetermined=tuple(undetermined), thresholds=tuple(thresholds),
@@ -284,15 +286,14 @@ def thresholds_checkpoint(checkpoint: str | Path) -> Path:
 
 
 def _estimate(fp: FitParameter, u: NDArray[np.float64], interval: ProfileInterval,
-              noise: bool, chi2: float, residuals: int) -> ProfileEstimate:
-    """``noise``: the fit's sum of squares ``chi2`` over ``residuals`` is one the noise gives
-    (:func:`~sphere_sim.fitting.profile_fit.reaches_the_noise`); if not, no interval is
-    called determined, however narrow."""
+              above_noise: str | None) -> ProfileEstimate:
+    """``above_noise``: why the fit's sum of squares is not one the noise gives
+    (:func:`~sphere_sim.fitting.profile_fit.reaches_the_noise`), or None; if it is not, no
+    interval is called determined, however narrow."""
     ends = sorted((fp.from_unit(interval.low_u), fp.from_unit(interval.high_u)))
-    determined = interval.determined and noise
-    if not noise:
-        note = (f'the fit does not reach the noise (a sum of squares of {chi2:.1f} over '
-                f'{residuals} residuals), so its profile bounds nothing')
+    determined = interval.determined and above_noise is None
+    if above_noise is not None:
+        note = above_noise
     elif interval.determined:
         note = f'95 % interval {interval.width_u:.3f} of the scaled range'
     elif not interval.complete:
